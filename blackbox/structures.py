@@ -1,0 +1,199 @@
+"""Generated frame structures, written as NASTRAN bulk data (free field, full precision).
+
+Used by the tests (cases beyond the fixtures: other frames, joints with 2-6 branches, several
+joints) and by the benchmark (car-body-like frames of 1e5-1e6 DOFs). A generated structure is
+just a deck plus a description of its flexible joints: exactly what a user brings.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass
+class FrameBuilder:
+    """Collects grids, bars, supports and joints; :meth:`bdf` renders the deck."""
+    E: float = 200e9
+    G: float = 80e9
+    A: float = 4.0e-4
+    I1: float = 1.333e-8
+    I2: float = 1.333e-8
+    J: float = 0.4e-8
+    grids: dict[int, tuple[float, float, float]] = field(default_factory=dict)
+    bars: list[tuple[int, int, int, tuple[float, float, float]]] = field(default_factory=list)
+    spcs: dict[int, str] = field(default_factory=dict)
+    rbe2: list[tuple[int, int, tuple[int, ...], str]] = field(default_factory=list)
+    springs: list[tuple[int, int, int, int, float]] = field(default_factory=list)
+    joints: list[tuple[str, tuple[int, ...]]] = field(default_factory=list)
+
+    def grid(self, gid: int, xyz) -> int:
+        self.grids[gid] = tuple(float(v) for v in xyz)
+        return gid
+
+    def bar(self, ga: int, gb: int, v=None) -> int:
+        eid = len(self.bars) + 1
+        d = np.subtract(self.grids[gb], self.grids[ga])
+        if v is None:
+            v = (0.0, 0.0, 1.0)
+            if np.linalg.norm(np.cross(d, v)) < 1e-6 * np.linalg.norm(d):
+                v = (1.0, 0.0, 0.0)
+        self.bars.append((eid, ga, gb, tuple(float(x) for x in v)))
+        return eid
+
+    def fix(self, gid: int, comps: str = "123456") -> None:
+        self.spcs[gid] = "".join(sorted(set(self.spcs.get(gid, "") + comps)))
+
+    def flexible_joint(self, name: str, node: int, bar_ids: list[int], first_new_id: int) -> tuple[int, ...]:
+        """Split ``node`` into one coincident grid per bar in ``bar_ids`` (branch 1 keeps ``node``),
+        tie them with an RBE2 CM=123 and record the joint."""
+        grids = [node]
+        for b, eid in enumerate(bar_ids[1:]):
+            gid = self.grid(first_new_id + b, self.grids[node])
+            grids.append(gid)
+            i = eid - 1
+            e, ga, gb, v = self.bars[i]
+            self.bars[i] = (e, gid if ga == node else ga, gid if gb == node else gb, v)
+        self.rbe2.append((10_000_000 + len(self.rbe2) + 1, node, tuple(grids[1:]), "123"))
+        self.joints.append((name, tuple(grids)))
+        return tuple(grids)
+
+    def bdf(self, title: str = "generated frame") -> str:
+        out = [f"$ {title}", "BEGIN BULK",
+               f"MAT1,1,{self.E!r},{self.G!r}",
+               f"PBAR,1,1,{self.A!r},{self.I1!r},{self.I2!r},{self.J!r}"]
+        out += [f"GRID,{g},,{x!r},{y!r},{z!r}" for g, (x, y, z) in sorted(self.grids.items())]
+        out += [f"CBAR,{e},1,{a},{b},{v[0]!r},{v[1]!r},{v[2]!r}" for e, a, b, v in self.bars]
+        out += [f"SPC1,1,{c},{g}" for g, c in sorted(self.spcs.items())]
+        for eid, gn, gm, cm in self.rbe2:
+            out.append(f"RBE2,{eid},{gn},{cm}," + ",".join(str(g) for g in gm))
+        for i, (g1, c1, g2, c2, k) in enumerate(self.springs):
+            out.append(f"CELAS2,{20_000_000 + i + 1},{k!r},{g1},{c1},{g2 or ''},{c2 or ''}")
+        out.append("ENDDATA")
+        return "\n".join(out) + "\n"
+
+
+def cube(edge: float = 0.2) -> FrameBuilder:
+    """The cube of Section 3.7.1 (Table 3.1): nodes 1-4 bottom, i+4 above i, node 1 fixed,
+    a 3-branch flexible joint at node 7 (grids 7, 71, 72; members 7-3, 7-6, 7-8)."""
+    f = FrameBuilder()
+    pts = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]
+    for i, (x, y, _) in enumerate(pts):
+        f.grid(i + 1, (x * edge, y * edge, 0.0))
+        f.grid(i + 5, (x * edge, y * edge, edge))
+    for a, b in [(1, 2), (2, 3), (3, 4), (4, 1), (5, 6), (6, 7), (7, 8), (8, 5),
+                 (1, 5), (2, 6), (3, 7), (4, 8)]:
+        f.bar(a, b)
+    f.fix(1)
+    bars_at_7 = [e for e, a, b, _ in f.bars if 7 in (a, b)]
+    order = sorted(bars_at_7, key=lambda e: {3: 0, 6: 1, 8: 2}[
+        [g for g in f.bars[e - 1][1:3] if g != 7][0]])
+    f.flexible_joint("J7", 7, order, 71)
+    return f
+
+
+def star_joint_frame(n_branches: int, seed: int = 0, arm: float = 0.5) -> FrameBuilder:
+    """A frame with one flexible joint of ``n_branches`` branches (2..6 and more).
+
+    The joint sits at the origin; each branch is a bar to an outer node in a random direction;
+    outer nodes are chained into a ring of bars and each has a short leg to a clamped base,
+    so the structure is stable even with every joint parameter at zero.
+    """
+    rng = np.random.default_rng(seed)
+    f = FrameBuilder(E=206.85e9, G=82.7e9, A=2.99e-4, I1=77.42e-8, I2=16.65e-8, J=35.40e-8)
+    f.grid(1, (0.0, 0.0, 0.0))
+    dirs = []
+    while len(dirs) < n_branches:
+        d = rng.standard_normal(3)
+        d /= np.linalg.norm(d)
+        if all(abs(d @ e) < 0.9 for e in dirs):
+            dirs.append(d)
+    bar_ids = []
+    for b, d in enumerate(dirs):
+        outer = f.grid(100 + b, arm * (1.0 + 0.3 * rng.random()) * d)
+        bar_ids.append(f.bar(1, outer))
+        base = f.grid(200 + b, np.add(f.grids[outer], (0.0, 0.0, -0.3)))
+        f.bar(outer, base)
+        f.fix(base)
+    for b in range(n_branches):
+        if n_branches > 2 or b == 0:
+            f.bar(100 + b, 100 + (b + 1) % n_branches)
+    f.flexible_joint("J1", 1, bar_ids, 11)
+    return f
+
+
+def tube_body(n_long: int, n_around: int, length: float = 4.5, width: float = 1.5,
+              height: float = 1.4, with_joint: bool = True) -> FrameBuilder:
+    """A car-body-like frame: members on a closed elliptic tube (a shell-like surface, as a
+    body-in-white), rings around the long axis, longitudinals, and one diagonal per panel;
+    supported at four "suspension points" of the floor: front-left 123, front-right 13, rear
+    left 3, rear right 3 (the six rigid-body motions removed, plus one redundant vertical
+    support, as a body standing on four wheel pads).
+
+    DOFs = 6 * n_long * n_around (plus the joint's branch grids). With ``with_joint`` one
+    roof node becomes a flexible joint whose branches are all its members (4-5 branches).
+    """
+    f = FrameBuilder(E=206.85e9, G=82.7e9, A=2.99e-4, I1=77.42e-8, I2=16.65e-8, J=35.40e-8)
+
+    def gid(i: int, j: int) -> int:
+        return 1 + i * n_around + (j % n_around)
+
+    for i in range(n_long):
+        x = length * i / (n_long - 1)
+        for j in range(n_around):
+            t = 2 * math.pi * j / n_around
+            f.grid(gid(i, j), (x, 0.5 * width * math.cos(t), 0.5 * height * (1 + math.sin(t))))
+    for i in range(n_long):
+        for j in range(n_around):
+            f.bar(gid(i, j), gid(i, j + 1), v=(1.0, 0.0, 0.0))
+            if i + 1 < n_long:
+                f.bar(gid(i, j), gid(i + 1, j))
+                if (i + j) % 2 == 0:
+                    f.bar(gid(i, j), gid(i + 1, j + 1))
+    bottom = 3 * n_around // 4
+    left, right = bottom - max(1, n_around // 8), (bottom + max(1, n_around // 8)) % n_around
+    front, rear = max(1, n_long // 6), n_long - 1 - max(1, n_long // 6)
+    for g, c in [(gid(front, left), "123"), (gid(front, right), "13"),
+                 (gid(rear, left), "3"), (gid(rear, right), "3")]:
+        f.fix(g, c)
+    if with_joint:
+        node = gid(n_long // 2, n_around // 4)
+        bars = [e for e, a, b, _ in f.bars if node in (a, b)]
+        f.flexible_joint("JR", node, bars, 10 * n_long * n_around + 1)
+    return f
+
+
+def write_study(folder: Path, builder: FrameBuilder, loads: list[tuple[str, int, int, float]],
+                name: str, model: str = "simple", initial: float = 1.0e3) -> Path:
+    """Write a study folder (CONTRACT.md section 1) for a generated structure."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "model.bdf").write_text(builder.bdf(name))
+    with (folder / "loads.csv").open("w") as fh:
+        fh.write("case,grid,component,value\n")
+        for case, g, c, v in loads:
+            fh.write(f"{case},{g},{c},{v!r}\n")
+    lines = [f'name = "{name}"', "", "[solver]", 'adapter = "reference"', 'deck = "model.bdf"', ""]
+    for jname, grids in builder.joints:
+        lines += ["[[joints]]", f'name = "{jname}"', f"grids = {list(grids)}", f'model = "{model}"',
+                  f"initial = {initial!r}", ""]
+    (folder / "study.toml").write_text("\n".join(lines))
+    return folder
+
+
+def random_loads(builder: FrameBuilder, n_cases: int, seed: int = 1, per_case: int = 3,
+                 force: float = 100.0, moment: float = 10.0) -> list[tuple[str, int, int, float]]:
+    """Seeded load cases on unsupported, non-joint grids: forces and moments mixed."""
+    rng = np.random.default_rng(seed)
+    joint_grids = {g for _, gs in builder.joints for g in gs}
+    free = [g for g in sorted(builder.grids) if g not in builder.spcs and g not in joint_grids]
+    rows = []
+    for c in range(n_cases):
+        for g in rng.choice(free, size=min(per_case, len(free)), replace=False):
+            comp = int(rng.integers(1, 7))
+            mag = force if comp <= 3 else moment
+            rows.append((f"L{c + 1}", int(g), comp, float(mag * rng.uniform(-1, 1))))
+    return rows

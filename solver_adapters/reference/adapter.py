@@ -1,0 +1,107 @@
+"""The in-process reference solver as a :class:`~solver_adapters.protocol.SolverAdapter`."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import scipy.sparse as sp
+
+from solver_adapters.deck import Deck
+from solver_adapters.protocol import (Displacements, DofLabel, LoadMatrix, ScalarSpring,
+                                      SolverStats, UnknownDofError)
+from solver_adapters.reference.model import Assembled, Factorization, assemble
+
+
+class ReferenceAdapter:
+    """Reads a NASTRAN bulk-data deck and solves it in-process (see ``model.py``).
+
+    Assembly and factorization happen on the first ``solve`` and are reused for every batch, so
+    a call with many right-hand sides costs one factorization plus cheap triangular solves.
+    """
+
+    name = "reference"
+    version = "1"
+
+    def __init__(self, deck: Deck | str | Path, *, backend: str = "superlu",
+                 extra_springs: Sequence[ScalarSpring] = ()):
+        if not isinstance(deck, Deck):
+            from solver_adapters.bdf import read_deck
+            self.deck_path: Path | None = Path(deck)
+            deck = read_deck(deck)
+        else:
+            self.deck_path = None
+        self.deck = deck
+        self.backend = backend
+        self.extra_springs = tuple(extra_springs)
+        self.stats = SolverStats()
+        self._model: Assembled | None = None
+        self._fact: Factorization | None = None
+        self._labels = tuple((int(g), c) for g in sorted(deck.grids) for c in range(1, 7))
+        self._label_set = frozenset(self._labels)
+        for s in self.extra_springs:
+            self._check_known([s.a] + ([s.b] if s.b else []), "spring DOF")
+
+    # -- protocol -----------------------------------------------------------------------------
+    def dofs(self) -> tuple[DofLabel, ...]:
+        return self._labels
+
+    def grid_xyz(self) -> dict[int, tuple[float, float, float]]:
+        return {g.id: tuple(g.xyz) for g in self.deck.grids.values()}
+
+    def solve(self, loads: LoadMatrix, report: Sequence[DofLabel]) -> Displacements:
+        report = tuple((int(g), int(c)) for g, c in report)
+        self._check_known(loads.dofs, "load DOF")
+        self._check_known(report, "reported DOF")
+        t0 = time.perf_counter()
+        fact = self.factorization()
+        m = self.model
+        F_g = sp.csr_matrix((m.T.shape[0], loads.n_cases))
+        if loads.dofs:
+            gi = m.g_index(loads.dofs)
+            coo = sp.coo_matrix(loads.values)
+            F_g = sp.csr_matrix((coo.data, (gi[coo.row], coo.col)), shape=(m.T.shape[0], loads.n_cases))
+        F_f = (m.T.T @ F_g).toarray()
+        U_f = fact.solve(F_f) if loads.n_cases else np.zeros((m.T.shape[1], 0))
+        U_f = U_f.reshape(m.T.shape[1], loads.n_cases)
+        values = m.T[m.g_index(report), :] @ U_f if report else np.zeros((0, loads.n_cases))
+        wall = time.perf_counter() - t0
+        self.stats.runs += 1
+        self.stats.right_hand_sides += loads.n_cases
+        self.stats.wall_s += wall
+        self.stats.history.append({"right_hand_sides": loads.n_cases, "wall_s": wall})
+        return Displacements(report, np.asarray(values), loads.cases)
+
+    def with_springs(self, springs: Sequence[ScalarSpring]) -> "ReferenceAdapter":
+        return ReferenceAdapter(self.deck, backend=self.backend,
+                                extra_springs=self.extra_springs + tuple(springs))
+
+    # -- outside the protocol (benchmark's "standard condensation" only) ------------------------
+    @property
+    def model(self) -> Assembled:
+        if self._model is None:
+            self._model = assemble(self.deck, self.extra_springs)
+        return self._model
+
+    def factorization(self) -> Factorization:
+        if self._fact is None:
+            t0 = time.perf_counter()
+            self._fact = Factorization(self.model, self.backend)
+            self.stats.factorizations += 1
+            self.stats.wall_s += time.perf_counter() - t0
+        return self._fact
+
+    def stiffness(self) -> tuple[sp.csc_matrix, list[DofLabel], sp.csr_matrix]:
+        """``(K_ff, f_labels, T)`` with ``u_g = T u_f``: the assembled matrices, for the
+        benchmark's standard-condensation comparison. Not part of the protocol."""
+        m = self.model
+        return m.K_ff, m.f_labels, m.T
+
+    # -- helpers -------------------------------------------------------------------------------
+    def _check_known(self, dofs, what: str) -> None:
+        unknown = [d for d in dofs if tuple(d) not in self._label_set]
+        if unknown:
+            raise UnknownDofError(unknown, what)
