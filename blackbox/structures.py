@@ -78,7 +78,9 @@ class FrameBuilder:
 
 def cube(edge: float = 0.2) -> FrameBuilder:
     """The cube of Section 3.7.1 (Table 3.1): nodes 1-4 bottom, i+4 above i, node 1 fixed,
-    a 3-branch flexible joint at node 7 (grids 7, 71, 72; members 7-3, 7-6, 7-8)."""
+    a 3-branch flexible joint at node 7: grid 7 on member 7-3, 71 on 7-8, 72 on 7-6 (the branch
+    order with which the stub joint reproduces Table 5.12; branch 3, the clamped one of the
+    complex model, is the member to node 6)."""
     f = FrameBuilder()
     pts = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]
     for i, (x, y, _) in enumerate(pts):
@@ -89,7 +91,7 @@ def cube(edge: float = 0.2) -> FrameBuilder:
         f.bar(a, b)
     f.fix(1)
     bars_at_7 = [e for e, a, b, _ in f.bars if 7 in (a, b)]
-    order = sorted(bars_at_7, key=lambda e: {3: 0, 6: 1, 8: 2}[
+    order = sorted(bars_at_7, key=lambda e: {3: 0, 8: 1, 6: 2}[
         [g for g in f.bars[e - 1][1:3] if g != 7][0]])
     f.flexible_joint("J7", 7, order, 71)
     return f
