@@ -278,3 +278,40 @@ def load_study(root: str | Path, *, need_measurements: bool = False) -> Study:
     elif need_measurements:
         raise StudyError("measurements.csv not found (needed for this command)", file=str(meas_path))
     return Study(root, config, deck_path, loads, measurements)
+
+
+@dataclass(frozen=True)
+class Branch:
+    """One branch of a joint as the deck describes it: its grid, the member leaving the joint,
+    the unit direction into that member, the member's section and its CBAR orientation vector."""
+    grid: int
+    eid: int
+    direction: tuple[float, float, float]
+    length: float
+    E: float
+    G: float
+    A: float
+    I1: float
+    I2: float
+    J: float
+    orientation: tuple[float, float, float]
+
+
+def joint_branches(deck, grids) -> list[Branch]:
+    """The member attached to each branch grid (exactly one per branch grid is expected)."""
+    out = []
+    for g in grids:
+        bars = [b for b in deck.cbars.values() if g in (b.ga, b.gb)]
+        if len(bars) != 1:
+            raise StudyError(f"branch grid {g} should end exactly one CBAR, it ends {len(bars)} "
+                             f"({[b.eid for b in bars]})")
+        b = bars[0]
+        other = b.gb if b.ga == g else b.ga
+        d = np.subtract(deck.grids[other].xyz, deck.grids[g].xyz)
+        L = float(np.linalg.norm(d))
+        p = deck.pbars[b.pid]
+        m = deck.mat1s[p.mid]
+        v = np.array(b.x, float) if b.g0 is None else \
+            np.subtract(deck.grids[b.g0].xyz, deck.grids[b.ga].xyz)
+        out.append(Branch(g, b.eid, tuple(d / L), L, m.e, m.g, p.a, p.i1, p.i2, p.j, tuple(v)))
+    return out

@@ -224,7 +224,7 @@ def test_with_springs_matches_deck_springs():
     """Springs passed through the protocol equal CELAS2 cards written into the deck."""
     f = cube()
     g = f.joints[0][1]
-    springs = [ScalarSpring((g[0], 4), (g[1], 4), 1e4), ScalarSpring((g[1], 6), (g[2], 5), -2e3),
+    springs = [ScalarSpring((g[0], 4), (g[1], 4), 1e4), ScalarSpring((g[1], 6), (g[2], 5), -2e2),
                ScalarSpring((g[2], 6), None, 5e3)]
     a = adapter_of(f).with_springs(springs)
     f.springs += [(s.a[0], s.a[1], s.b[0] if s.b else 0, s.b[1] if s.b else 0, s.k) for s in springs]

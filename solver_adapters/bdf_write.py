@@ -1,0 +1,239 @@
+"""NASTRAN bulk-data writer: pure field formatters, one writer per card, and :func:`write_deck`.
+
+Everything written here is read back by :mod:`solver_adapters.bdf`: small field loses what 8
+characters cannot hold (see :func:`print_float_8`), large field keeps about 15 significant digits,
+free field keeps every bit (``repr`` digits).
+"""
+
+from __future__ import annotations
+
+import math
+from decimal import ROUND_DOWN, ROUND_HALF_EVEN, Context, Decimal
+from typing import Iterable, Sequence
+
+from solver_adapters.deck import CBar, Deck, Grid, Mat1, PBar, Pelas, Rbe2, Spc1, Spring
+
+__all__ = ["print_int", "print_float_8", "print_float_16", "print_float_free", "print_field",
+           "format_card", "write_grid", "write_cbar", "write_pbar", "write_mat1", "write_spc1",
+           "write_rbe2", "write_pelas", "write_celas1", "write_celas2", "write_spring", "write_deck"]
+
+Field = int | float | str | None
+_FORMATS = ("small", "large", "free")
+
+
+# --------------------------------------------------------------------------------------------
+# field formatters
+# --------------------------------------------------------------------------------------------
+def print_int(value: int) -> str:
+    """An integer field: ``12``; ``None`` is a blank field."""
+    return "" if value is None else str(int(value))
+
+
+def _place(digits: str, q: int, negative: bool, width: int) -> str | None:
+    """The shortest NASTRAN real for ``int(digits) * 10**q`` that fits ``width``, or None.
+
+    Tries every exponent ``k`` of the implicit-exponent form ``<mantissa><+-k>`` (``k = 0``: plain
+    ``123.45``); ties go to no exponent, then to a normalised mantissa (``1.2346+8``).
+    """
+    n = len(digits)
+    e = q + n - 1                       # decimal exponent of the leading digit
+    best: tuple[int, bool, int, str] | None = None
+    for k in {0, *range(q - 1, q + n + 1)}:
+        j = q - k                       # the mantissa is int(digits) * 10**j
+        if j >= 0:
+            mantissa = digits + "0" * j + "."
+        elif -j < n:
+            mantissa = digits[:j] + "." + digits[j:]
+        else:
+            mantissa = "." + "0" * (-j - n) + digits
+        suffix = "" if k == 0 else f"{'+' if k > 0 else '-'}{abs(k)}"
+        text = ("-" if negative else "") + mantissa + suffix
+        key = (len(text), k != 0, abs(k - e), text)
+        if len(text) <= width and (best is None or key < best):
+            best = key
+    return None if best is None else best[3]
+
+
+def _print_float(value: float, width: int) -> str:
+    x = float(value)
+    if not math.isfinite(x):
+        raise ValueError(f"cannot write a non-finite real to a deck: {value!r}")
+    if x == 0.0:
+        return "0."
+    negative = x < 0.0
+    # 1) the shortest digits that round-trip (repr): exact, if some placement fits
+    sign, digit_tuple, q = Decimal(repr(abs(x))).normalize().as_tuple()
+    exact = _place("".join(map(str, digit_tuple)), q, negative, width)
+    if exact is not None:
+        return exact
+    # 2) the exact binary value rounded to ever fewer significant digits: the first that fits
+    #    is the closest representation of that width (n-digit decimals include the (n-1)-digit)
+    full = Decimal(abs(x))
+    # a mantissa needs its n digits and a decimal point: no use trying more than width - 1 - sign
+    for n in range(min(len(digit_tuple) - 1, width - 1 - negative), 0, -1):
+        rounded = Context(prec=n, rounding=ROUND_HALF_EVEN).plus(full).normalize()
+        if not math.isfinite(float(rounded)):   # 1.797e308 -> 1.8e308 overflows: round down
+            rounded = Context(prec=n, rounding=ROUND_DOWN).plus(full).normalize()
+        _, d, q = rounded.as_tuple()
+        text = _place("".join(map(str, d)), q, negative, width)
+        if text is not None:
+            return text
+    raise ValueError(f"{value!r} does not fit a {width}-character field")
+
+
+def print_float_8(value: float) -> str:
+    """The closest NASTRAN real to ``value`` that fits 8 characters.
+
+    Exact when the shortest round-trip digits fit (``0.25`` -> ``.25``, ``1e-5`` -> ``1.-5``);
+    otherwise the value rounded to as many significant digits as any placement allows, using the
+    implicit-exponent form where it saves characters (``1.23456789e12`` -> ``12346.+8``,
+    ``-0.000123456`` -> ``-1.235-4``). Always has a decimal point, so it reads back as a real.
+    """
+    return _print_float(value, 8)
+
+
+def print_float_16(value: float) -> str:
+    """The closest NASTRAN real that fits 16 characters (large field): 15+ significant digits."""
+    return _print_float(value, 16)
+
+
+def print_float_free(value: float) -> str:
+    """Full precision for free field: ``repr`` digits with a decimal point (``1.E-09``)."""
+    x = float(value)
+    if not math.isfinite(x):
+        raise ValueError(f"cannot write a non-finite real to a deck: {value!r}")
+    mantissa, _, exponent = repr(x).upper().partition("E")
+    if "." not in mantissa:
+        mantissa += "."
+    return mantissa + ("E" + exponent if exponent else "")
+
+
+def print_field(value: Field, fmt: str = "small") -> str:
+    """One field's text: ``None`` blank, ``int``/``float``/``str`` by type, in format ``fmt``."""
+    if value is None:
+        return ""
+    if isinstance(value, str):
+        return value
+    if isinstance(value, (bool, int)) or (hasattr(value, "dtype") and value.dtype.kind in "iu"):
+        return print_int(int(value))
+    return {"small": print_float_8, "large": print_float_16, "free": print_float_free}[fmt](value)
+
+
+# --------------------------------------------------------------------------------------------
+# cards
+# --------------------------------------------------------------------------------------------
+def format_card(name: str, fields: Sequence[Field], fmt: str = "small") -> str:
+    """One card as text lines (ending in a newline). ``fields[0]`` is NASTRAN field 2.
+
+    ``small``: 8-column fields, 8 data fields a line, implicit continuations (blank field 1).
+    ``large``: ``NAME*`` then 16-column fields, 4 a line, ``*`` continuations, an even number of
+    lines. ``free``: comma separated, 8 data fields a line, continuations start with ``,``.
+    Trailing blank fields are dropped.
+    """
+    if fmt not in _FORMATS:
+        raise ValueError(f"fmt must be 'small', 'large' or 'free', got {fmt!r}")
+    texts = [print_field(v, fmt) for v in fields]
+    while texts and texts[-1] == "":
+        texts.pop()
+    per_line = 4 if fmt == "large" else 8
+    chunks = [texts[i:i + per_line] for i in range(0, max(len(texts), 1), per_line)]
+    if fmt == "free":
+        return "".join((name if k == 0 else "") + "," + ",".join(c) + "\n"
+                       for k, c in enumerate(chunks))
+    width = 16 if fmt == "large" else 8
+    for t in texts:
+        if len(t) > width:
+            raise ValueError(f"{name}: field {t!r} is longer than {width} characters")
+    if fmt == "large" and len(chunks) % 2:
+        chunks.append([])
+    first = f"{name}*" if fmt == "large" else name
+    cont = "*" if fmt == "large" else ""
+    lines = [(first if k == 0 else cont).ljust(8) + "".join(t.rjust(width) for t in c)
+             for k, c in enumerate(chunks)]
+    return "".join(line.rstrip() + "\n" for line in lines)
+
+
+def write_grid(g: Grid, fmt: str = "small") -> str:
+    """GRID: ID, CP (blank), X1, X2, X3, CD (blank), PS, SEID (blank)."""
+    return format_card("GRID", [g.id, None, *g.xyz, None, g.ps or None], fmt)
+
+
+def write_cbar(b: CBar, fmt: str = "small") -> str:
+    """CBAR: EID, PID, GA, GB, X1 X2 X3 (orientation vector) or G0 (then X2 X3 blank)."""
+    orient: list[Field] = [b.g0, None, None] if b.g0 is not None else list(b.x)
+    return format_card("CBAR", [b.eid, b.pid, b.ga, b.gb, *orient], fmt)
+
+
+def write_pbar(p: PBar, fmt: str = "small") -> str:
+    """PBAR: PID, MID, A, I1, I2, J."""
+    return format_card("PBAR", [p.pid, p.mid, p.a, p.i1, p.i2, p.j], fmt)
+
+
+def write_mat1(m: Mat1, fmt: str = "small") -> str:
+    """MAT1: MID, E, G, NU (all three written, so nothing is recomputed on reading)."""
+    return format_card("MAT1", [m.mid, m.e, m.g, m.nu], fmt)
+
+
+def write_spc1(s: Spc1, fmt: str = "small") -> str:
+    """SPC1: SID, C (component digits), G1, G2, ... (every grid listed, no THRU)."""
+    return format_card("SPC1", [s.sid, s.components, *s.grids], fmt)
+
+
+def write_rbe2(e: Rbe2, fmt: str = "small") -> str:
+    """RBE2: EID, GN (independent grid), CM (dependent components), GM1, GM2, ..."""
+    return format_card("RBE2", [e.eid, e.gn, e.cm, *e.gm], fmt)
+
+
+def write_pelas(p1: Pelas, p2: Pelas | None = None, fmt: str = "small") -> str:
+    """PELAS: PID1, K1, GE1 (blank), S1 (blank), PID2, K2 (a second property is optional)."""
+    fields: list[Field] = [p1.pid, p1.k, None, None]
+    if p2 is not None:
+        fields += [p2.pid, p2.k]
+    return format_card("PELAS", fields, fmt)
+
+
+def _end(g: int, c: int) -> list[Field]:
+    return [g, c] if g else [None, None]
+
+
+def write_celas1(s: Spring, fmt: str = "small") -> str:
+    """CELAS1: EID, PID, G1, C1, G2, C2 (G2 C2 blank: to ground)."""
+    return format_card("CELAS1", [s.eid, s.pid, *_end(s.g1, s.c1), *_end(s.g2, s.c2)], fmt)
+
+
+def write_celas2(s: Spring, fmt: str = "small", k: float | None = None) -> str:
+    """CELAS2: EID, K, G1, C1, G2, C2 (G2 C2 blank: to ground); GE, S blank.
+
+    ``k`` overrides the spring's own stiffness (a CELAS1 written as a CELAS2 needs its PELAS's K).
+    """
+    stiffness = s.k if k is None else k
+    if stiffness is None:
+        raise ValueError(f"CELAS2 {s.eid}: no stiffness (a CELAS1 needs k= from its PELAS)")
+    return format_card("CELAS2", [s.eid, stiffness, *_end(s.g1, s.c1), *_end(s.g2, s.c2)], fmt)
+
+
+def write_spring(s: Spring, fmt: str = "small") -> str:
+    """The spring as it was read: CELAS1 (``pid`` set) or CELAS2."""
+    return write_celas1(s, fmt) if s.card == "CELAS1" else write_celas2(s, fmt)
+
+
+def _pairs(items: list[Pelas]) -> Iterable[tuple[Pelas, Pelas | None]]:
+    for i in range(0, len(items), 2):
+        yield items[i], items[i + 1] if i + 1 < len(items) else None
+
+
+def write_deck(deck: Deck, fmt: str = "small") -> str:
+    """A complete bulk data section (``BEGIN BULK`` ... ``ENDDATA``), cards sorted by ID."""
+    if fmt not in _FORMATS:
+        raise ValueError(f"fmt must be 'small', 'large' or 'free', got {fmt!r}")
+    out = [f"$ bulk data written by blackbox ({fmt} field)\n", "BEGIN BULK\n"]
+    out += [write_grid(deck.grids[i], fmt) for i in sorted(deck.grids)]
+    out += [write_cbar(deck.cbars[i], fmt) for i in sorted(deck.cbars)]
+    out += [write_pbar(deck.pbars[i], fmt) for i in sorted(deck.pbars)]
+    out += [write_mat1(deck.mat1s[i], fmt) for i in sorted(deck.mat1s)]
+    out += [write_spc1(s, fmt) for s in deck.spc1s]
+    out += [write_rbe2(deck.rbe2s[i], fmt) for i in sorted(deck.rbe2s)]
+    out += [write_pelas(a, b, fmt) for a, b in _pairs([deck.pelas[i] for i in sorted(deck.pelas)])]
+    out += [write_spring(deck.springs[i], fmt) for i in sorted(deck.springs)]
+    out.append("ENDDATA\n")
+    return "".join(out)
