@@ -69,6 +69,15 @@ def cmd_solve(args) -> int:
     return 0
 
 
+def cmd_simulate(args) -> int:
+    from blackbox.workflows import simulate_study
+
+    rec = simulate_study(args.study, args.truth, args.out, args.adapter)
+    print(f"simulated {rec['n_measurements']} measurements over {len(rec['cases'])} case(s) "
+          f"({rec['solver_runs']} solver run(s)) -> {args.out / 'measurements.csv'}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="blackbox", description=__doc__.splitlines()[0])
     p.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -79,6 +88,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--adapter", default=None, help="override [solver] adapter")
     s.add_argument("--out", type=Path, required=True)
     s.set_defaults(func=cmd_solve)
+
+    s = sub.add_parser("simulate", help="a copy of the study with simulated measurements (Sec. 5.2)")
+    s.add_argument("study", type=Path)
+    s.add_argument("--truth", type=Path, required=True, help="truth TOML: joints, noise, bias, what to measure")
+    s.add_argument("--adapter", default=None)
+    s.add_argument("--out", type=Path, required=True)
+    s.set_defaults(func=cmd_simulate)
     return p
 
 

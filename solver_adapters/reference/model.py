@@ -198,12 +198,18 @@ class Factorization:
         K = model.K_ff
         t0 = time.perf_counter()
         diag = K.diagonal()
-        dead = np.flatnonzero(diag <= 0.0)
+        dead = np.flatnonzero(diag == 0.0)
         if dead.size:
             raise UnstableStructureError(
-                "the stiffness has no (or negative) diagonal term at these free components: nothing "
-                "connects them (a grid without elements, or a rotation no element reaches); add an "
-                "SPC1 or an element", [model.f_labels[i] for i in dead])
+                "the stiffness has no diagonal term at these free components: nothing connects "
+                "them (a grid without elements, or a rotation no element reaches); add an SPC1 or "
+                "an element", [model.f_labels[i] for i in dead])
+        negative = np.flatnonzero(diag < 0.0)
+        if negative.size:
+            raise UnstableStructureError(
+                "negative diagonal stiffness at these free components: negative springs exceed "
+                "what the elements provide, the structure would be unstable",
+                [model.f_labels[i] for i in negative])
         if backend == "superlu":
             self._lu = self._superlu(K)
             self._check_pivots(K, diag)

@@ -1,0 +1,168 @@
+"""Simulation of measurements (Section 5.2).
+
+The exact response comes from a *truth*: joint models with known parameters added to the
+condensed structure (the same black-box condensation as the identification), or a different
+deck solved as it is (for effects the study does not declare). It is then contaminated:
+
+* Gaussian noise whose standard deviation is a fraction of each measured quantity's magnitude
+  (the dissertation: 5 % of the actual rotation), with a floor so that a quantity that happens to
+  be ~0 (a symmetric case) still gets a realistic error, and/or an absolute part;
+* systematic bias by scaling the applied forces of the truth (Section 5.3.1): the study keeps
+  the nominal loads, the "structure" felt scaled ones;
+* branch rotations measured as the average of several points near the branch end (eq. 33):
+  each point's rotation follows the member's cubic (Hermite) deflection, each has its own noise,
+  the mean is reported with the sigma of the mean;
+* measurement relative to a reference point (Section 5.2): every quantity of a case shares the
+  reference point's error, and the relative part has an error proportional to the *relative*
+  motion only.
+
+Everything here is solver-free: the caller supplies the exact values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from solver_adapters.protocol import DofLabel
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class TruthJoint(_Strict):
+    """A joint of the truth: ``value`` (every parameter), explicit ``values``, or for the complex
+    model a ``stub_length`` (the "actual joint" of Section 5.4.1, from the deck's branch members)."""
+    name: str
+    model: str = "simple"
+    value: float | None = None
+    values: dict[str, float] | None = None
+    stub_length: float | None = Field(None, gt=0)
+
+
+class NoiseConfig(_Strict):
+    relative: float = Field(0.05, ge=0)     # sigma = relative * |true value|
+    absolute: float = Field(0.0, ge=0)      # added in quadrature
+    floor: float = Field(0.02, ge=0)        # sigma >= relative * floor * max|same kind in the case|
+
+
+class MeasureConfig(_Strict):
+    joint: bool = True                      # all joint boundary DOFs
+    away: list[tuple[int, int]] = []        # extra (grid, component) away from the joint
+    away_grids: list[int] = []              # all six components of these grids
+    cases: list[str] = []                   # default: every load case
+    averaging_points: int = Field(0, ge=0)  # eq. 33: points per branch (0 = the branch end itself)
+    averaging_spacing: float = Field(0.01, gt=0)
+    reference_grid: int | None = None       # Section 5.2 reference point
+
+
+class TruthConfig(_Strict):
+    seed: int = 0
+    deck: str | None = None                 # a different deck as the truth (solved as it is)
+    joints: list[TruthJoint] = []
+    noise: NoiseConfig = NoiseConfig()
+    force_scale: float = Field(1.0, gt=0)   # Section 5.3.1 systematic bias
+    measure: MeasureConfig = MeasureConfig()
+
+
+def measured_rows(case_labels: Sequence[str], dofs: Sequence[DofLabel]) -> tuple[list[str], list[DofLabel]]:
+    """Every (case, DOF) pair, case-major, as rows of measurements.csv."""
+    return [c for c in case_labels for _ in dofs], [d for _ in case_labels for d in dofs]
+
+
+def noise_sigma(true: np.ndarray, kinds: np.ndarray, case_idx: np.ndarray, cfg: NoiseConfig) -> np.ndarray:
+    """Per-row sigma: ``relative*|u|`` floored by ``relative*floor*max|u|`` over the rows of the
+    same kind (translation/rotation) and case, with ``absolute`` added in quadrature."""
+    mag = np.abs(true)
+    ref = np.zeros_like(mag)
+    for c in np.unique(case_idx):
+        for k in np.unique(kinds):
+            sel = (case_idx == c) & (kinds == k)
+            ref[sel] = mag[sel].max()
+    rel = cfg.relative * np.maximum(mag, cfg.floor * ref)
+    sigma = np.sqrt(rel**2 + cfg.absolute**2)
+    if np.any(sigma <= 0):
+        raise ValueError("noise model gives sigma = 0 for some measurement: set noise.absolute > 0 "
+                         "or noise.floor > 0")
+    return sigma
+
+
+@dataclass(frozen=True)
+class Simulated:
+    values: np.ndarray
+    sigma: np.ndarray
+    true: np.ndarray
+
+
+def contaminate(true: np.ndarray, sigma: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    return true + sigma * rng.standard_normal(true.shape)
+
+
+def relative_to_reference(true: np.ndarray, ref_true: np.ndarray, kinds: np.ndarray,
+                          case_idx: np.ndarray, cfg: NoiseConfig, rng: np.random.Generator) -> Simulated:
+    """Section 5.2: ``u_i = (u_ref + e_ref) + (u_i - u_ref + e_rel,i)``.
+
+    ``ref_true[row]`` is the reference point's true value of the same component and case.
+    ``e_ref`` is common to every row of a case and component; the relative part's sigma is
+    ``relative * |u_i - u_ref|`` (floored). The declared sigma is the marginal one; the common
+    part is correlated across rows, which a diagonal weighting ignores (stated in the report)."""
+    rel_true = true - ref_true
+    s_rel = noise_sigma(rel_true, kinds, case_idx, cfg)
+    s_ref = noise_sigma(ref_true, kinds, case_idx, cfg)
+    common = {}
+    e_ref = np.empty_like(true)
+    for i, key in enumerate(zip(case_idx, kinds, np.round(ref_true, 300))):
+        if key not in common:
+            common[key] = s_ref[i] * rng.standard_normal()
+        e_ref[i] = common[key]
+    values = true + e_ref + s_rel * rng.standard_normal(true.shape)
+    return Simulated(values, np.sqrt(s_rel**2 + s_ref**2), true)
+
+
+def member_end_rotation_samples(u_a: np.ndarray, u_b: np.ndarray, xa: np.ndarray, xb: np.ndarray,
+                                v: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Rotations (global, 3) at distances ``s`` from end a along a frame member (eq. 33 points).
+
+    ``u_a``, ``u_b``: the 6 global DOFs of each end, shape ``(6, L)``. Bending rotations follow
+    the Hermite cubic of each plane, torsion is linear. Returns ``(len(s), 3, L)``.
+    """
+    d = xb - xa
+    Lm = float(np.linalg.norm(d))
+    ex = d / Lm
+    ez = np.cross(ex, v)
+    ez /= np.linalg.norm(ez)
+    ey = np.cross(ez, ex)
+    R = np.vstack([ex, ey, ez])                     # global -> local
+    ta, tb = R @ u_a[:3], R @ u_b[:3]
+    ra, rb = R @ u_a[3:], R @ u_b[3:]
+    out = np.empty((len(s), 3, u_a.shape[1]))
+    for i, si in enumerate(np.asarray(s, float)):
+        xi = si / Lm
+        # derivatives of the Hermite shape functions N1..N4 with respect to x
+        dN1 = (-6 * xi + 6 * xi**2) / Lm
+        dN2 = 1 - 4 * xi + 3 * xi**2
+        dN3 = (6 * xi - 6 * xi**2) / Lm
+        dN4 = -2 * xi + 3 * xi**2
+        theta_z = dN1 * ta[1] + dN2 * ra[2] + dN3 * tb[1] + dN4 * rb[2]          # plane 1: v'
+        theta_y = -(dN1 * ta[2] + dN2 * (-ra[1]) + dN3 * tb[2] + dN4 * (-rb[1]))  # plane 2: -w'
+        theta_x = (1 - xi) * ra[0] + xi * rb[0]
+        out[i] = R.T @ np.vstack([theta_x, theta_y, theta_z])
+    return out
+
+
+def averaged_rotation(samples: np.ndarray, cfg: NoiseConfig, rng: np.random.Generator,
+                      kinds_scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 33: mean of the noisy rotations of several points; returns ``(value, sigma_of_mean)``.
+
+    ``samples``: ``(p, 3, L)`` true rotations; ``kinds_scale``: ``(L,)`` the largest rotation of
+    each case (the noise floor's reference)."""
+    mag = np.abs(samples)
+    s = cfg.relative * np.maximum(mag, cfg.floor * kinds_scale[None, None, :])
+    s = np.sqrt(s**2 + cfg.absolute**2)
+    noisy = samples + s * rng.standard_normal(samples.shape)
+    p = samples.shape[0]
+    return noisy.mean(axis=0), np.sqrt((s**2).sum(axis=0)) / p
