@@ -15,28 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from blackbox.errors import IdentificationError, StudyError
-from solver_adapters.protocol import SolverAdapter, SolverError
-
-
-# --------------------------------------------------------------------------------------------
-# wiring: the only place that picks an adapter
-# --------------------------------------------------------------------------------------------
-def adapter_for(study, name: str | None = None, *, cache: bool = True) -> SolverAdapter:
-    """The adapter the study asks for (or ``name``), with the study's solver options."""
-    from solver_adapters.registry import make_adapter
-
-    cfg = study.config.solver
-    name = name or cfg.adapter
-    if name == "reference":
-        opts = {"backend": cfg.backend}
-    elif name == "command":
-        if not cfg.command:
-            raise StudyError("adapter 'command' needs [solver] command = [\"program\", \"{deck}\"]",
-                             file=str(study.root / "study.toml"))
-        opts = {"command": cfg.command, "dialect": cfg.dialect, "timeout_s": cfg.timeout_s}
-    else:
-        opts = {"timeout_s": cfg.timeout_s}
-    return make_adapter(name, study.deck_path, **opts)
+from solver_adapters.protocol import SolverError
 
 
 def _write_csv(path: Path, header: list[str], rows) -> None:
@@ -51,9 +30,10 @@ def _write_csv(path: Path, header: list[str], rows) -> None:
 # --------------------------------------------------------------------------------------------
 def cmd_solve(args) -> int:
     from blackbox.study import load_study
+    from blackbox.workflows import make_adapter_for
 
     study = load_study(args.study)
-    adapter = adapter_for(study, args.adapter)
+    adapter = make_adapter_for(study, args.adapter)
     report = adapter.dofs()
     t0 = time.perf_counter()
     out = adapter.solve(study.loads, report)
