@@ -249,7 +249,8 @@ class Dialect(Protocol):
         ...
 
 
-BUILTIN_DIALECTS = {"nastran": "solver_adapters.nastran:NastranDialect"}
+BUILTIN_DIALECTS = {"nastran": "solver_adapters.nastran:NastranDialect",
+                    "legacy": "solver_adapters.legacy:LegacyDialect"}
 DIALECT_GROUP = "blackbox.dialects"
 
 
