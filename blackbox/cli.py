@@ -58,6 +58,74 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+def cmd_conformance(args) -> int:
+    """``blackbox conformance ADAPTER``: the shared adapter checks of ``solver_adapters.conformance``."""
+    import tempfile
+
+    from solver_adapters import conformance as cf
+    from solver_adapters.registry import adapter_factory, make_adapter
+
+    name = args.adapter
+    adapter_factory(name)  # an unknown or uninstalled adapter is bad input (exit 2), not a failed check
+    opts = {"timeout_s": args.timeout}
+    with tempfile.TemporaryDirectory(prefix="blackbox-conformance-") as tmp:
+        if args.study is not None:
+            from blackbox.study import load_study
+            from blackbox.workflows import make_adapter_for
+
+            study = load_study(args.study)
+
+            def factory(deck):
+                return make_adapter_for(study, name, deck=deck, cache=False)
+
+            deck, loads, deck_name, others = study.deck_path, study.loads, study.name, {}
+        else:
+            if name == "command":
+                raise ValueError("adapter 'command' needs a study for its command line and dialect: "
+                                 "blackbox conformance command --study STUDY")
+
+            def factory(deck):
+                return make_adapter(name, deck, **opts)
+
+            if args.deck is not None:
+                if not args.deck.is_file():
+                    raise ValueError(f"--deck {args.deck}: no such file")
+                deck, loads, deck_name, others = args.deck, None, args.deck.stem, {}
+            else:
+                others = cf.conformance_decks(tmp)
+                deck_name = "cube" if "cube" in others else "generated"
+                deck, loads = others[deck_name]
+        misbehaviour = None if args.no_misbehaviour else cf.builtin_misbehaviour(name, args.misbehave_timeout)
+        print(f"conformance of adapter {name!r} on {deck} ({'+'.join([deck_name, *(n for n in others if n != deck_name)])})")
+
+        def progress(check):
+            print(f"{'PASS' if check.passed else 'FAIL'}  {check.name:<34} {check.wall_s:7.2f} s  {check.detail}",
+                  flush=True)
+
+        report = cf.run_conformance(factory, deck, loads, misbehaviour=misbehaviour, rtol=args.rtol,
+                                    agreement_decks=others, deck_name=deck_name, progress=progress)
+    print(report.lines()[-1])
+    if args.out is not None:
+        js, md = report.write(args.out)
+        print(f"-> {js}, {md}")
+    return 0 if report.passed else 1
+
+
+def add_cache_options(s: argparse.ArgumentParser) -> None:
+    """``--no-cache`` / ``--cache-dir`` for a sub-command that builds adapters for a study
+    (``main`` hands them to ``blackbox.workflows.make_adapter_for`` through ``ADAPTER_CACHE``)."""
+    s.add_argument("--no-cache", action="store_true",
+                   help="run the solver even for batches already in the study's .blackbox_cache/")
+    s.add_argument("--cache-dir", type=Path, default=None,
+                   help="keep solver results here instead of STUDY/.blackbox_cache/")
+
+
+def _cache_choice(args) -> bool | Path:
+    if args.no_cache:
+        return False
+    return args.cache_dir if args.cache_dir is not None else True
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="blackbox", description=__doc__.splitlines()[0])
     p.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -67,6 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("study", type=Path)
     s.add_argument("--adapter", default=None, help="override [solver] adapter")
     s.add_argument("--out", type=Path, required=True)
+    add_cache_options(s)
     s.set_defaults(func=cmd_solve)
 
     s = sub.add_parser("simulate", help="a copy of the study with simulated measurements (Sec. 5.2)")
@@ -75,12 +144,33 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--adapter", default=None)
     s.add_argument("--out", type=Path, required=True)
     s.set_defaults(func=cmd_simulate)
+
+    s = sub.add_parser("conformance", help="run the shared adapter checks; exit 0 only if all pass")
+    s.add_argument("adapter", help="adapter name: reference, mystran, legacy, command (needs --study), "
+                                   "or one registered under the entry-point group blackbox.adapters")
+    s.add_argument("--deck", type=Path, default=None,
+                   help="run on this deck with seeded loads (default: the cube fixture, and the car and a "
+                        "generated deck for the reference agreement)")
+    s.add_argument("--study", type=Path, default=None,
+                   help="run on this study's deck and loads with its [solver] settings")
+    s.add_argument("--out", type=Path, default=None, help="write conformance.json and conformance.md here")
+    s.add_argument("--rtol", type=float, default=None,
+                   help="precision to hold the adapter to (default: its rtol attribute, else 1e-6)")
+    s.add_argument("--timeout", type=float, default=None, help="per-run timeout for external codes (s)")
+    s.add_argument("--misbehave-timeout", type=float, default=2.0,
+                   help="timeout of the 'hang' misbehaviour check (s)")
+    s.add_argument("--no-misbehaviour", action="store_true", help="skip the misbehaviour checks")
+    s.set_defaults(func=cmd_conformance)
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    cache_token = None
+    if hasattr(args, "no_cache"):  # a sub-command with --no-cache / --cache-dir (add_cache_options)
+        from blackbox.workflows import ADAPTER_CACHE
+        cache_token = ADAPTER_CACHE.set(_cache_choice(args))
     try:
         return int(args.func(args) or 0)
     except (StudyError, SolverError, IdentificationError, ValueError, OSError) as exc:
@@ -92,6 +182,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"blackbox {args.command}: interrupted", file=sys.stderr)
         return 130
+    finally:
+        if cache_token is not None:
+            ADAPTER_CACHE.reset(cache_token)
 
 
 if __name__ == "__main__":

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import shutil
 import tomllib
+from contextvars import ContextVar
 from pathlib import Path
 
 import numpy as np
@@ -23,9 +24,24 @@ from blackbox.study import Study, joint_branches, load_study
 from solver_adapters.protocol import DofLabel, LoadMatrix, SolverAdapter
 
 
-def make_adapter_for(study: Study, name: str | None = None, deck: Path | None = None) -> SolverAdapter:
-    """The study's adapter (or ``name``), optionally on another deck (a truth deck)."""
+ADAPTER_CACHE: ContextVar[bool | Path] = ContextVar("blackbox_adapter_cache", default=False)
+"""What ``make_adapter_for(..., cache=None)`` does: False (no cache), True (``STUDY/.blackbox_cache``)
+or a cache folder. The CLI sets it from ``--no-cache`` / ``--cache-dir`` for the command's duration."""
+
+
+def make_adapter_for(study: Study, name: str | None = None, deck: Path | None = None,
+                     cache: bool | str | Path | None = None) -> SolverAdapter:
+    """The study's adapter (or ``name``), optionally on another deck (a truth deck).
+
+    ``cache``: True wraps the adapter in :class:`solver_adapters.cache.CachedAdapter` with the
+    study's ``.blackbox_cache/`` folder (a repeated batch is read back instead of solved, so an
+    interrupted command resumes); a path uses that folder instead; False returns the bare
+    adapter; None (default) takes :data:`ADAPTER_CACHE` (False unless the CLI set it).
+    """
     from solver_adapters.registry import make_adapter
+
+    if cache is None:
+        cache = ADAPTER_CACHE.get()
 
     cfg = study.config.solver
     name = name or cfg.adapter
@@ -39,7 +55,11 @@ def make_adapter_for(study: Study, name: str | None = None, deck: Path | None = 
         opts = {"command": cfg.command, "dialect": cfg.dialect, "timeout_s": cfg.timeout_s}
     else:
         opts = {"timeout_s": cfg.timeout_s}
-    return make_adapter(name, deck, **opts)
+    adapter = make_adapter(name, deck, **opts)
+    if cache is False:
+        return adapter
+    from solver_adapters.cache import CACHE_DIRNAME, CachedAdapter
+    return CachedAdapter(adapter, study.root / CACHE_DIRNAME if cache is True else Path(cache))
 
 
 def study_deck(study: Study):

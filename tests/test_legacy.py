@@ -252,11 +252,15 @@ def test_bad_listings_never_give_numbers(tmp_path, mode, message):
     assert legacy.stats.right_hand_sides == 0 and not legacy.stats.history[-1]["ok"]
 
 
-def _framesolve_processes() -> list[psutil.Process]:
+def _framesolve_processes(root: Path) -> list[psutil.Process]:
+    """Live framesolve.py processes started under ``root`` (their run directory or deck is there),
+    so that runs of other test sessions on the machine are neither counted nor killed."""
     found = []
-    for p in psutil.process_iter(["cmdline", "status"]):
+    for p in psutil.process_iter(["cmdline", "status", "cwd"]):
         try:
-            if p.info["status"] != psutil.STATUS_ZOMBIE and any("framesolve.py" in a for a in p.info["cmdline"] or ()):
+            args = p.info["cmdline"] or ()
+            mine = str(root) in (p.info["cwd"] or "") or any(str(root) in a for a in args)
+            if p.info["status"] != psutil.STATUS_ZOMBIE and mine and any("framesolve.py" in a for a in args):
                 found.append(p)
         except psutil.Error:
             pass
@@ -264,7 +268,7 @@ def _framesolve_processes() -> list[psutil.Process]:
 
 
 def test_hang_times_out_and_leaves_no_process(tmp_path):
-    assert not _framesolve_processes(), "a framesolve.py process was running before the test"
+    assert not _framesolve_processes(tmp_path), "a framesolve.py process was running before the test"
     timeout = 2.0
     legacy = LegacyAdapter(FIXTURES / "cube" / "model.bdf", timeout_s=timeout, misbehave="hang",
                            workdir_root=tmp_path)
@@ -276,9 +280,9 @@ def test_hang_times_out_and_leaves_no_process(tmp_path):
     child = re.search(r"WAITING FOR CHILD PROCESS (\d+)", info.value.log_tail)
     assert child, info.value.log_tail  # the child (own session) was started, so the check means something
     deadline = time.monotonic() + 3.0  # killed orphans are reaped by init shortly after the kill
-    while _framesolve_processes() and time.monotonic() < deadline:
+    while _framesolve_processes(tmp_path) and time.monotonic() < deadline:
         time.sleep(0.05)
-    left = _framesolve_processes()
+    left = _framesolve_processes(tmp_path)
     for p in left:  # do not leave them to the next test run
         p.kill()
     assert not left, [p.info["cmdline"] for p in left]

@@ -1,0 +1,389 @@
+"""Solver-run cache: :class:`CachedAdapter` answers a repeated ``solve`` from disk, without a run.
+
+A long study (identification, diagnosis, a benchmark) makes many batches; an interrupted one is
+resumed by running the same command again: every batch that finished before the interruption is
+read back, the others are computed. ``blackbox`` commands use ``STUDY/.blackbox_cache/`` (see
+``blackbox.workflows.make_adapter_for``; ``--no-cache`` bypasses it, ``--cache-dir`` moves it).
+
+The key
+-------
+sha256 over everything that decides the answer:
+
+* the deck: the bytes of the main file and of every file it INCLUDEs (recursively), in reading
+  order. Contents, not paths: a study folder copied elsewhere keeps its cache. The deck is
+  fingerprinted when the adapter is wrapped and again at every solve; if it changed in between,
+  the inner adapter may hold the old model, so that solve bypasses the cache (``bypassed``);
+* the extra springs (``with_springs``), in order, with ``repr`` of each stiffness;
+* the load matrix: DOF labels, case labels, and the CSC arrays of its values (duplicates summed,
+  explicit zeros dropped, indices sorted: equal matrices give equal bytes);
+* the report labels, in order;
+* the adapter: class, ``name``, ``version`` and the options that change results (``command``,
+  ``backend``, ``misbehave``, the dialect's name and scalar settings).
+
+An adapter that is neither deck-file based nor one of ours can define ``cache_token()``
+(a string that changes whenever its answers may change); it replaces the deck fingerprint.
+
+Entries
+-------
+``CACHE_DIR/<key[:2]>/<key>.bbc``: a magic line, one JSON header line (key, shape, dtype, report
+labels, cases, sha256 and length of the value bytes, adapter, time) and the raw float64 values.
+An entry is written to a temporary file in the same directory, flushed, ``fsync``-ed and renamed
+over the final name with ``os.replace`` (atomic on POSIX), so a reader sees either the whole old
+entry, the whole new one or none, and two processes writing the same key leave one valid entry.
+On read the header must match the request and the sha256 of the values must match the header;
+anything else (a truncated file, a flipped byte) counts as ``corrupt``, is ignored and is
+rewritten by the recomputed result. A failed run raises before anything is written: failures are
+never cached. The cache never makes a solve fail: an unwritable directory is counted
+(``store_errors``) and warned about once.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import tempfile
+import threading
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from solver_adapters.protocol import (Displacements, DofLabel, LoadMatrix, ScalarSpring, SolverAdapter,
+                                      SolverStats)
+
+MAGIC = b"BLACKBOX-SOLVER-CACHE 1\n"
+SUFFIX = ".bbc"
+CACHE_DIRNAME = ".blackbox_cache"
+STALE_TMP_S = 3600.0
+"""A temporary file older than this was left by a writer that died; it is removed on the next write."""
+
+_INCLUDE = re.compile(r"^\s*INCLUDE\s*(?:'([^']*)'|\"([^\"]*)\"|([^\s'\"$]+))", re.IGNORECASE)
+_RESULT_OPTIONS = ("version", "command", "backend", "misbehave")
+_COUNT_LOCK = threading.Lock()   # counters are shared by a CachedAdapter and its with_springs copies
+
+
+class CorruptEntry(ValueError):
+    """A cache file that is not a complete, valid entry for the requested key."""
+
+
+@dataclass
+class CacheStats:
+    """What the cache did. ``hits`` made no solver run; ``misses`` ran the inner adapter."""
+
+    hits: int = 0
+    misses: int = 0
+    stores: int = 0
+    corrupt: int = 0
+    store_errors: int = 0
+    bypassed: int = 0
+    not_stored: int = 0
+
+    def snapshot(self) -> dict[str, int]:
+        return dict(vars(self))
+
+
+# --------------------------------------------------------------------------------------------
+# the key
+# --------------------------------------------------------------------------------------------
+def deck_files(path: str | os.PathLike) -> list[Path]:
+    """The deck and every file it INCLUDEs (recursively, relative to the including file), in
+    reading order. Unreadable includes are left out: the adapter could not have read them either."""
+    out: list[Path] = []
+
+    def walk(p: Path) -> None:
+        if p in out:
+            return
+        out.append(p)
+        try:
+            text = p.read_text(encoding="latin-1")
+        except OSError:
+            return
+        for line in text.splitlines():
+            m = _INCLUDE.match(line)
+            if m:
+                name = next(g for g in m.groups() if g is not None).strip()
+                walk((p.parent / name).resolve())
+
+    walk(Path(path).resolve())
+    return out
+
+
+def _files_digest(files: Sequence[Path]) -> str:
+    h = hashlib.sha256()
+    for f in files:
+        try:
+            data = f.read_bytes()
+        except OSError:
+            data = b"<unreadable>"
+        h.update(hashlib.sha256(data).digest())
+    return h.hexdigest()
+
+
+def deck_fingerprint(adapter: Any) -> str:
+    """What identifies the model an adapter solves: its ``cache_token()``, else the bytes of its
+    deck files (``deck_path`` + INCLUDEs, plus any file listed in its parsed deck), else the parsed
+    deck itself. ``TypeError`` when none is available."""
+    token = getattr(adapter, "cache_token", None)
+    if callable(token):
+        return "token:" + str(token())
+    path = getattr(adapter, "deck_path", None)
+    parsed = getattr(adapter, "deck", None)
+    if parsed is None:
+        parsed = getattr(getattr(adapter, "_base", None), "model", None)
+    if path is not None:
+        files = deck_files(path)
+        for name in getattr(parsed, "files", None) or []:   # what the reader itself followed
+            p = Path(name).resolve()
+            if p.is_file() and p not in files:
+                files.append(p)
+        return "files:" + _files_digest(files)
+    if parsed is not None:
+        return "deck:" + hashlib.sha256(repr(parsed).encode()).hexdigest()
+    raise TypeError(f"CachedAdapter cannot identify the model of {type(adapter).__name__}: give it a "
+                    f"deck_path attribute or a cache_token() method")
+
+
+def _scalar_settings(obj: Any) -> dict[str, Any]:
+    return {k: v for k, v in sorted(vars(obj).items())
+            if not k.startswith("_") and isinstance(v, (str, int, float, bool, type(None)))}
+
+
+def adapter_identity(adapter: Any) -> dict[str, Any]:
+    """Class, name and the options that change an adapter's answers (see the module docstring)."""
+    ident: dict[str, Any] = {"class": f"{type(adapter).__module__}.{type(adapter).__qualname__}",
+                             "name": getattr(adapter, "name", None)}
+    for attr in _RESULT_OPTIONS:
+        value = getattr(adapter, attr, None)
+        if value is not None:
+            ident[attr] = list(value) if isinstance(value, (list, tuple)) else str(value)
+    dialect = getattr(adapter, "dialect", None)
+    if dialect is not None:
+        ident["dialect"] = {"name": getattr(dialect, "name", type(dialect).__name__),
+                            "class": f"{type(dialect).__module__}.{type(dialect).__qualname__}",
+                            **(_scalar_settings(dialect) if hasattr(dialect, "__dict__") else {})}
+    return ident
+
+
+def _springs_of(adapter: Any, tracked: tuple[ScalarSpring, ...]) -> tuple[ScalarSpring, ...]:
+    """The adapter's own full list of extra springs when it exposes one, else those added
+    through :meth:`CachedAdapter.with_springs`."""
+    for attr in ("extra_springs", "springs"):
+        value = getattr(adapter, attr, None)
+        if isinstance(value, (tuple, list)) and all(isinstance(s, ScalarSpring) for s in value):
+            return tuple(value)
+    return tracked
+
+
+def solve_key(identity: dict[str, Any], deck: str, springs: Sequence[ScalarSpring], loads: LoadMatrix,
+              report: Sequence[DofLabel]) -> str:
+    """The cache key of one ``solve`` (hex sha256); every part is length-prefixed."""
+    h = hashlib.sha256()
+
+    def part(tag: str, data: bytes) -> None:
+        h.update(f"{tag}:{len(data)}:".encode())
+        h.update(data)
+
+    part("format", MAGIC)
+    part("adapter", json.dumps(identity, sort_keys=True, default=str).encode())
+    part("deck", deck.encode())
+    part("springs", json.dumps([[list(s.a), list(s.b) if s.b is not None else None, repr(float(s.k))]
+                                for s in springs]).encode())
+    part("load_dofs", json.dumps([list(d) for d in loads.dofs]).encode())
+    part("cases", json.dumps(list(loads.cases)).encode())
+    v = loads.values.tocsc(copy=True)
+    v.sum_duplicates()
+    v.eliminate_zeros()
+    v.sort_indices()
+    part("shape", json.dumps(list(v.shape)).encode())
+    part("indptr", np.asarray(v.indptr, dtype="<i8").tobytes())
+    part("indices", np.asarray(v.indices, dtype="<i8").tobytes())
+    part("data", np.asarray(v.data, dtype="<f8").tobytes())
+    part("report", json.dumps([[int(g), int(c)] for g, c in report]).encode())
+    return h.hexdigest()
+
+
+# --------------------------------------------------------------------------------------------
+# entries
+# --------------------------------------------------------------------------------------------
+def entry_path(cache_dir: str | os.PathLike, key: str) -> Path:
+    return Path(cache_dir) / key[:2] / f"{key}{SUFFIX}"
+
+
+def write_entry(path: Path, key: str, result: Displacements, extra: dict[str, Any] | None = None) -> None:
+    """Write ``result`` as the entry ``path`` atomically (temp file, fsync, ``os.replace``)."""
+    values = np.ascontiguousarray(result.values, dtype="<f8")
+    raw = values.tobytes()
+    header = {"key": key, "shape": list(values.shape), "dtype": "<f8", "nbytes": len(raw),
+              "sha256": hashlib.sha256(raw).hexdigest(),
+              "dofs": [[int(g), int(c)] for g, c in result.dofs], "cases": list(result.cases),
+              "created": time.time(), **(extra or {})}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _remove_stale_tmp(path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".part", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(MAGIC)
+            fh.write(json.dumps(header).encode() + b"\n")
+            fh.write(raw)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    try:  # make the rename itself durable (best effort: not every file system allows it)
+        dfd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(dfd)
+        finally:
+            os.close(dfd)
+    except OSError:
+        pass
+
+
+def read_entry(path: Path, key: str, report: Sequence[DofLabel], cases: Sequence[str]) -> Displacements:
+    """The stored result for ``key``; :class:`CorruptEntry` unless the file is a complete entry
+    for exactly this key, report and cases with matching checksum; ``FileNotFoundError`` if absent."""
+    data = path.read_bytes()
+    if not data.startswith(MAGIC):
+        raise CorruptEntry("bad magic")
+    end = data.find(b"\n", len(MAGIC))
+    if end < 0:
+        raise CorruptEntry("no header line")
+    try:
+        header = json.loads(data[len(MAGIC):end].decode())
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise CorruptEntry(f"unreadable header: {exc}") from None
+    raw = data[end + 1:]
+    report = [(int(g), int(c)) for g, c in report]
+    shape = [len(report), len(cases)]
+    try:
+        ok = (header["key"] == key and header["shape"] == shape and header["dtype"] == "<f8"
+              and header["nbytes"] == len(raw) == 8 * shape[0] * shape[1]
+              and [tuple(d) for d in header["dofs"]] == report and header["cases"] == list(cases))
+    except (KeyError, TypeError):
+        ok = False
+    if not ok:
+        raise CorruptEntry("header does not match the request")
+    if hashlib.sha256(raw).hexdigest() != header.get("sha256"):
+        raise CorruptEntry("checksum mismatch")
+    values = np.frombuffer(raw, dtype="<f8").reshape(shape).astype(float)
+    return Displacements(tuple(report), values, tuple(cases))
+
+
+def _remove_stale_tmp(folder: Path) -> None:
+    now = time.time()
+    for p in folder.glob(".tmp-*.part"):
+        try:
+            if now - p.stat().st_mtime > STALE_TMP_S:
+                p.unlink()
+        except OSError:
+            pass
+
+
+# --------------------------------------------------------------------------------------------
+# the adapter
+# --------------------------------------------------------------------------------------------
+class CachedAdapter:
+    """A :class:`SolverAdapter` that delegates to ``inner`` and keeps every successful ``solve``
+    in ``cache_dir`` (see the module docstring for the key and the entry format).
+
+    ``stats`` is the inner adapter's: a cache hit makes no run and changes none of its counters.
+    The cache's own counters are in ``cache_stats`` (:class:`CacheStats`), shared with every
+    adapter derived through :meth:`with_springs`. Other attributes are read from ``inner``.
+    """
+
+    def __init__(self, inner: SolverAdapter, cache_dir: str | os.PathLike, *,
+                 springs: Sequence[ScalarSpring] = (), cache_stats: CacheStats | None = None):
+        self.inner = inner
+        self.cache_dir = Path(cache_dir)
+        self.name = inner.name
+        self.cache_stats = cache_stats if cache_stats is not None else CacheStats()
+        self._springs = tuple(springs)
+        self._identity = adapter_identity(inner)
+        self._deck0 = deck_fingerprint(inner)
+        self._warned = False
+
+    # ---- protocol --------------------------------------------------------------------------
+    @property
+    def stats(self) -> SolverStats:
+        return self.inner.stats
+
+    def dofs(self) -> tuple[DofLabel, ...]:
+        return self.inner.dofs()
+
+    def grid_xyz(self) -> dict[int, tuple[float, float, float]]:
+        return self.inner.grid_xyz()
+
+    def with_springs(self, springs: Sequence[ScalarSpring]) -> "CachedAdapter":
+        return CachedAdapter(self.inner.with_springs(springs), self.cache_dir,
+                             springs=self._springs + tuple(springs), cache_stats=self.cache_stats)
+
+    def solve(self, loads: LoadMatrix, report: Sequence[DofLabel]) -> Displacements:
+        report = tuple((int(g), int(c)) for g, c in report)
+        deck = deck_fingerprint(self.inner)
+        if deck != self._deck0:
+            self._count("bypassed")
+            return self.inner.solve(loads, report)
+        key = self.key(loads, report, deck)
+        path = entry_path(self.cache_dir, key)
+        try:
+            hit = read_entry(path, key, report, loads.cases)
+        except FileNotFoundError:
+            hit = None
+        except (CorruptEntry, OSError):
+            self._count("corrupt")
+            hit = None
+        if hit is not None:
+            self._count("hits")
+            return hit
+        self._count("misses")
+        out = self.inner.solve(loads, report)          # a failure propagates: nothing is stored
+        self._store(path, key, out, loads, report)
+        return out
+
+    # ---- helpers -----------------------------------------------------------------------------
+    def key(self, loads: LoadMatrix, report: Sequence[DofLabel], deck: str | None = None) -> str:
+        """The cache key of ``solve(loads, report)`` on this adapter."""
+        return solve_key(self._identity, deck or deck_fingerprint(self.inner),
+                         _springs_of(self.inner, self._springs), loads, report)
+
+    def _store(self, path: Path, key: str, out: Displacements, loads: LoadMatrix,
+               report: tuple[DofLabel, ...]) -> None:
+        values = np.asarray(out.values)
+        good = (values.shape == (len(report), loads.n_cases) and np.all(np.isfinite(values))
+                and tuple(tuple(d) for d in out.dofs) == report and tuple(out.cases) == loads.cases)
+        if not good:
+            self._count("not_stored")
+            return
+        try:
+            write_entry(path, key, Displacements(report, values, loads.cases),
+                        {"adapter": self.name, "inner_runs": self.inner.stats.runs})
+        except OSError as exc:
+            self._count("store_errors")
+            if not self._warned:
+                self._warned = True
+                warnings.warn(f"solver cache: cannot write {path}: {exc}; continuing without storing",
+                              RuntimeWarning, stacklevel=3)
+            return
+        self._count("stores")
+
+    def _count(self, what: str) -> None:
+        with _COUNT_LOCK:
+            setattr(self.cache_stats, what, getattr(self.cache_stats, what) + 1)
+
+    def __getattr__(self, attr: str) -> Any:
+        if attr.startswith("_") or attr in ("inner", "cache_dir", "cache_stats", "name"):
+            raise AttributeError(attr)
+        return getattr(self.inner, attr)
+
+    def __repr__(self) -> str:
+        return f"CachedAdapter({self.inner!r}, cache_dir={str(self.cache_dir)!r})"

