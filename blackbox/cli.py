@@ -58,6 +58,38 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+def cmd_identify(args) -> int:
+    import json
+
+    from blackbox.report import fit_report, identification_plots
+    from blackbox.study import load_study
+    from blackbox.workflows import identify_study, make_adapter_for, truth_of
+
+    study = load_study(args.study, need_measurements=True)
+    adapter = make_adapter_for(study, args.adapter)
+
+    def progress(rec) -> bool:
+        print(f"  iteration {rec.iteration:2d}  {rec.phase:<11s} chi2 = {rec.objective:.6g}", flush=True)
+        return False
+
+    print(f"identify {study.name}: {len(study.measurements)} measurements, joints "
+          f"{[j.name for j in study.config.joints]}, adapter {adapter.name!r}")
+    run = identify_study(study, adapter, model=args.model, progress=progress)
+    r = run.result
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "result.json").write_text(json.dumps(r.to_json_dict(run.solver), indent=2))
+    truth = truth_of(study)
+    (args.out / "report.md").write_text(
+        fit_report(r, title=f"Identification of {study.name}", solver=run.solver, truth=truth)
+        + "\n![convergence](convergence.png)\n\n![estimates](estimates.png)\n\n![residuals](residuals.png)\n")
+    plots = identification_plots(r, run.fit_obs, args.out, truth=truth)
+    print(f"{'converged' if r.converged else 'NOT converged'} in {r.iterations} iterations "
+          f"({r.message}); reduced chi2 = {r.reduced_chi2:.4g}; {run.solver['runs']} solver run(s), "
+          f"{run.solver['right_hand_sides']} right-hand sides -> {args.out}"
+          + ("" if plots else " (no plots: install matplotlib)"))
+    return 0 if r.converged else 3
+
+
 def cmd_conformance(args) -> int:
     """``blackbox conformance ADAPTER``: the shared adapter checks of ``solver_adapters.conformance``."""
     import tempfile
@@ -144,6 +176,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--adapter", default=None)
     s.add_argument("--out", type=Path, required=True)
     s.set_defaults(func=cmd_simulate)
+
+    s = sub.add_parser("identify", help="identify the joint parameters from the measurements (Ch. 4-5)")
+    s.add_argument("study", type=Path)
+    s.add_argument("--adapter", default=None, help="override [solver] adapter")
+    s.add_argument("--model", choices=["simple", "complex"], default=None,
+                   help="override every joint's declared model")
+    s.add_argument("--out", type=Path, required=True)
+    add_cache_options(s)
+    s.set_defaults(func=cmd_identify)
 
     s = sub.add_parser("conformance", help="run the shared adapter checks; exit 0 only if all pass")
     s.add_argument("adapter", help="adapter name: reference, mystran, legacy, command (needs --study), "

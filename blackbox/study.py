@@ -58,7 +58,7 @@ class IdentificationConfig(_Strict):
     max_iterations: int = Field(30, ge=1)
     fixed_point: bool = True
     bootstrap: int = Field(0, ge=0)
-    profile: bool = False
+    profile: bool = True                    # profile-likelihood intervals (their coverage is tested)
 
 
 class StudyConfig(_Strict):

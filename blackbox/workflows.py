@@ -11,6 +11,7 @@ import json
 import shutil
 import tomllib
 from contextvars import ContextVar
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -242,3 +243,63 @@ def simulate_study(study_dir: Path, truth_path: Path, out_dir: Path, adapter_nam
               "solver_runs": adapter.stats.runs}
     (out_dir / "truth.json").write_text(json.dumps(record, indent=2))
     return record
+
+
+# --------------------------------------------------------------------------------------------
+# identify
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class IdentifyRun:
+    """Everything one identification produced, for the CLI, the reports and other workflows."""
+    study: Study
+    joints: list[JointModel]
+    model: CondensedModel
+    fit_obs: "Observations"
+    holdout_obs: "Observations | None"
+    result: "IdentificationResult"
+    solver: dict
+
+
+def condensed_for_study(study: Study, adapter: SolverAdapter, joints: list[JointModel],
+                        observed: list[DofLabel], loads: LoadMatrix | None = None) -> CondensedModel:
+    """The one batched run: unit loads at the joints' DOFs plus the study's load cases."""
+    boundary = [d for j in joints for d in j.dofs]
+    c = condense(adapter, loads or study.loads, boundary, observed)
+    return CondensedModel(c, joints, deck_matrix(study, joints))
+
+
+def identify_study(study: Study, adapter: SolverAdapter, *, model: str | None = None,
+                   progress=None, **options) -> IdentifyRun:
+    """``blackbox identify``: condense once, then estimate (Chapter 4)."""
+    from blackbox.identification import Observations, identify
+
+    if not study.config.joints:
+        raise StudyError("study.toml declares no [[joints]] to identify", file=str(study.root / "study.toml"))
+    if study.measurements is None:
+        raise StudyError("measurements.csv not found (needed to identify)", file=str(study.root))
+    joints = study_joints(study, model)
+    observed = list(dict.fromkeys(study.measurements.dofs))
+    cm = condensed_for_study(study, adapter, joints, observed)
+    obs = Observations.from_measurements(study.measurements, cm.c.cases)
+    cfg = study.config.identification
+    hold = None
+    fit_obs = obs
+    if cfg.holdout_cases:
+        fit_obs, hold = obs.split(cfg.holdout_cases)
+    k0 = np.concatenate([j.initial_params(jc.initial) for j, jc in zip(joints, study.config.joints)])
+    opts = dict(fixed_point=cfg.fixed_point, max_iterations=cfg.max_iterations,
+                confidence=cfg.confidence, bootstrap=cfg.bootstrap, profile=cfg.profile)
+    opts.update(options)
+    result = identify(cm, fit_obs, k0, holdout=hold, callback=progress, **opts)
+    solver = {"runs": cm.c.solver_runs, "right_hand_sides": cm.c.right_hand_sides,
+              "wall_s": cm.c.wall_s, "adapter": adapter.name}
+    return IdentifyRun(study, joints, cm, fit_obs, hold, result, solver)
+
+
+def truth_of(study: Study) -> dict[str, float] | None:
+    """``{"joint.param": value}`` from a ``truth.json`` written by ``blackbox simulate``."""
+    p = study.root / "truth.json"
+    if not p.exists():
+        return None
+    rec = json.loads(p.read_text())
+    return {f"{q['joint']}.{q['name']}": q["value"] for q in rec.get("parameters", [])} or None
