@@ -79,6 +79,7 @@ Uncertainty (Sec. 4.4)
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 from typing import Callable, Sequence
@@ -89,7 +90,7 @@ from scipy import stats
 
 from blackbox.condensation import CondensedModel, Response
 from blackbox.errors import IdentificationError
-from blackbox.joints import SimpleJoint
+from blackbox.joints import ComplexJoint, SimpleJoint
 from solver_adapters.protocol import DofLabel
 
 __all__ = ["Observations", "IterationRecord", "HoldoutStats", "IdentificationResult", "identify"]
@@ -126,6 +127,9 @@ class Observations:
     values: np.ndarray
     sigma: np.ndarray
     case_labels: tuple[str, ...] = ()
+    ref_dofs: tuple[DofLabel | None, ...] = ()
+    """Per row, ``None`` or the DOF the row is measured relative to (Section 5.2 reference point):
+    the row's value is then ``u(dof) - u(ref_dof)``. Empty: every row is absolute."""
 
     def __post_init__(self) -> None:
         try:
@@ -157,11 +161,21 @@ class Observations:
             raise IdentificationError(
                 f"{bad.size} sigma(s) are not finite and positive, first DOF {dofs[i]} in case "
                 f"{self._label(labels, int(ci[i]))!r}: {sig[i]!r}")
+        refs = tuple(None if r is None else (int(r[0]), int(r[1])) for r in self.ref_dofs)
+        if refs and len(refs) != n:
+            raise IdentificationError(f"ref_dofs needs one entry (None or a DOF) per row ({n}), got {len(refs)}")
+        if not any(r is not None for r in refs):
+            refs = ()
         seen: set = set()
-        for d, c in zip(dofs, ci.tolist()):
-            if (d, c) in seen:
+        for i, (d, c) in enumerate(zip(dofs, ci.tolist())):
+            key = (d, c, refs[i] if refs else None)
+            if key in seen:
                 raise IdentificationError(f"DOF {d} is measured twice in case {self._label(labels, c)!r}")
-            seen.add((d, c))
+            if refs and refs[i] == d:
+                raise IdentificationError(f"DOF {d} is measured relative to itself in case "
+                                          f"{self._label(labels, c)!r}")
+            seen.add(key)
+        object.__setattr__(self, "ref_dofs", refs)
         ci = ci.astype(int)
         for name, arr in (("case_index", ci), ("values", vals), ("sigma", sig)):
             arr = arr.copy()
@@ -193,16 +207,18 @@ class Observations:
             raise IdentificationError(
                 f"measured case(s) {unknown} are not among the condensed load cases {list(labels)}")
         return cls(tuple(measurements.dofs), np.array([index[str(c)] for c in measurements.cases], dtype=int),
-                   np.asarray(measurements.values, float), np.asarray(measurements.sigma, float), labels)
+                   np.asarray(measurements.values, float), np.asarray(measurements.sigma, float), labels,
+                   tuple(getattr(measurements, "refs", ()) or ()))
 
     def subset(self, mask: np.ndarray) -> "Observations":
         idx = np.flatnonzero(mask)
         return Observations(tuple(self.dofs[i] for i in idx), self.case_index[idx], self.values[idx],
-                            self.sigma[idx], self.case_labels)
+                            self.sigma[idx], self.case_labels,
+                            tuple(self.ref_dofs[i] for i in idx) if self.ref_dofs else ())
 
     def with_values(self, values: np.ndarray) -> "Observations":
         """The same rows with other measured values (bootstrap, simulation)."""
-        return Observations(self.dofs, self.case_index, values, self.sigma, self.case_labels)
+        return Observations(self.dofs, self.case_index, values, self.sigma, self.case_labels, self.ref_dofs)
 
     def split(self, holdout_cases: Sequence[str | int]) -> tuple["Observations", "Observations"]:
         """``(fit, holdout)``: the rows of ``holdout_cases`` (labels or case indices) go to ``holdout``."""
@@ -334,6 +350,65 @@ def _num(v) -> float | None:
 
 
 # --------------------------------------------------------------------------------------------
+# matrix-logarithm coordinates of a complex joint
+# --------------------------------------------------------------------------------------------
+class _MatrixLog:
+    """``K_C = expm(S)`` with ``S`` symmetric: the coordinates ``phi`` of a complex joint are the
+    upper triangle of ``S`` (row then column, the order of the parameters ``k``, the upper
+    triangle of ``K_C``). Every ``S`` gives a positive definite ``K_C``, and a step in ``S``
+    changes ``K_C`` *relatively* -- the analogue of ``log k`` for a spring: ``S = log(k) I`` is
+    the complex model with every eigenvalue ``k``. With ``S = V diag(l) V^T``,
+    ``K_C = V diag(exp l) V^T`` and the Frechet derivative of ``expm`` at ``S`` in a direction
+    ``E`` is (Daleckii-Krein; Higham, *Functions of Matrices*, 2008, Thm. 3.11)::
+
+        dK_C = V (Gamma o (V^T E V)) V^T,   Gamma_ij = (e^l_i - e^l_j) / (l_i - l_j)  (e^l_i if equal)
+
+    the first divided differences of ``exp``; ``dk/dphi`` is that map on the basis ``E_q`` of
+    symmetric matrices (``E_ij + E_ji`` off the diagonal), restricted to the upper triangle.
+    Checked against ``scipy.linalg.expm_frechet`` in the tests."""
+
+    def __init__(self, sl: slice, m: int):
+        self.sl, self.m = sl, m
+        self.iu = np.triu_indices(m)
+        E = np.zeros((self.iu[0].size, m, m))
+        q = np.arange(self.iu[0].size)
+        E[q, self.iu[0], self.iu[1]] = 1.0
+        E[q, self.iu[1], self.iu[0]] = 1.0
+        self.E = E
+
+    def sym(self, v: np.ndarray) -> np.ndarray:
+        A = np.zeros((self.m, self.m))
+        A[self.iu] = v
+        return A + np.triu(A, 1).T
+
+    def to_k(self, phi: np.ndarray) -> np.ndarray:
+        if not np.all(np.isfinite(phi)):
+            return np.full(phi.shape, np.nan)
+        lam, V = np.linalg.eigh(self.sym(phi))
+        return ((V * np.exp(np.minimum(lam, 700.0))) @ V.T)[self.iu]     # > 1e150: inadmissible
+
+    def to_phi(self, k: np.ndarray) -> np.ndarray:
+        if not np.all(np.isfinite(k)):
+            return np.full(k.shape, np.nan)
+        mu, V = np.linalg.eigh(self.sym(k))
+        if mu[0] <= 0.0:
+            return np.full(k.shape, np.nan)
+        return ((V * np.log(mu)) @ V.T)[self.iu]
+
+    def dk_dphi(self, k: np.ndarray) -> np.ndarray:
+        """``(n_params, n_params)``: column ``q`` is ``dk / dphi_q`` at ``K_C(k)``."""
+        mu, V = np.linalg.eigh(self.sym(k))
+        lam = np.log(np.maximum(mu, np.finfo(float).tiny))
+        a = np.abs(lam[:, None] - lam[None, :])
+        with np.errstate(invalid="ignore", divide="ignore"):   # (1 - e^-a) / a without overflow
+            q = np.where(a > 0.0, -np.expm1(-a) / a, 1.0)
+        gamma = np.exp(np.maximum(lam[:, None], lam[None, :])) * q
+        Et = np.einsum("ai,qab,bj->qij", V, self.E, V)
+        dK = np.einsum("ia,qab,jb->qij", V, Et * gamma, V)
+        return dK[:, self.iu[0], self.iu[1]].T
+
+
+# --------------------------------------------------------------------------------------------
 # the problem in the condensed space
 # --------------------------------------------------------------------------------------------
 class _Problem:
@@ -357,7 +432,22 @@ class _Problem:
         self.L, self.nB = L, nB
         self.rows = np.array([i if s == "B" else nB + i for s, i in loc], dtype=int)
         self.flat = self.rows * L + obs.case_index
-        self._rows_u, self._rows_inv = np.unique(self.rows, return_inverse=True)
+        # rows measured relative to a reference DOF (Section 5.2): predicted u(dof) - u(ref)
+        self.has_ref = np.array([r is not None for r in obs.ref_dofs], dtype=bool) if obs.ref_dofs \
+            else np.zeros(len(obs), dtype=bool)
+        ref_rows = np.zeros(len(obs), dtype=int)
+        if self.has_ref.any():
+            try:
+                rloc = model.locate([r for r in obs.ref_dofs if r is not None])
+            except KeyError as exc:
+                raise IdentificationError(str(exc.args[0])) from None
+            ref_rows[self.has_ref] = [i if s == "B" else nB + i for s, i in rloc]
+        self.ref_rows = ref_rows
+        self.flat_ref = ref_rows * L + obs.case_index
+        all_rows = np.concatenate([self.rows, ref_rows[self.has_ref]])
+        self._rows_u, inv = np.unique(all_rows, return_inverse=True)
+        self._rows_inv = inv[:len(obs)]
+        self._ref_inv = inv[len(obs):]
         self.y, self.sigma = obs.values, obs.sigma
         self.w = 1.0 / obs.sigma
         asm = model.assembly
@@ -368,6 +458,12 @@ class _Problem:
                 self.log_mask[sl] = True
         self._spring_slices = [sl for j, sl in zip(asm.joints, asm.slices) if isinstance(j, SimpleJoint)]
         self._others = [(j, sl) for j, sl in zip(asm.joints, asm.slices) if not isinstance(j, SimpleJoint)]
+        # complex joints: phi = the upper triangle of S = logm(K_C) (K_C = expm(S))
+        self._mlog = [_MatrixLog(sl, j.m) for j, sl in self._others if isinstance(j, ComplexJoint)]
+        self.mlog_mask = np.zeros(self.p, dtype=bool)
+        for b in self._mlog:
+            self.mlog_mask[b.sl] = True
+        self.log_coords = self.log_mask | self.mlog_mask
         # Every model of blackbox.joints is linear in k (K_J = sum k_p dK_J/dk_p): then K_J is a
         # contraction with a constant basis, much cheaper than asking every joint each time.
         probe = np.arange(1.0, self.p + 1.0)
@@ -377,19 +473,51 @@ class _Problem:
                                     atol=1e-14 * float(np.abs(D).max(initial=1.0)))) else None
         self._Dflat = D.reshape(self.p, -1)
 
-    # ---- coordinates: log k for springs, k for the rest ------------------------------------
+    # ---- coordinates: log k for springs, logm K_C for complex joints, k for the rest ----------
+    def natural(self) -> "_Problem":
+        """The same problem with every complex joint in its natural parameters (the entries of
+        ``K_C``; springs stay in log k): for profiling an entry of ``K_C``, which must then be a
+        coordinate."""
+        out = copy.copy(self)
+        out._mlog = []
+        out.mlog_mask = np.zeros(self.p, dtype=bool)
+        out.log_coords = self.log_mask.copy()
+        return out
+
     def to_k(self, phi: np.ndarray) -> np.ndarray:
         k = np.array(phi, dtype=float)
         k[self.log_mask] = np.exp(np.minimum(k[self.log_mask], 700.0))   # > 1e150: inadmissible
+        for b in self._mlog:
+            k[b.sl] = b.to_k(k[b.sl])
         return k
 
     def to_phi(self, k: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`to_k`; ``nan`` for a spring <= 0 or a ``K_C`` that is not positive
+        definite (no coordinates there)."""
         phi = np.array(k, dtype=float)
-        phi[self.log_mask] = np.log(phi[self.log_mask])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            phi[self.log_mask] = np.where(phi[self.log_mask] > 0.0, np.log(phi[self.log_mask]), np.nan)
+        for b in self._mlog:
+            phi[b.sl] = b.to_phi(phi[b.sl])
         return phi
 
-    def dk_dphi(self, k: np.ndarray) -> np.ndarray:
-        return np.where(self.log_mask, k, 1.0)
+    def chain(self, J_k: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """``J_k dk/dphi``: a Jacobian in ``k`` (columns) to one in ``phi``. ``dk/dphi`` is
+        ``diag(k)`` for springs, the identity for natural parameters and, per complex joint, the
+        Frechet derivative of ``expm`` at ``S`` (:class:`_MatrixLog`)."""
+        J = J_k * np.where(self.log_mask, k, 1.0)
+        for b in self._mlog:
+            J[:, b.sl] = J_k[:, b.sl] @ b.dk_dphi(k[b.sl])
+        return J
+
+    def log_step_size(self, step: np.ndarray) -> float:
+        """How far a step in ``phi`` moves in log coordinates: the largest ``|d log k|`` of a
+        spring and spectral norm of ``dS`` of a complex joint (which bounds the change of every
+        eigenvalue's logarithm, Weyl). 0 when nothing is in log coordinates."""
+        big = float(np.max(np.abs(step[self.log_mask]), initial=0.0))
+        for b in self._mlog:
+            big = max(big, float(np.max(np.abs(np.linalg.eigvalsh(b.sym(step[b.sl]))), initial=0.0)))
+        return big
 
     def scale(self, k: np.ndarray) -> np.ndarray:
         """The size of each parameter: ``k`` for springs (at least 1e-3 of the joint's stiffest),
@@ -422,6 +550,27 @@ class _Problem:
             return False
         return all(j.is_admissible(k[sl], strict=True) for j, sl in self._others)
 
+    def clipped(self, k: np.ndarray, relative: float) -> np.ndarray | None:
+        """The nearest point (Frobenius norm, per joint) whose springs and ``K_C`` eigenvalues are
+        at least ``relative`` times the joint's largest (Higham 1988: clip the eigenvalues);
+        ``None`` when a joint has nothing positive to be relative to, or the result is not
+        admissible. Other joint models are left as they are."""
+        out = np.array(k, dtype=float)
+        if not np.all(np.isfinite(out)):
+            return None
+        for sl in self._spring_slices:
+            top = float(np.max(out[sl]))
+            if not top > 0.0:
+                return None
+            out[sl] = np.maximum(out[sl], relative * top)
+        for j, sl in self._others:
+            if isinstance(j, ComplexJoint):
+                mu, V = np.linalg.eigh(j.kc_matrix(out[sl]))
+                if not mu[-1] > 0.0:
+                    return None
+                out[sl] = j.params_from_kc((V * np.maximum(mu, relative * mu[-1])) @ V.T)
+        return out if self.admissible(out) else None
+
     # ---- model -----------------------------------------------------------------------------
     def dK(self, k: np.ndarray) -> np.ndarray:
         """``K_J(k) - K_deck`` over the boundary DOFs."""
@@ -443,7 +592,11 @@ class _Problem:
                 r = Response(U_B, c.U_O0 - c.G_OB @ (dK @ U_B))
         except np.linalg.LinAlgError:                     # singular: reported as non-finite
             r = Response(np.full_like(c.U_B0, np.nan), np.full_like(c.U_O0, np.nan))
-        return np.vstack([r.U_B, r.U_O]).ravel()[self.flat], r
+        full = np.vstack([r.U_B, r.U_O]).ravel()
+        f = full[self.flat]
+        if self.has_ref.any():
+            f = f - np.where(self.has_ref, full[self.flat_ref], 0.0)
+        return f, r
 
     def jacobian_k(self, k: np.ndarray, r: Response) -> np.ndarray:
         """``dU/dk`` at the observed rows, ``(n_obs, n_params)``: eq. 18 in flexibility form,
@@ -461,7 +614,10 @@ class _Problem:
         p, nB, L = self.p, self.nB, self.L
         V = (D.reshape(-1, nB) @ r.U_B).reshape(p, nB, L)
         T = (H @ V.transpose(1, 0, 2).reshape(nB, -1)).reshape(len(self._rows_u), p, L)
-        return -T[self._rows_inv, :, self.obs.case_index]
+        J = -T[self._rows_inv, :, self.obs.case_index]
+        if self.has_ref.any():
+            J[self.has_ref] += T[self._ref_inv, :, self.obs.case_index[self.has_ref]]
+        return J
 
     def chi2(self, f: np.ndarray, y: np.ndarray | None = None) -> float:
         rr = ((self.y if y is None else y) - f) * self.w
@@ -488,8 +644,29 @@ class _FixedPoint:
         self.needed = np.flatnonzero(D.sum(axis=0) > 0)         # DOFs on which K_J or K_deck act
         self.reason = ""
         self.case_rows: list[tuple[int, np.ndarray, np.ndarray]] = []
+        # Section 5.2: a row measured relative to a reference point becomes absolute by adding the
+        # reference point's own (absolute) measurement of the same case; the fixed point is only
+        # the start of the iteration, so the correlation this creates is not carried into V_e
+        # (the Newton phase uses the rows as measured).
+        self.y, self.w = prob.y, prob.w
+        if prob.has_ref.any():
+            obs = prob.obs
+            absolute = {(d, c): i for i, (d, c, r) in
+                        enumerate(zip(obs.dofs, obs.case_index.tolist(), prob.has_ref)) if not r}
+            y, var = prob.y.copy(), prob.sigma.copy() ** 2
+            for i in np.flatnonzero(prob.has_ref):
+                j = absolute.get((obs.ref_dofs[i], int(obs.case_index[i])))
+                if j is None:
+                    self.reason = (f"the fixed-point scheme needs the reference DOF {obs.ref_dofs[i]} "
+                                   f"measured absolutely in every case with relative rows")
+                    return
+                y[i] += prob.y[j]
+                var[i] += prob.sigma[j] ** 2
+            self.y, self.w = y, 1.0 / np.sqrt(var)
         for case in prob.obs.cases:
             rows = np.flatnonzero(prob.obs.case_index == case)
+            if prob.has_ref.any():          # the reference point's rows sit among the absolute ones
+                rows = rows[np.unique(prob.rows[rows], return_index=True)[1]]
             pos_of = {int(prob.rows[i]): a for a, i in enumerate(rows)}
             missing = [c.boundary[b] for b in self.needed if int(b) not in pos_of]
             if missing:
@@ -514,7 +691,7 @@ class _FixedPoint:
         Xs, Ys = [], []
         for case, rows, pos in self.case_rows:
             srow = prob.rows[rows]
-            um = prob.y[rows]
+            um = self.y[rows]
             uB = np.zeros(prob.nB)
             uB[self.needed] = um[pos]
             X_m = np.zeros((prob.nB, prob.p))                    # Table 5.1, scattered into B
@@ -525,8 +702,8 @@ class _FixedPoint:
             Y = self.U0[srow, case] - um + Gr @ (self.K_deck @ uB)   # eq. 27a, flexibility form
             M = np.eye(rows.size)                                # K_overall of eq. 25a, flexibility form
             M[:, pos] += Gr[:, self.needed] @ dK_nn
-            Xs.append(np.linalg.solve(M, X) * prob.w[rows, None])     # V_e^-1/2 = V_m^-1/2 M^-1
-            Ys.append(np.linalg.solve(M, Y) * prob.w[rows])
+            Xs.append(np.linalg.solve(M, X) * self.w[rows, None])     # V_e^-1/2 = V_m^-1/2 M^-1
+            Ys.append(np.linalg.solve(M, Y) * self.w[rows])
         X, Y = np.vstack(Xs), np.concatenate(Ys)
         # eq. 28 as a least-squares problem for the change (min-norm: unidentifiable directions stay)
         out = k.copy()
@@ -574,13 +751,32 @@ def _lsq(J: np.ndarray, r: np.ndarray, lam: float = 0.0, size: np.ndarray | None
 
 
 def _relative_step(prob: _Problem, k_old: np.ndarray, k_new: np.ndarray, free: np.ndarray) -> float:
-    """``|d log k|`` for springs, ``|dk| / scale`` for the others; the largest over ``free``."""
+    """``|d phi|`` in log coordinates (``|d log k|`` for springs, ``|dS_ij|`` for a complex joint
+    in ``logm K_C``), ``|dk| / scale`` for the others; the largest over ``free``."""
     d = np.abs(k_new - k_old) / prob.scale(k_old)
-    lg = prob.log_mask
-    with np.errstate(divide="ignore", invalid="ignore"):
-        d[lg] = np.abs(np.log(k_new[lg] / k_old[lg]))
+    lc = prob.log_coords
+    with np.errstate(invalid="ignore"):
+        d[lc] = np.abs(prob.to_phi(k_new)[lc] - prob.to_phi(k_old)[lc])
     d[~np.isfinite(d)] = np.inf
     return float(np.max(d[free])) if np.any(free) else 0.0
+
+
+def _admissible_on_segment(prob: _Problem, k: np.ndarray, k_t: np.ndarray,
+                           shrink: float = 0.9) -> np.ndarray | None:
+    """The regression of eq. 28 is unconstrained and can leave the admissible set (a spring
+    below 0, ``K_C`` not positive definite). The admissible set is convex and ``k`` is in it, so
+    the segment towards ``k_t`` stays admissible up to some fraction: bisect for it and stop a
+    little short (``shrink``), so that the next iterate is strictly inside."""
+    lo, hi = 0.0, 1.0
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        if prob.admissible(k + mid * (k_t - k)):
+            lo = mid
+        else:
+            hi = mid
+    if lo <= 0.0:
+        return None
+    return k + shrink * lo * (k_t - k)
 
 
 def _shift(phi: np.ndarray, free: np.ndarray, step: np.ndarray) -> np.ndarray:
@@ -644,9 +840,10 @@ def _newton(prob: _Problem, phi0: np.ndarray, *, y: np.ndarray | None = None, fr
     while it < max_iterations and status == 0:
         it += 1
         r = (y - f) * prob.w
-        J_all = prob.jacobian_k(k, resp) * prob.dk_dphi(k) * prob.w[:, None]
+        J_k = prob.jacobian_k(k, resp) * prob.w[:, None]         # whitened, natural parameters
+        J_all = prob.chain(J_k, k)
         use = free.copy()
-        size = np.where(prob.log_mask, 1.0, prob.scale(k))       # of a unit of phi
+        size = np.where(prob.log_coords, 1.0, prob.scale(k))     # of a unit of phi
         step_gn = _lsq(J_all[:, use], r, size=size[use])
         # the bound k = 0 of the springs (active set)
         down = np.zeros(prob.p, dtype=bool)
@@ -658,15 +855,16 @@ def _newton(prob: _Problem, phi0: np.ndarray, *, y: np.ndarray | None = None, fr
         crossing[lg] = step_gn[prob.log_mask[use]] < prob.floor_value(k)[lg] / k[lg] - 1.0
         k_b = None
         if np.any(crossing & ~held):
-            k_b = _bounded_natural_step(prob, J_all / prob.dk_dphi(k), r, k, use & ~held)
+            k_b = _bounded_natural_step(prob, J_k, r, k, use & ~held)
         if k_b is not None:
             f_b, resp_b = prob.predict(k_b)
             F_b = prob.chi2(f_b, y) if np.all(np.isfinite(f_b)) else np.inf
             if F_b <= F:
                 phi, k, f, resp, F = prob.to_phi(k_b), k_b, f_b, resp_b, F_b
                 r = (y - f) * prob.w
-                J_all = prob.jacobian_k(k, resp) * prob.dk_dphi(k) * prob.w[:, None]
-                size = np.where(prob.log_mask, 1.0, prob.scale(k))
+                J_k = prob.jacobian_k(k, resp) * prob.w[:, None]
+                J_all = prob.chain(J_k, k)
+                size = np.where(prob.log_coords, 1.0, prob.scale(k))
                 held |= use & prob.at_floor(k, 2.0 * _SPRING_FLOOR)
         if np.any(held):
             use &= ~held
@@ -675,7 +873,6 @@ def _newton(prob: _Problem, phi0: np.ndarray, *, y: np.ndarray | None = None, fr
                 break
             step_gn = _lsq(J_all[:, use], r, size=size[use])
         J = J_all[:, use]
-        log_free = prob.log_mask[use]
         predicted = float(np.sum((J @ step_gn) ** 2))          # decrease the GN step promises
         ok = small = False
         while True:
@@ -689,10 +886,11 @@ def _newton(prob: _Problem, phi0: np.ndarray, *, y: np.ndarray | None = None, fr
                 acc = _lsq(J, -f_vv * prob.w, lam, size[use])
                 if np.all(np.isfinite(acc)) and 2.0 * np.linalg.norm(acc) <= 0.75 * np.linalg.norm(step):
                     step = step + 0.5 * acc
-            big = np.max(np.abs(step[log_free]), initial=0.0)
+            big = prob.log_step_size(_shift(np.zeros(prob.p), use, step))
             if big > _MAX_LOG_STEP:
                 step *= _MAX_LOG_STEP / big
-            small = _relative_step(prob, k, prob.to_k(_shift(phi, use, step)), use) < xtol
+            # relative step (as _relative_step): phi itself in log coordinates, else dk / scale
+            small = float(np.max(np.abs(step) / size[use])) < xtol
             for alpha in _BACKTRACK:                  # line search along the (damped) GN step
                 phi_t = _shift(phi, use, alpha * step)
                 k_t = prob.to_k(phi_t)
@@ -785,13 +983,15 @@ def _profile_ci(prob: _Problem, fit: _Fit, i: int, delta: float, half_width: flo
     the lower end of a spring (springs are searched down to the floor and up to
     :data:`_PROFILE_SPAN` times the joint's stiffest spring, other parameters over
     :data:`_PROFILE_WIDTHS` linearised half-widths)."""
+    prob = prob.natural()                             # k_i must be a coordinate
+    phi_fit = prob.to_phi(fit.k)
     free = np.ones(prob.p, dtype=bool)
     free[i] = False
     tau_star = math.sqrt(delta)
-    phi_hat = float(fit.phi[i])
+    phi_hat = float(phi_fit[i])
     ends = []
     for side in (-1.0, 1.0):
-        solved = {0.0: fit.phi}
+        solved = {0.0: phi_fit}
 
         def tau(h: float) -> float:
             near = min(solved, key=lambda u: abs(u - h))
@@ -914,7 +1114,9 @@ def _estimate(prob: _Problem, k0: np.ndarray, fixed_point: bool, max_iterations:
         while fp.applicable and n_fp < max_iterations:
             k_t = fp.step(k, live)
             if not prob.admissible(k_t):
-                break
+                k_t = _admissible_on_segment(prob, k, k_t)
+                if k_t is None:
+                    break
             f_t, _ = prob.predict(k_t)
             F_t = prob.chi2(f_t) if np.all(np.isfinite(f_t)) else np.inf
             if not F_t < _FP_STALL * F:           # stalls or oscillates: hand over to Newton
@@ -989,7 +1191,7 @@ def identify(model: CondensedModel, obs: Observations, k0, *, fixed_point: bool 
     lin = np.full((p, 2), np.nan)
     lg = prob.log_mask
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        half = z * std / prob.dk_dphi(k)                     # in phi: log k for springs
+        half = z * std / np.where(lg, k, 1.0)                # in log k for springs, else in k
         lin[lg & ident] = k[lg & ident, None] * np.exp(np.outer(half[lg & ident], [-1.0, 1.0]))
         lin[~lg & ident] = k[~lg & ident, None] + np.outer(half[~lg & ident], [-1.0, 1.0])
         corr = cov / np.outer(std, std)

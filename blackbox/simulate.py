@@ -12,9 +12,9 @@ deck solved as it is (for effects the study does not declare). It is then contam
 * branch rotations measured as the average of several points near the branch end (eq. 33):
   each point's rotation follows the member's cubic (Hermite) deflection, each has its own noise,
   the mean is reported with the sigma of the mean;
-* measurement relative to a reference point (Section 5.2): every quantity of a case shares the
-  reference point's error, and the relative part has an error proportional to the *relative*
-  motion only.
+* measurement relative to a reference point (Section 5.2): each quantity is reported relative
+  to the reference grid's same component (``reference_grid`` column of measurements.csv) with an
+  error proportional to the *relative* motion, and the reference grid itself absolutely.
 
 Everything here is solver-free: the caller supplies the exact values.
 """
@@ -104,23 +104,14 @@ def contaminate(true: np.ndarray, sigma: np.ndarray, rng: np.random.Generator) -
 
 def relative_to_reference(true: np.ndarray, ref_true: np.ndarray, kinds: np.ndarray,
                           case_idx: np.ndarray, cfg: NoiseConfig, rng: np.random.Generator) -> Simulated:
-    """Section 5.2: ``u_i = (u_ref + e_ref) + (u_i - u_ref + e_rel,i)``.
-
-    ``ref_true[row]`` is the reference point's true value of the same component and case.
-    ``e_ref`` is common to every row of a case and component; the relative part's sigma is
-    ``relative * |u_i - u_ref|`` (floored). The declared sigma is the marginal one; the common
-    part is correlated across rows, which a diagonal weighting ignores (stated in the report)."""
+    """Section 5.2: a quantity measured *relative to a reference point*: the value is
+    ``u_i - u_ref`` and its error is proportional to the relative motion only (floored), so the
+    rigid-body part that dominates the rotations no longer drowns the relative rotations that
+    carry the joint's information. Rows are independent; the reference point's own absolute
+    measurement is a separate row."""
     rel_true = true - ref_true
-    s_rel = noise_sigma(rel_true, kinds, case_idx, cfg)
-    s_ref = noise_sigma(ref_true, kinds, case_idx, cfg)
-    common = {}
-    e_ref = np.empty_like(true)
-    for i, key in enumerate(zip(case_idx, kinds, np.round(ref_true, 300))):
-        if key not in common:
-            common[key] = s_ref[i] * rng.standard_normal()
-        e_ref[i] = common[key]
-    values = true + e_ref + s_rel * rng.standard_normal(true.shape)
-    return Simulated(values, np.sqrt(s_rel**2 + s_ref**2), true)
+    sigma = noise_sigma(rel_true, kinds, case_idx, cfg)
+    return Simulated(contaminate(rel_true, sigma, rng), sigma, rel_true)
 
 
 def member_end_rotation_samples(u_a: np.ndarray, u_b: np.ndarray, xa: np.ndarray, xb: np.ndarray,

@@ -86,6 +86,7 @@ class Measurements:
     values: np.ndarray
     sigma: np.ndarray
     lines: tuple[int, ...] = ()
+    refs: tuple[DofLabel | None, ...] = ()      # optional reference_grid column (Section 5.2)
 
     def __len__(self) -> int:
         return len(self.cases)
@@ -94,7 +95,13 @@ class Measurements:
         idx = np.flatnonzero(mask)
         return Measurements(tuple(self.cases[i] for i in idx), tuple(self.dofs[i] for i in idx),
                             self.values[idx], self.sigma[idx],
-                            tuple(self.lines[i] for i in idx) if self.lines else ())
+                            tuple(self.lines[i] for i in idx) if self.lines else (),
+                            tuple(self.refs[i] for i in idx) if self.refs else ())
+
+    @property
+    def all_dofs(self) -> list[DofLabel]:
+        """Every DOF the rows need a prediction at (measured DOFs and reference DOFs)."""
+        return list(dict.fromkeys(list(self.dofs) + [r for r in self.refs if r is not None]))
 
 
 @dataclass(frozen=True)
@@ -126,8 +133,9 @@ def read_config(path: Path) -> StudyConfig:
         raise StudyError(msgs, file=str(path)) from None
 
 
-def _rows(path: Path, header: list[str]):
-    """Yield ``(line_no, dict)`` for every data row, checking the header first."""
+def _rows(path: Path, header: list[str], optional: list[str] = ()):
+    """Yield ``(line_no, dict)`` for every data row, checking the header first (``optional``
+    columns may follow the required ones)."""
     try:
         fh = path.open(newline="")
     except FileNotFoundError:
@@ -135,9 +143,13 @@ def _rows(path: Path, header: list[str]):
     with fh:
         reader = csv.reader(fh)
         first = next(reader, None)
-        if first is None or [h.strip() for h in first] != header:
-            raise StudyError(f"header must be {','.join(header)}, got {','.join(first or [])!r}",
+        got = [h.strip() for h in first or []]
+        extra = got[len(header):]
+        if first is None or got[:len(header)] != header or extra != list(optional)[:len(extra)]:
+            allowed = ",".join(header) + "".join(f"[,{o}]" for o in optional)
+            raise StudyError(f"header must be {allowed}, got {','.join(first or [])!r}",
                              file=str(path), line=1)
+        header = got
         for row in reader:
             line = reader.line_num
             if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
@@ -200,11 +212,23 @@ def read_loads(path: Path, grids: set[int] | None = None) -> LoadMatrix:
 
 
 def read_measurements(path: Path, load_cases: set[str], grids: set[int] | None = None) -> Measurements:
-    """``case,grid,component,value,sigma``; sigma > 0 and finite; every case must be loaded."""
-    seen: dict[tuple[str, DofLabel], int] = {}
-    cases, dofs, vals, sig, lines = [], [], [], [], []
-    for line, rec in _rows(path, ["case", "grid", "component", "value", "sigma"]):
+    """``case,grid,component,value,sigma[,reference_grid]``; sigma > 0 and finite; every case
+    must be loaded. With a ``reference_grid`` the value is the displacement relative to that
+    grid's same component (Section 5.2); blank means absolute."""
+    seen: dict[tuple[str, DofLabel, DofLabel | None], int] = {}
+    cases, dofs, vals, sig, lines, refs = [], [], [], [], [], []
+    for line, rec in _rows(path, ["case", "grid", "component", "value", "sigma"], ["reference_grid"]):
         dof = _dof(rec, path, line, grids)
+        ref = None
+        if rec.get("reference_grid"):
+            rg = _int(rec["reference_grid"], path, line, "reference_grid")
+            if grids is not None and rg not in grids:
+                raise StudyError(f"reference grid {rg} is not in the deck", file=str(path), line=line,
+                                 column="reference_grid")
+            if rg == dof[0]:
+                raise StudyError("a grid cannot be measured relative to itself", file=str(path),
+                                 line=line, column="reference_grid")
+            ref = (rg, dof[1])
         if rec["case"] not in load_cases:
             raise StudyError(f"case {rec['case']!r} has no loads in loads.csv", file=str(path),
                              line=line, column="case")
@@ -213,15 +237,17 @@ def read_measurements(path: Path, load_cases: set[str], grids: set[int] | None =
         if s <= 0:
             raise StudyError(f"sigma must be positive, got {rec['sigma']!r}", file=str(path),
                              line=line, column="sigma")
-        key = (rec["case"], dof)
+        key = (rec["case"], dof, ref)
         if key in seen:
             raise StudyError(f"duplicate measurement of case {key[0]!r} grid {dof[0]} component "
                              f"{dof[1]} (first on line {seen[key]})", file=str(path), line=line)
         seen[key] = line
         cases.append(rec["case"]); dofs.append(dof); vals.append(val); sig.append(s); lines.append(line)
+        refs.append(ref)
     if not cases:
         raise StudyError("no measurement rows", file=str(path))
-    return Measurements(tuple(cases), tuple(dofs), np.array(vals), np.array(sig), tuple(lines))
+    return Measurements(tuple(cases), tuple(dofs), np.array(vals), np.array(sig), tuple(lines),
+                        tuple(refs) if any(r is not None for r in refs) else ())
 
 
 def check_joints(config: StudyConfig, deck, toml_path: Path) -> None:

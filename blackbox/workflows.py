@@ -201,17 +201,24 @@ def simulate_study(study_dir: Path, truth_path: Path, out_dir: Path, adapter_nam
         names = [(j.name, n) for j in joints for n in j.param_names]
     row = {d: i for i, d in enumerate(needed)}
     rng = np.random.default_rng(truth.seed)
+    if m.reference_grid is not None:     # the reference grid itself is measured absolutely
+        dofs = [(m.reference_grid, c) for c in range(1, 7)] + [d for d in dofs if d[0] != m.reference_grid]
     case_rows, dof_rows = sim.measured_rows(cases, dofs)
     ci = np.array([cases.index(c) for c in case_rows])
     true = np.array([U[row[d], j] for d, j in zip(dof_rows, ci)])
     kinds = np.array([1 if d[1] >= 4 else 0 for d in dof_rows])
+    sigma = sim.noise_sigma(true, kinds, ci, truth.noise)
+    values = sim.contaminate(true, sigma, rng)
+    refs: list[int | None] = [None] * len(dof_rows)
     if m.reference_grid is not None:
+        if m.averaging_points:
+            raise StudyError("measure.averaging_points and measure.reference_grid cannot be combined",
+                             file=str(truth_path))
+        rel = np.array([d[0] != m.reference_grid for d in dof_rows])
         ref = np.array([U[row[(m.reference_grid, d[1])], j] for d, j in zip(dof_rows, ci)])
-        out = sim.relative_to_reference(true, ref, kinds, ci, truth.noise, rng)
-        values, sigma = out.values, out.sigma
-    else:
-        sigma = sim.noise_sigma(true, kinds, ci, truth.noise)
-        values = sim.contaminate(true, sigma, rng)
+        out = sim.relative_to_reference(true[rel], ref[rel], kinds[rel], ci[rel], truth.noise, rng)
+        values[rel], sigma[rel] = out.values, out.sigma
+        refs = [m.reference_grid if r else None for r in rel]
     if m.averaging_points:
         s = np.arange(m.averaging_points) * m.averaging_spacing
         xyz = {g.id: np.array(g.xyz, float) for g in deck.grids.values()}
@@ -232,9 +239,11 @@ def simulate_study(study_dir: Path, truth_path: Path, out_dir: Path, adapter_nam
         shutil.rmtree(out_dir)
     shutil.copytree(study_dir, out_dir, ignore=shutil.ignore_patterns("measurements.csv", "truth.json"))
     with (out_dir / "measurements.csv").open("w") as fh:
-        fh.write("case,grid,component,value,sigma\n")
-        for c, (g, comp), v, s_ in zip(case_rows, dof_rows, values, sigma):
-            fh.write(f"{c},{g},{comp},{float(v)!r},{float(s_)!r}\n")
+        relative = any(r is not None for r in refs)
+        fh.write("case,grid,component,value,sigma" + (",reference_grid\n" if relative else "\n"))
+        for c, (g, comp), v, s_, rg in zip(case_rows, dof_rows, values, sigma, refs):
+            tail = ("," + ("" if rg is None else str(rg))) if relative else ""
+            fh.write(f"{c},{g},{comp},{float(v)!r},{float(s_)!r}{tail}\n")
     record = {"truth_file": str(truth_path), "seed": truth.seed, "force_scale": truth.force_scale,
               "noise": truth.noise.model_dump(), "measure": truth.measure.model_dump(),
               "deck": truth.deck, "parameters": [{"joint": j, "name": n, "value": float(v)}
@@ -278,7 +287,7 @@ def identify_study(study: Study, adapter: SolverAdapter, *, model: str | None = 
     if study.measurements is None:
         raise StudyError("measurements.csv not found (needed to identify)", file=str(study.root))
     joints = study_joints(study, model)
-    observed = list(dict.fromkeys(study.measurements.dofs))
+    observed = study.measurements.all_dofs
     cm = condensed_for_study(study, adapter, joints, observed)
     obs = Observations.from_measurements(study.measurements, cm.c.cases)
     cfg = study.config.identification

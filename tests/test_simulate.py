@@ -43,19 +43,16 @@ def test_contaminated_values_are_standard_normal_in_sigma_units():
     assert abs(z.mean()) < 0.028 and abs(z.var() - 1) < 0.04
 
 
-def test_reference_point_error_is_common_to_a_case():
+def test_reference_point_error_follows_the_relative_motion():
+    """Section 5.2: relative values with an error proportional to the relative motion only."""
     rng = np.random.default_rng(1)
     true = np.array([1.0, 1.1, 1.2, 5.0, 5.1])
     ref = np.array([1.0, 1.0, 1.0, 5.0, 5.0])
-    kinds = np.zeros(5, int)
-    case = np.array([0, 0, 0, 1, 1])
-    out = sim.relative_to_reference(true, ref, kinds, case, sim.NoiseConfig(relative=0.0, absolute=0.0, floor=0.0)
-                                    if False else sim.NoiseConfig(relative=0.05, floor=0.0, absolute=1e-12), rng)
-    # the reference point itself (relative motion 0) carries only the common error
-    common0 = out.values[0] - true[0]
-    assert abs(common0) > 0
-    rel = (out.values[:3] - true[:3]) - common0
-    assert np.all(np.abs(rel) <= 6 * 0.05 * np.abs(true[:3] - ref[:3]) + 1e-9)
+    out = sim.relative_to_reference(true, ref, np.zeros(5, int), np.array([0, 0, 0, 1, 1]),
+                                    sim.NoiseConfig(relative=0.05, floor=0.1), rng)
+    assert np.allclose(out.true, true - ref)
+    assert np.allclose(out.sigma, 0.05 * np.maximum(np.abs(true - ref), 0.1 * np.array([.2, .2, .2, .1, .1])))
+    assert np.all(np.abs(out.values - out.true) < 6 * out.sigma)
 
 
 def test_member_rotation_samples_follow_the_beam():
