@@ -84,10 +84,39 @@ def cmd_identify(args) -> int:
         + "\n![convergence](convergence.png)\n\n![estimates](estimates.png)\n\n![residuals](residuals.png)\n")
     plots = identification_plots(r, run.fit_obs, args.out, truth=truth)
     print(f"{'converged' if r.converged else 'NOT converged'} in {r.iterations} iterations "
-          f"({r.message}); reduced chi2 = {r.reduced_chi2:.4g}; {run.solver['runs']} solver run(s), "
-          f"{run.solver['right_hand_sides']} right-hand sides -> {args.out}"
+          f"({r.message}); reduced chi2 = {r.reduced_chi2:.4g}; {run.solver['runs']} solver run(s)"
+          + (f" + {run.solver['cached_batches']} batch(es) from the cache"
+             if run.solver.get("cached_batches") else "")
+          + f", {run.solver['right_hand_sides']} right-hand sides -> {args.out}"
           + ("" if plots else " (no plots: install matplotlib)"))
     return 0 if r.converged else 3
+
+
+def cmd_compare(args) -> int:
+    """``blackbox compare STUDY``: simple vs complex joint model (Chapter 6), ``blackbox.compare_run``."""
+    from blackbox.compare_run import compare_study
+
+    res = compare_study(args.study, args.out, args.adapter, log=lambda s: print(s, flush=True))
+    se = res["strain_energy"]
+    print(f"isolated joint: E_complex = {se['complex']:.4e}, E_simple = {se['simple']:.4e}, "
+          f"R = {100 * se['relative_difference']:.1f} % -> {args.out / 'comparison.json'}")
+    ok = all(m["converged"] for m in res["models"].values())
+    return 0 if ok else 3
+
+
+def cmd_bench(args) -> int:
+    from blackbox.bench import CASES, main_bench
+
+    adapters = [a.strip() for a in args.adapters.split(",") if a.strip()]
+    cases = [c.strip() for c in args.cases.split(",") if c.strip()] if args.cases else list(CASES)
+    unknown = [c for c in cases if c not in CASES]
+    if unknown:
+        raise ValueError(f"unknown bench case(s) {unknown}; known: {', '.join(CASES)}")
+    print(f"bench: cases {cases}, adapters {adapters}")
+    command = "blackbox bench " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else "blackbox bench"
+    main_bench(args.out, args.fixtures, adapters, cases, args.repeat, command)
+    print(f"-> {args.out / 'bench.json'}, {args.out / 'bench.md'}")
+    return 0
 
 
 def cmd_conformance(args) -> int:
@@ -177,6 +206,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", type=Path, required=True)
     s.set_defaults(func=cmd_simulate)
 
+    s = sub.add_parser("bench", help="identification cost by sensitivity method (Table 3.3)")
+    s.add_argument("--out", type=Path, required=True)
+    s.add_argument("--adapters", default="reference", help="comma-separated, e.g. reference,mystran")
+    s.add_argument("--cases", default=None, help="comma-separated subset of cube-simple,cube-complex,car-simple,car-complex")
+    s.add_argument("--repeat", type=int, default=3, help="best of N timings per row")
+    s.add_argument("--fixtures", type=Path, default=Path(__file__).resolve().parents[1] / "fixtures")
+    s.set_defaults(func=cmd_bench)
+
     s = sub.add_parser("identify", help="identify the joint parameters from the measurements (Ch. 4-5)")
     s.add_argument("study", type=Path)
     s.add_argument("--adapter", default=None, help="override [solver] adapter")
@@ -185,6 +222,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", type=Path, required=True)
     add_cache_options(s)
     s.set_defaults(func=cmd_identify)
+
+    s = sub.add_parser("compare", help="simple vs complex joint model, MDSE loading (Ch. 6)")
+    s.add_argument("study", type=Path)
+    s.add_argument("--adapter", default=None, help="override [solver] adapter")
+    s.add_argument("--out", type=Path, required=True)
+    add_cache_options(s)
+    s.set_defaults(func=cmd_compare)
 
     s = sub.add_parser("conformance", help="run the shared adapter checks; exit 0 only if all pass")
     s.add_argument("adapter", help="adapter name: reference, mystran, legacy, command (needs --study), "

@@ -302,6 +302,11 @@ def identify_study(study: Study, adapter: SolverAdapter, *, model: str | None = 
     result = identify(cm, fit_obs, k0, holdout=hold, callback=progress, **opts)
     solver = {"runs": cm.c.solver_runs, "right_hand_sides": cm.c.right_hand_sides,
               "wall_s": cm.c.wall_s, "adapter": adapter.name}
+    cache = getattr(adapter, "cache_stats", None)
+    if cache is not None:                 # a batch served from the cache made no solver run
+        solver["cached_batches"] = cache.hits
+        if cache.hits:
+            solver["right_hand_sides"] = sum(len(j.dofs) for j in joints) + study.loads.n_cases
     return IdentifyRun(study, joints, cm, fit_obs, hold, result, solver)
 
 
