@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from solver_adapters.bdf_write import print_float_free
+
 
 @dataclass
 class FrameBuilder:
@@ -62,16 +64,19 @@ class FrameBuilder:
         return tuple(grids)
 
     def bdf(self, title: str = "generated frame") -> str:
+        def r(x: float) -> str:       # <= 16 characters per field, as NASTRAN free field allows
+            return print_float_free(x, max_width=16)
+
         out = [f"$ {title}", "BEGIN BULK",
-               f"MAT1,1,{self.E!r},{self.G!r}",
-               f"PBAR,1,1,{self.A!r},{self.I1!r},{self.I2!r},{self.J!r}"]
-        out += [f"GRID,{g},,{x!r},{y!r},{z!r}" for g, (x, y, z) in sorted(self.grids.items())]
-        out += [f"CBAR,{e},1,{a},{b},{v[0]!r},{v[1]!r},{v[2]!r}" for e, a, b, v in self.bars]
+               f"MAT1,1,{r(self.E)},{r(self.G)}",
+               f"PBAR,1,1,{r(self.A)},{r(self.I1)},{r(self.I2)},{r(self.J)}"]
+        out += [f"GRID,{g},,{r(x)},{r(y)},{r(z)}" for g, (x, y, z) in sorted(self.grids.items())]
+        out += [f"CBAR,{e},1,{a},{b},{r(v[0])},{r(v[1])},{r(v[2])}" for e, a, b, v in self.bars]
         out += [f"SPC1,1,{c},{g}" for g, c in sorted(self.spcs.items())]
         for eid, gn, gm, cm in self.rbe2:
             out.append(f"RBE2,{eid},{gn},{cm}," + ",".join(str(g) for g in gm))
         for i, (g1, c1, g2, c2, k) in enumerate(self.springs):
-            out.append(f"CELAS2,{20_000_000 + i + 1},{k!r},{g1},{c1},{g2 or ''},{c2 or ''}")
+            out.append(f"CELAS2,{20_000_000 + i + 1},{r(k)},{g1},{c1},{g2 or ''},{c2 or ''}")
         out.append("ENDDATA")
         return "\n".join(out) + "\n"
 

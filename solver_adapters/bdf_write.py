@@ -97,15 +97,20 @@ def print_float_16(value: float) -> str:
     return _print_float(value, 16)
 
 
-def print_float_free(value: float) -> str:
-    """Full precision for free field: ``repr`` digits with a decimal point (``1.E-09``)."""
+def print_float_free(value: float, max_width: int | None = None) -> str:
+    """Free field: ``repr`` digits with a decimal point (``1.E-09``), which read back bit for bit.
+
+    NASTRAN-type codes allow at most 16 characters per free-field entry (MYSTRAN rejects longer
+    ones, error 1002): with ``max_width=16`` a longer ``repr`` becomes the 16-character
+    large-field text (12-15 significant digits)."""
     x = float(value)
     if not math.isfinite(x):
         raise ValueError(f"cannot write a non-finite real to a deck: {value!r}")
     mantissa, _, exponent = repr(x).upper().partition("E")
     if "." not in mantissa:
         mantissa += "."
-    return mantissa + ("E" + exponent if exponent else "")
+    text = mantissa + ("E" + exponent if exponent else "")
+    return text if max_width is None or len(text) <= max_width else print_float_16(x).strip()
 
 
 def print_field(value: Field, fmt: str = "small") -> str:

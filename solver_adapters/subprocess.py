@@ -395,12 +395,17 @@ class CommandAdapter:
             self.workdir_root.mkdir(parents=True, exist_ok=True)
         workdir = Path(tempfile.mkdtemp(prefix=f"{self.name}-", dir=self.workdir_root))
         record = None
+        times = {}
         try:
+            t0 = time.perf_counter()
             deck = self.dialect.write_deck(workdir, self._base, loads, report, self.springs)
+            times["write_s"] = time.perf_counter() - t0
             record = run_solver(self._command_for(Path(deck)), workdir, self.timeout_s,
                                 log_name=self.name)
+            t0 = time.perf_counter()
             values = np.asarray(self.dialect.read_results(workdir, Path(deck), loads, report, record),
                                 dtype=float)
+            times["parse_s"] = time.perf_counter() - t0
             expected = (len(report), loads.n_cases)
             if values.shape != expected:
                 raise SolverRunError(f"dialect {self.dialect.name!r} returned shape {values.shape}, "
@@ -416,16 +421,16 @@ class CommandAdapter:
             else:
                 shutil.rmtree(workdir, ignore_errors=True)
             raise
-        self._account(loads, record, workdir, ok=True)
+        self._account(loads, record, workdir, ok=True, times=times)
         shutil.rmtree(workdir, ignore_errors=True)
         return values
 
     def _account(self, loads: LoadMatrix, record: RunRecord | None, workdir: Path, ok: bool,
-                 error: str | None = None) -> None:
+                 error: str | None = None, times: dict | None = None) -> None:
         with self._lock:
             s = self.stats
             entry = {"ok": ok, "cases": loads.n_cases, "workdir": None if ok else str(workdir),
-                     "error": error}
+                     "error": error, **(times or {})}
             if record is not None:
                 s.runs += 1
                 s.factorizations += 1
