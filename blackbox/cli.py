@@ -265,8 +265,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"blackbox {args.command}: {kind}: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"blackbox {args.command}: interrupted", file=sys.stderr)
+        print(f"blackbox {args.command}: interrupted (finished solver batches are kept in the "
+              f"cache; run the command again to resume)", file=sys.stderr)
         return 130
+    except Exception as exc:                 # a bug, not bad input: still one paragraph
+        if args.debug:
+            raise
+        print(f"blackbox {args.command}: unexpected {type(exc).__name__}: {exc} "
+              f"(this is a bug in blackbox; run again with --debug for the traceback)", file=sys.stderr)
+        return 1
     finally:
         if cache_token is not None:
             ADAPTER_CACHE.reset(cache_token)
