@@ -104,6 +104,26 @@ def cmd_compare(args) -> int:
     return 0 if ok else 3
 
 
+def cmd_diagnose(args) -> int:
+    """``blackbox diagnose STUDY``: find what the declared model lacks (``blackbox.diagnose_run``)."""
+    from blackbox.diagnose_run import run_diagnose
+
+    effects = tuple(e.strip() for e in args.effects.split(",") if e.strip()) if args.effects else None
+    opts = {"effects": effects} if effects else {}
+    run = run_diagnose(args.study, args.out, adapter_name=args.adapter, alpha=args.alpha,
+                       max_steps=args.max_steps, refit_top=args.refit_top,
+                       progress=lambda s: print(s, flush=True), **opts)
+    d = run.document
+    b, a = d["before"], d["after"]
+    added = ", ".join(f"{e['effect']} @ {', '.join(map(str, e['where']))[:40]}" for e in d["added"]) or "nothing"
+    print(f"added {added}; reduced chi2 {b['reduced_chi2']:.4g} -> {a['reduced_chi2']:.4g} "
+          f"(99% band {a['band_99'][0]:.3g}..{a['band_99'][1]:.3g}), hold-out RMS "
+          f"{b['holdout_rms'] if b['holdout_rms'] is not None else float('nan'):.4g} -> "
+          f"{a['holdout_rms'] if a['holdout_rms'] is not None else float('nan'):.4g}; "
+          f"{d['solver']['runs']} solver runs, {d['wall_s']:.1f} s -> {args.out}")
+    return 0
+
+
 def cmd_bench(args) -> int:
     from blackbox.bench import CASES, main_bench
 
@@ -229,6 +249,21 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", type=Path, required=True)
     add_cache_options(s)
     s.set_defaults(func=cmd_compare)
+
+    s = sub.add_parser("diagnose", help="find what the declared model lacks, add it, report before/after")
+    s.add_argument("study", type=Path)
+    s.add_argument("--adapter", default=None, help="override [solver] adapter")
+    s.add_argument("--out", type=Path, required=True)
+    s.add_argument("--alpha", type=float, default=0.01,
+                   help="significance level after the Bonferroni correction (default 0.01)")
+    s.add_argument("--max-steps", type=int, default=5, help="effects added at most (default 5)")
+    s.add_argument("--refit-top", type=int, default=6, help="candidates refitted per round (default 6)")
+    s.add_argument("--effects", default=None,
+                   help="comma-separated effect kinds to consider (default: all of joint_coupling, "
+                        "joint_translation, undeclared_joint, support_flexibility, load_scale, "
+                        "sensor_gain, member_stiffness)")
+    add_cache_options(s)
+    s.set_defaults(func=cmd_diagnose)
 
     s = sub.add_parser("conformance", help="run the shared adapter checks; exit 0 only if all pass")
     s.add_argument("adapter", help="adapter name: reference, mystran, legacy, command (needs --study), "
