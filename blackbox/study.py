@@ -33,7 +33,7 @@ class SolverConfig(_Strict):
     timeout_s: float = Field(600.0, gt=0)
     command: list[str] | None = None
     dialect: str = "nastran"
-    backend: Literal["superlu", "pardiso"] = "superlu"
+    backend: Literal["auto", "superlu", "pardiso"] = "auto"   # auto: PARDISO from 2e4 DOFs if installed
 
 
 class JointConfig(_Strict):

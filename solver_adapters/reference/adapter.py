@@ -11,9 +11,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from solver_adapters.deck import Deck
-from solver_adapters.protocol import (Displacements, DofLabel, LoadMatrix, ScalarSpring,
+from solver_adapters.protocol import (Displacements, DofLabel, LoadMatrix, ModelError, ScalarSpring,
                                       SolverStats, UnknownDofError)
-from solver_adapters.reference.model import Assembled, Factorization, assemble
+from solver_adapters.reference.model import BACKENDS, Assembled, Factorization, assemble
 
 
 class ReferenceAdapter:
@@ -21,13 +21,21 @@ class ReferenceAdapter:
 
     Assembly and factorization happen on the first ``solve`` and are reused for every batch, so
     a call with many right-hand sides costs one factorization plus cheap triangular solves.
+
+    ``backend``: ``"auto"`` (default: SuperLU below ``model.AUTO_PARDISO_MIN_DOFS`` free DOFs,
+    MKL PARDISO above when pypardiso is installed), ``"superlu"`` or ``"pardiso"``; see
+    ``docs/scale.md`` for the measured difference. ``timings`` holds the wall time of each
+    assembly phase and of the factorization (seconds) once they have run.
     """
 
     name = "reference"
     version = "1"
 
-    def __init__(self, deck: Deck | str | Path, *, backend: str = "superlu",
+    def __init__(self, deck: Deck | str | Path, *, backend: str = "auto",
                  extra_springs: Sequence[ScalarSpring] = ()):
+        if backend not in BACKENDS:
+            raise ModelError(f"unknown factorization backend {backend!r}; "
+                             f"use one of {', '.join(BACKENDS)}")
         if not isinstance(deck, Deck):
             from solver_adapters.bdf import read_deck
             self.deck_path: Path | None = Path(deck)
@@ -38,6 +46,7 @@ class ReferenceAdapter:
         self.backend = backend
         self.extra_springs = tuple(extra_springs)
         self.stats = SolverStats()
+        self.timings: dict[str, float] = {}
         self._model: Assembled | None = None
         self._fact: Factorization | None = None
         self._labels = tuple((int(g), c) for g in sorted(deck.grids) for c in range(1, 7))
@@ -64,7 +73,7 @@ class ReferenceAdapter:
             gi = m.g_index(loads.dofs)
             coo = sp.coo_matrix(loads.values)
             F_g = sp.csr_matrix((coo.data, (gi[coo.row], coo.col)), shape=(m.T.shape[0], loads.n_cases))
-        F_f = (m.T.T @ F_g).toarray()
+        F_f = (m.T.T @ F_g).toarray(order="F")      # column-major: no copy in the solvers
         U_f = fact.solve(F_f) if loads.n_cases else np.zeros((m.T.shape[1], 0))
         U_f = U_f.reshape(m.T.shape[1], loads.n_cases)
         values = m.T[m.g_index(report), :] @ U_f if report else np.zeros((0, loads.n_cases))
@@ -83,7 +92,7 @@ class ReferenceAdapter:
     @property
     def model(self) -> Assembled:
         if self._model is None:
-            self._model = assemble(self.deck, self.extra_springs)
+            self._model = assemble(self.deck, self.extra_springs, timings=self.timings)
         return self._model
 
     def factorization(self) -> Factorization:
@@ -92,7 +101,13 @@ class ReferenceAdapter:
             self._fact = Factorization(self.model, self.backend)
             self.stats.factorizations += 1
             self.stats.wall_s += time.perf_counter() - t0
+            self.timings["factor_s"] = self._fact.factor_s
         return self._fact
+
+    @property
+    def backend_used(self) -> str | None:
+        """The backend that factorized (``"superlu"``/``"pardiso"``), None before the first solve."""
+        return self._fact.backend if self._fact is not None else None
 
     def stiffness(self) -> tuple[sp.csc_matrix, list[DofLabel], sp.csr_matrix]:
         """``(K_ff, f_labels, T)`` with ``u_g = T u_f``: the assembled matrices, for the
