@@ -207,24 +207,28 @@ def _cache_choice(args) -> bool | Path:
     return args.cache_dir if args.cache_dir is not None else True
 
 
+def _study_command(sub, name: str, help: str, func, *, cache: bool = True) -> argparse.ArgumentParser:
+    """A sub-command on a study folder: STUDY, --adapter, --out (and the cache options)."""
+    s = sub.add_parser(name, help=help)
+    s.add_argument("study", type=Path)
+    s.add_argument("--adapter", default=None, help="override [solver] adapter")
+    s.add_argument("--out", type=Path, required=True)
+    if cache:
+        add_cache_options(s)
+    s.set_defaults(func=func)
+    return s
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="blackbox", description=__doc__.splitlines()[0])
     p.add_argument("--debug", action="store_true", help="show tracebacks")
     sub = p.add_subparsers(dest="command", required=True)
 
-    s = sub.add_parser("solve", help="solve the study's load cases, no joint model added")
-    s.add_argument("study", type=Path)
-    s.add_argument("--adapter", default=None, help="override [solver] adapter")
-    s.add_argument("--out", type=Path, required=True)
-    add_cache_options(s)
-    s.set_defaults(func=cmd_solve)
+    _study_command(sub, "solve", "solve the study's load cases, no joint model added", cmd_solve)
 
-    s = sub.add_parser("simulate", help="a copy of the study with simulated measurements (Sec. 5.2)")
-    s.add_argument("study", type=Path)
+    s = _study_command(sub, "simulate", "a copy of the study with simulated measurements (Sec. 5.2)",
+                       cmd_simulate, cache=False)
     s.add_argument("--truth", type=Path, required=True, help="truth TOML: joints, noise, bias, what to measure")
-    s.add_argument("--adapter", default=None)
-    s.add_argument("--out", type=Path, required=True)
-    s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser("bench", help="identification cost by sensitivity method (Table 3.3)")
     s.add_argument("--out", type=Path, required=True)
@@ -234,26 +238,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--fixtures", type=Path, default=Path(__file__).resolve().parents[1] / "fixtures")
     s.set_defaults(func=cmd_bench)
 
-    s = sub.add_parser("identify", help="identify the joint parameters from the measurements (Ch. 4-5)")
-    s.add_argument("study", type=Path)
-    s.add_argument("--adapter", default=None, help="override [solver] adapter")
+    s = _study_command(sub, "identify", "identify the joint parameters from the measurements (Ch. 4-5)",
+                       cmd_identify)
     s.add_argument("--model", choices=["simple", "complex"], default=None,
                    help="override every joint's declared model")
-    s.add_argument("--out", type=Path, required=True)
-    add_cache_options(s)
-    s.set_defaults(func=cmd_identify)
 
-    s = sub.add_parser("compare", help="simple vs complex joint model, MDSE loading (Ch. 6)")
-    s.add_argument("study", type=Path)
-    s.add_argument("--adapter", default=None, help="override [solver] adapter")
-    s.add_argument("--out", type=Path, required=True)
-    add_cache_options(s)
-    s.set_defaults(func=cmd_compare)
+    _study_command(sub, "compare", "simple vs complex joint model, MDSE loading (Ch. 6)", cmd_compare)
 
-    s = sub.add_parser("diagnose", help="find what the declared model lacks, add it, report before/after")
-    s.add_argument("study", type=Path)
-    s.add_argument("--adapter", default=None, help="override [solver] adapter")
-    s.add_argument("--out", type=Path, required=True)
+    s = _study_command(sub, "diagnose", "find what the declared model lacks, add it, report before/after",
+                       cmd_diagnose)
     s.add_argument("--alpha", type=float, default=0.01,
                    help="significance level after the Bonferroni correction (default 0.01)")
     s.add_argument("--max-steps", type=int, default=5, help="effects added at most (default 5)")
@@ -262,8 +255,6 @@ def build_parser() -> argparse.ArgumentParser:
                    help="comma-separated effect kinds to consider (default: all of joint_coupling, "
                         "joint_translation, undeclared_joint, support_flexibility, load_scale, "
                         "sensor_gain, member_stiffness)")
-    add_cache_options(s)
-    s.set_defaults(func=cmd_diagnose)
 
     s = sub.add_parser("conformance", help="run the shared adapter checks; exit 0 only if all pass")
     s.add_argument("adapter", help="adapter name: reference, mystran, legacy, command (needs --study), "

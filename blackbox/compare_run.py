@@ -634,9 +634,9 @@ def _energy_bars(plt, comps: list[cmp.JointComparison], unc: list[dict], which: 
 
 def comparison_plots(first: Stage, second: Stage | None, out: Path) -> list[str]:
     """Bar plots like Figures 6.2-6.5 (returns the file names; none without matplotlib)."""
-    from blackbox.report import _pyplot
+    from blackbox.report import pyplot
 
-    plt = _pyplot()
+    plt = pyplot()
     if plt is None:
         return []
     written = []

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from blackbox import diagnose as dg
+from blackbox.report import pyplot
 from blackbox.identification import Observations, identify
 from blackbox.study import Study, joint_branches, load_study
 from blackbox.workflows import condensed_for_study, deck_matrix, make_adapter_for, study_joints
@@ -583,16 +584,6 @@ def diagnosis_report(study: Study, doc: dict, files: list[str]) -> str:
 # --------------------------------------------------------------------------------------------
 # plots
 # --------------------------------------------------------------------------------------------
-def _pyplot():
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-        return plt
-    except ImportError:
-        return None
-
-
 def _grid_rms(obs_dofs, r) -> dict[int, float]:
     acc: dict[int, list] = {}
     for d, z in zip(obs_dofs, r):
@@ -601,7 +592,7 @@ def _grid_rms(obs_dofs, r) -> dict[int, float]:
 
 
 def diagnosis_plots(diag: dg.Diagnosis, deck: Deck, sd: SplitDeck, out_dir: Path) -> list[str]:
-    plt = _pyplot()
+    plt = pyplot()
     if plt is None:
         return []
     from matplotlib import colors

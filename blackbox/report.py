@@ -82,7 +82,8 @@ def fit_report(result, *, title: str = "Identification", solver: dict | None = N
     return "\n".join(out) + "\n"
 
 
-def _pyplot():
+def pyplot():
+    """matplotlib's pyplot on the non-interactive Agg backend, or None when it is not installed."""
     try:
         import matplotlib
         matplotlib.use("Agg")
@@ -95,7 +96,7 @@ def _pyplot():
 def identification_plots(result, obs, out_dir: Path, *, truth: dict[str, float] | None = None) -> list[str]:
     """Convergence (Figs. 5.3-5.5), estimates with intervals (Table 5.2 as a figure) and
     standardized residuals per case and DOF. Returns the file names written."""
-    plt = _pyplot()
+    plt = pyplot()
     if plt is None:
         return []
     r = result
