@@ -70,7 +70,9 @@ def finite_difference(adapter: SolverAdapter, joints: Sequence[JointModel], k: n
     """``dU/dk`` by re-solving the full model (eq. 6 or 7), shape ``(n_params, len(dofs), L)``.
 
     ``base`` is ``U(k)`` if the caller already has it (forward differences need it).
-    Step ``h_i = rel_step * |k_i|`` (absolute ``rel_step`` when ``k_i = 0``).
+    Step ``h_i = rel_step * max|k_j|`` over the parameters of ``k_i``'s joint (a small
+    off-diagonal K_C entry stepped relative to itself would move the response below round-off;
+    absolute ``rel_step`` when the joint's parameters are all 0).
     """
     if scheme not in ("forward", "central"):
         raise ValueError(f"scheme must be 'forward' or 'central', got {scheme!r}")
@@ -78,8 +80,10 @@ def finite_difference(adapter: SolverAdapter, joints: Sequence[JointModel], k: n
     if scheme == "forward" and base is None:
         base = full_response(adapter, joints, k, loads, dofs, deck_joints)
     out = np.empty((k.size, len(dofs), loads.n_cases))
+    scale = np.concatenate([np.full(j.n_params, np.max(np.abs(k[a:a + j.n_params])))
+                            for j, a in zip(joints, np.cumsum([0] + [j.n_params for j in joints])[:-1])])
     for i in range(k.size):
-        h = rel_step * abs(k[i]) if k[i] != 0 else rel_step
+        h = rel_step * scale[i] if scale[i] != 0 else rel_step
         kp = k.copy()
         kp[i] += h
         up = full_response(adapter, joints, kp, loads, dofs, deck_joints)
