@@ -650,7 +650,7 @@ class AugmentedModel:
     def member_score_columns(self, st: _State, members: Sequence[Effect], om: _ObsMap) -> np.ndarray:
         """``d prediction / d alpha_e`` at ``alpha_e = 1`` for members NOT in the model, by
         reciprocity (rows of the split run at the member DOFs; no column of their own needed)."""
-        nS, m, L = self.nS, self.m, self.base.n_cases
+        nS, m = self.nS, self.m
         IDK = np.eye(m) - st.D * self.K0[None, :]
         cond = self.cond
         out = np.zeros((len(om.y), len(members)))

@@ -1063,8 +1063,7 @@ def _profile_ci(prob: _Problem, fit: _Fit, i: int, delta: float, half_width: flo
             solved[h] = sub.phi
             return math.sqrt(max(sub.chi2 - fit.chi2, 0.0))
 
-        lo, t_lo = 0.0, 0.0                           # tau(lo) < tau_star <= tau(hi)
-        hi, t_hi = np.inf, np.inf
+        lo, hi = 0.0, np.inf                          # tau(lo) < tau_star <= tau(hi)
         h = half_width if np.isfinite(half_width) and half_width > 0 else 1.0
         if prob.log_mask[i]:                          # springs: from the floor to 1e6 x the stiffest
             floor = prob.floor_value(fit.k)[i]
@@ -1086,9 +1085,9 @@ def _profile_ci(prob: _Problem, fit: _Fit, i: int, delta: float, half_width: flo
                 result = h
                 break
             if t < tau_star:
-                lo, t_lo = h, t
+                lo = h
             else:
-                hi, t_hi = h, t
+                hi = h
             if np.isfinite(hi) and hi - lo <= _PROFILE_TAU_RTOL * min(half_width, h):
                 result = 0.5 * (lo + hi)
                 break

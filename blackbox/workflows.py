@@ -11,6 +11,7 @@ import json
 import shutil
 import tomllib
 from contextvars import ContextVar
+from typing import TYPE_CHECKING
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,6 +24,9 @@ from blackbox.errors import StudyError
 from blackbox.joints import ComplexJoint, JointModel, SimpleJoint, actual_joint_stub_kc, joint_dofs, make_joint
 from blackbox.study import Study, joint_branches, load_study
 from solver_adapters.protocol import DofLabel, LoadMatrix, SolverAdapter
+
+if TYPE_CHECKING:
+    from blackbox.identification import IdentificationResult, Observations
 
 
 ADAPTER_CACHE: ContextVar[bool | Path] = ContextVar("blackbox_adapter_cache", default=False)
@@ -263,9 +267,9 @@ class IdentifyRun:
     study: Study
     joints: list[JointModel]
     model: CondensedModel
-    fit_obs: "Observations"
-    holdout_obs: "Observations | None"
-    result: "IdentificationResult"
+    fit_obs: Observations
+    holdout_obs: Observations | None
+    result: IdentificationResult
     solver: dict
 
 

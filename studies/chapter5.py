@@ -1178,7 +1178,7 @@ def run_studies(setups: dict[str, Setup]) -> tuple[list[str], dict]:
     for s in S:
         out += study_joint_vs_away(s, F["away"])
     out += discussion("away", F, setups)
-    out += [f"## 6. Biased vs unbiased data (Figures 5.6-5.7, 5.11, 5.15, 5.19)", "",
+    out += ["## 6. Biased vs unbiased data (Figures 5.6-5.7, 5.11, 5.15, 5.19)", "",
             f"Biased: the truth felt forces x{BIAS} (``force_scale = {BIAS}`` of ``blackbox simulate``) while "
             "the study declares the nominal loads; same seeds and cases as study 1 (the unbiased columns are "
             "study 1's fits). Per parameter over the replicates: the median of (estimate - truth) / size "
@@ -1486,7 +1486,7 @@ def discussion(section: str, F: dict, setups: dict) -> list[str]:
     elif section == "bias":
         bi = f
         r = bi["cube-simple-ref"]
-        n0, n1 = CASES["simple"][0], CASES["simple"][-1]
+        n1 = CASES["simple"][-1]
         soft = float(np.mean(r[(n1, BIAS)]["med"]))
         out.append(
             f"**Agrees.** A systematic error does not average out: with forces x{BIAS} in the truth the "

@@ -21,7 +21,6 @@ import psutil
 import pytest
 import scipy.sparse as sp
 
-from solver_adapters import cache as cache_mod
 from solver_adapters.cache import (MAGIC, CachedAdapter, CorruptEntry, entry_path, read_entry,
                                    write_entry)
 from solver_adapters.conformance import read_loads_csv, write_generated_deck

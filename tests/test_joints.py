@@ -6,7 +6,6 @@ Reference: the dissertation in ``/work/shared/seed`` -- Sec. 2.2 (eq. 1-3, Table
 
 from __future__ import annotations
 
-import itertools
 from math import comb
 
 import numpy as np

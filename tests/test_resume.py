@@ -5,7 +5,6 @@ import json
 import shutil
 from pathlib import Path
 
-import pytest
 
 import blackbox.identification as identification
 from blackbox.cli import main
