@@ -76,7 +76,10 @@ def study_joints(study: Study, model: str | None = None) -> list[JointModel]:
     """The study's joints as models (``model`` overrides every joint's declared model)."""
     out = []
     for j in study.config.joints:
-        opts = {"rigid_pairs": j.rigid_pairs} if (model or j.model) == "simple" and j.rigid_pairs else {}
+        opts = {}
+        if (model or j.model) == "simple" and j.rigid_pairs:     # grid pairs -> branch numbers
+            opts = {"rigid_pairs": tuple((j.grids.index(a) + 1, j.grids.index(b) + 1)
+                                         for a, b in j.rigid_pairs)}
         out.append(make_joint(j.name, j.grids, model or j.model, **opts))
     return out
 
@@ -278,7 +281,36 @@ def condensed_for_study(study: Study, adapter: SolverAdapter, joints: list[Joint
     """The one batched run: unit loads at the joints' DOFs plus the study's load cases."""
     boundary = [d for j in joints for d in j.dofs]
     c = condense(adapter, loads or study.loads, boundary, observed)
-    return CondensedModel(c, joints, deck_matrix(study, joints))
+    K_deck = deck_matrix(study, joints)
+    rigid = rigid_pair_penalty(c, joints)
+    if rigid is not None:
+        # A rigid branch pair (Sec. 2.2, last paragraph) is a very stiff spring that is not a
+        # parameter: carried as a *negative* deck stiffness, since dK = K_J(k) - K_deck. Then the
+        # joint matrices stay linear in k and every scheme (fixed point included) stays exact.
+        K_deck = (np.zeros_like(rigid) if K_deck is None else K_deck) - rigid
+    return CondensedModel(c, joints, K_deck)
+
+
+RIGID_FACTOR = 1e6
+"""A rigid pair's penalty: 1e6 times the stiffest rotational stiffness the structure offers at
+the joint (1 / smallest flexibility there). Rigid to ~1e-6 of the relative rotation, while the
+condensed system keeps ~10 digits in double precision."""
+
+
+def rigid_pair_penalty(c, joints: list[JointModel]) -> np.ndarray | None:
+    index = {d: i for i, d in enumerate(c.boundary)}
+    n = len(c.boundary)
+    out = np.zeros((n, n))
+    found = False
+    for j in joints:
+        if not getattr(j, "rigid_pairs", ()):
+            continue
+        idx = np.array([index[d] for d in j.dofs])
+        rot = idx[3:]
+        scale = RIGID_FACTOR / float(np.min(np.diag(c.G_BB)[rot]))
+        out[np.ix_(idx, idx)] += j.rigid_penalty_matrix(scale)
+        found = True
+    return out if found else None
 
 
 def identify_study(study: Study, adapter: SolverAdapter, *, model: str | None = None,
