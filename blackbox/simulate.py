@@ -92,6 +92,45 @@ def noise_sigma(true: np.ndarray, kinds: np.ndarray, case_idx: np.ndarray, cfg: 
 
 
 @dataclass(frozen=True)
+class SimulatedRows:
+    """Measured rows, case-major: ``case_index`` (column of the response), ``dofs``, ``values``,
+    ``sigma``, ``true`` values, ``kinds`` (0 translation, 1 rotation) and ``refs`` (the reference
+    DOF of a row measured relative to a reference point, else None)."""
+    case_index: np.ndarray
+    dofs: tuple[DofLabel, ...]
+    values: np.ndarray
+    sigma: np.ndarray
+    true: np.ndarray
+    kinds: np.ndarray
+    refs: tuple[DofLabel | None, ...]
+
+
+def simulate_rows(U: np.ndarray, row: dict[DofLabel, int], n_cases: int, dofs: Sequence[DofLabel],
+                  cfg: NoiseConfig, rng: np.random.Generator, reference_grid: int | None = None,
+                  scale: float = 1.0) -> SimulatedRows:
+    """Every (case, DOF) of ``dofs`` measured from the exact response ``U`` (rows ``row[dof]``,
+    one column per case), contaminated as Section 5.2 says: proportional noise with its floor,
+    and, with ``reference_grid``, every row but the reference grid's own measured relative to it
+    (the caller lists the reference grid's DOFs in ``dofs`` to have them measured absolutely).
+    ``scale`` multiplies the exact response (forces scaled in the truth). The random draws come
+    in a fixed order, so a seed reproduces the same values."""
+    case_rows, dof_rows = measured_rows(list(range(n_cases)), dofs)
+    ci = np.array(case_rows, dtype=int)
+    true = np.array([U[row[d], j] for d, j in zip(dof_rows, ci)]) * scale
+    kinds = np.array([1 if d[1] >= 4 else 0 for d in dof_rows])
+    sigma = noise_sigma(true, kinds, ci, cfg)
+    values = contaminate(true, sigma, rng)
+    refs: list[DofLabel | None] = [None] * len(dof_rows)
+    if reference_grid is not None:
+        rel = np.array([d[0] != reference_grid for d in dof_rows])
+        ref = np.array([U[row[(reference_grid, d[1])], j] for d, j in zip(dof_rows, ci)]) * scale
+        out = relative_to_reference(true[rel], ref[rel], kinds[rel], ci[rel], cfg, rng)
+        values[rel], sigma[rel] = out.values, out.sigma
+        refs = [(reference_grid, d[1]) if r else None for d, r in zip(dof_rows, rel)]
+    return SimulatedRows(ci, tuple(dof_rows), values, sigma, true, kinds, tuple(refs))
+
+
+@dataclass(frozen=True)
 class Simulated:
     values: np.ndarray
     sigma: np.ndarray

@@ -210,22 +210,14 @@ def simulate_study(study_dir: Path, truth_path: Path, out_dir: Path, adapter_nam
     rng = np.random.default_rng(truth.seed)
     if m.reference_grid is not None:     # the reference grid itself is measured absolutely
         dofs = [(m.reference_grid, c) for c in range(1, 7)] + [d for d in dofs if d[0] != m.reference_grid]
-    case_rows, dof_rows = sim.measured_rows(cases, dofs)
-    ci = np.array([cases.index(c) for c in case_rows])
-    true = np.array([U[row[d], j] for d, j in zip(dof_rows, ci)])
-    kinds = np.array([1 if d[1] >= 4 else 0 for d in dof_rows])
-    sigma = sim.noise_sigma(true, kinds, ci, truth.noise)
-    values = sim.contaminate(true, sigma, rng)
-    refs: list[int | None] = [None] * len(dof_rows)
-    if m.reference_grid is not None:
-        if m.averaging_points:
-            raise StudyError("measure.averaging_points and measure.reference_grid cannot be combined",
-                             file=str(truth_path))
-        rel = np.array([d[0] != m.reference_grid for d in dof_rows])
-        ref = np.array([U[row[(m.reference_grid, d[1])], j] for d, j in zip(dof_rows, ci)])
-        out = sim.relative_to_reference(true[rel], ref[rel], kinds[rel], ci[rel], truth.noise, rng)
-        values[rel], sigma[rel] = out.values, out.sigma
-        refs = [m.reference_grid if r else None for r in rel]
+    if m.reference_grid is not None and m.averaging_points:
+        raise StudyError("measure.averaging_points and measure.reference_grid cannot be combined",
+                         file=str(truth_path))
+    rows = sim.simulate_rows(U, row, len(cases), dofs, truth.noise, rng, m.reference_grid)
+    dof_rows, ci, true, kinds = rows.dofs, rows.case_index, rows.true, rows.kinds
+    values, sigma = rows.values.copy(), rows.sigma.copy()
+    case_rows = [cases[j] for j in ci]
+    refs = [None if r is None else r[0] for r in rows.refs]
     if m.averaging_points:
         s = np.arange(m.averaging_points) * m.averaging_spacing
         xyz = {g.id: np.array(g.xyz, float) for g in deck.grids.values()}

@@ -506,23 +506,9 @@ def simulate(s: Setup, seed: int, level: float = NOISE, scale: float = 1.0,
     key = ("obs", seed, level, scale, n)
     if key in s.cache:
         return s.cache[key]
-    cases = list(range(n))
     noise = sim.NoiseConfig(relative=level, floor=s.floor)
-    rng = np.random.default_rng(seed)
-    case_rows, dof_rows = sim.measured_rows(cases, s.dofs)
-    ci = np.array(case_rows, dtype=int)
-    true = np.array([s.U[s.row[d], j] for d, j in zip(dof_rows, ci)]) * scale
-    kinds = np.array([1 if d[1] >= 4 else 0 for d in dof_rows])
-    sigma = sim.noise_sigma(true, kinds, ci, noise)
-    values = sim.contaminate(true, sigma, rng)
-    refs: list = [None] * len(dof_rows)
-    if s.reference is not None:
-        rel = np.array([d[0] != s.reference for d in dof_rows])
-        ref = np.array([s.U[s.row[(s.reference, d[1])], j] for d, j in zip(dof_rows, ci)]) * scale
-        out = sim.relative_to_reference(true[rel], ref[rel], kinds[rel], ci[rel], noise, rng)
-        values[rel], sigma[rel] = out.values, out.sigma
-        refs = [(s.reference, d[1]) if r else None for d, r in zip(dof_rows, rel)]
-    obs = Observations(tuple(dof_rows), ci, values, sigma, s.cm.c.cases, tuple(refs))
+    rows = sim.simulate_rows(s.U, s.row, n, s.dofs, noise, np.random.default_rng(seed), s.reference, scale)
+    obs = Observations(rows.dofs, rows.case_index, rows.values, rows.sigma, s.cm.c.cases, rows.refs)
     s.cache[key] = obs
     return obs
 
