@@ -34,7 +34,6 @@ from blackbox.report import pyplot
 from blackbox.identification import Observations, identify
 from blackbox.study import Study, joint_branches, load_study
 from blackbox.workflows import condensed_for_study, deck_matrix, make_adapter_for, study_joints
-from solver_adapters.bdf import read_deck
 from solver_adapters.bdf_write import write_deck
 from solver_adapters.deck import CBar, Deck, Grid, Rbe2, Spc1, Spring
 from solver_adapters.protocol import DofLabel
@@ -284,7 +283,7 @@ def prepare(study_dir: Path, out_dir: Path, *, adapter_name: str | None = None,
     if unknown:
         raise ValueError(f"unknown effect kind(s) {unknown}; known: {', '.join(dg.EFFECTS)}")
     study = load_study(study_dir, need_measurements=True)
-    deck = read_deck(study.deck_path)
+    deck = study.deck
     out_dir = Path(out_dir)
     (out_dir / "decks").mkdir(parents=True, exist_ok=True)
     log: list[dg.RunRecord] = []

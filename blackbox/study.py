@@ -20,6 +20,7 @@ import scipy.sparse as sp
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from blackbox.errors import StudyError
+from solver_adapters.deck import Deck
 from solver_adapters.protocol import DofLabel, LoadMatrix
 
 
@@ -111,6 +112,7 @@ class Study:
     deck_path: Path
     loads: LoadMatrix
     measurements: Measurements | None
+    deck: Deck                      # the parsed deck_path (read once, reused by the wiring)
 
     @property
     def name(self) -> str:
@@ -303,7 +305,7 @@ def load_study(root: str | Path, *, need_measurements: bool = False) -> Study:
                              file=str(toml_path))
     elif need_measurements:
         raise StudyError("measurements.csv not found (needed for this command)", file=str(meas_path))
-    return Study(root, config, deck_path, loads, measurements)
+    return Study(root, config, deck_path, loads, measurements, deck)
 
 
 @dataclass(frozen=True)

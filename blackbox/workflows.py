@@ -50,9 +50,10 @@ def make_adapter_for(study: Study, name: str | None = None, deck: Path | None = 
 
     cfg = study.config.solver
     name = name or cfg.adapter
+    own_deck = deck is None or Path(deck) == study.deck_path
     deck = deck or study.deck_path
     if name == "reference":
-        opts = {"backend": cfg.backend}
+        opts = {"backend": cfg.backend, "parsed": study.deck if own_deck else None}
     elif name == "command":
         if not cfg.command:
             raise StudyError("adapter 'command' needs [solver] command = [\"program\", \"{deck}\"]",
@@ -68,8 +69,8 @@ def make_adapter_for(study: Study, name: str | None = None, deck: Path | None = 
 
 
 def study_deck(study: Study):
-    from solver_adapters.bdf import read_deck
-    return read_deck(study.deck_path)
+    """The study's parsed deck (read once by :func:`blackbox.study.load_study`)."""
+    return study.deck
 
 
 def study_joints(study: Study, model: str | None = None) -> list[JointModel]:

@@ -24,7 +24,6 @@ from blackbox import sensitivity as S                                   # noqa: 
 from blackbox.condensation import CondensedModel, condense               # noqa: E402
 from blackbox.joints import ComplexJoint, SimpleJoint, actual_joint_stub_kc  # noqa: E402
 from blackbox.study import joint_branches, load_study                     # noqa: E402
-from solver_adapters.bdf import read_deck                                # noqa: E402
 from solver_adapters.reference import ReferenceAdapter                   # noqa: E402
 
 TABLE_3_2 = {  # Table 3.2: translations in 1e-10, rotations in 1e-14 (the dissertation's units)
@@ -163,7 +162,7 @@ def stub_joint() -> list[str]:
     lines = ["## The actual joint of Section 5.4.1 (stubs of equal length, branch n clamped)", ""]
     for name in ("cube", "car"):
         study, adapter, jc, L1 = setup(name)
-        deck = read_deck(study.deck_path)
+        deck = study.deck
         br = joint_branches(deck, jc.grids)
         joint = ComplexJoint(jc.name, tuple(jc.grids))
         m = CondensedModel(condense(adapter, L1, joint.dofs, observed=L1.dofs), [joint])

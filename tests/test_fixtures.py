@@ -86,3 +86,15 @@ def test_solve_bad_input_is_one_paragraph(tmp_path, capsys):
     assert main(["solve", str(bad), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "loads.csv:2" in err and "grid 999" in err and "Traceback" not in err
+
+
+def test_the_study_deck_is_parsed_once():
+    """load_study parses model.bdf; the reference adapter built for the study reuses that parse
+    (a 1e6-DOF deck takes ~23 s to read) while keeping the path the run cache hashes."""
+    from blackbox.workflows import make_adapter_for
+
+    study = load_study(FIXTURES / "cube")
+    adapter = make_adapter_for(study, cache=False)
+    assert adapter.deck is study.deck and adapter.deck_path == study.deck_path
+    cached = make_adapter_for(study, cache=True)
+    assert cached.inner.deck is study.deck

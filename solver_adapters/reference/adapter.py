@@ -31,14 +31,19 @@ class ReferenceAdapter:
     version = "1"
 
     def __init__(self, deck: Deck | str | Path, *, backend: str = "auto",
-                 extra_springs: Sequence[ScalarSpring] = ()):
+                 extra_springs: Sequence[ScalarSpring] = (), parsed: Deck | None = None):
+        """``deck``: a parsed :class:`Deck` or a deck path. ``parsed``: the already parsed deck of
+        that path (the caller read it), so that it is not parsed twice; ``deck_path`` is kept
+        for whoever needs the files (the run cache hashes them)."""
         if backend not in BACKENDS:
             raise ModelError(f"unknown factorization backend {backend!r}; "
                              f"use one of {', '.join(BACKENDS)}")
         if not isinstance(deck, Deck):
-            from solver_adapters.bdf import read_deck
             self.deck_path: Path | None = Path(deck)
-            deck = read_deck(deck)
+            if parsed is None:
+                from solver_adapters.bdf import read_deck
+                parsed = read_deck(deck)
+            deck = parsed
         else:
             self.deck_path = None
         self.deck = deck
