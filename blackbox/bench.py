@@ -13,8 +13,9 @@ and sensitivities are obtained differs:
   structure re-solved for the prediction and once more per parameter (eq. 6);
 * ``central``   -- the same with central differences (eq. 7): 2 runs per parameter.
 
-Wall time covers everything from reading the deck to convergence, so that assembly and
-factorization are counted where they happen.
+Wall time covers everything from building the adapter to convergence, so that assembly and
+factorization are counted where they happen (the in-process solver reuses the deck parsed when
+the study was loaded; an external code reads its deck in every run, which is counted).
 """
 
 from __future__ import annotations
