@@ -1,4 +1,4 @@
-"""NASTRAN bulk-data reader: the subset of CONTRACT.md section 1 into :class:`~solver_adapters.deck.Deck`.
+"""NASTRAN bulk-data reader: the card subset of ``docs/study-format.md`` into :class:`~solver_adapters.deck.Deck`.
 
 Formats, mixed freely within one deck:
 
@@ -11,8 +11,16 @@ Continuations are either explicit (marker ``+xxx`` in field 10 matched by ``+xxx
 of the next line) or implicit (the next line's field 1 is blank, ``+`` or ``*``; in free field the
 line starts with ``,``, ``+`` or ``*``). ``$`` starts a comment anywhere. ``BEGIN BULK`` and ``ENDDATA``
 are optional; a deck with executive/case control (a ``CEND`` line) is read from ``BEGIN BULK`` on.
-``INCLUDE 'file'`` is resolved relative to the including file (nested, loops detected). ``PARAM``
-cards are accepted and ignored; any other card outside the contract's list is an error.
+``INCLUDE 'file'`` is resolved relative to the including file (nested, loops detected).
+
+Cards modelled: GRID, GRDSET (defaults for blank CP, CD, PS, SEID of GRID), CBAR (with pin flags
+and offsets in the basic system), BAROR (defaults for CBAR), PBAR (with K1/K2 shear factors and I12),
+CROD, PROD, CONROD, MAT1 (completed as NASTRAN does), SPC1, SPC (zero enforced value), SPCADD,
+RBE2, PELAS, CELAS1, CELAS2. Cards in :data:`NO_EFFECT` (solver parameters, masses,
+eigenvalue and dynamic-analysis controls) are accepted with no effect on a linear static solve and
+counted in ``Deck.no_effect`` (``Deck.summary()`` lists them once). Every other card is an error;
+the whole deck is read first, so one message names every unsupported card with its count and its
+first location.
 
 Field numbers in error messages are NASTRAN's, counted over the whole card with the continuation
 markers left out: field 1 is the card name, fields 2-9 are the first line's data, 10-17 the next
@@ -21,16 +29,20 @@ line's (for large field: 2-5, 6-9, ...). The line number is the physical line ho
 
 from __future__ import annotations
 
+import logging
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from solver_adapters.deck import CBar, Deck, Grid, Mat1, PBar, Pelas, Rbe2, Spc1, Spring
+from solver_adapters.errors import NumberFieldError as _NumberError
+from solver_adapters.deck import (CBar, Deck, Grid, Mat1, PBar, Pelas, Prod, Rbe2, Rod, Spc1, SpcAdd,
+                                  Spring)
 from solver_adapters.protocol import DeckFormatError, ModelError
 
-__all__ = ["read_deck", "read_deck_text", "validate", "parse_int", "parse_real"]
+__all__ = ["read_deck", "read_deck_text", "validate", "parse_int", "parse_real", "NO_EFFECT",
+           "SUPPORTED"]
 
 # --------------------------------------------------------------------------------------------
 # numbers
@@ -39,10 +51,6 @@ _INT = re.compile(r"[+-]?\d+")
 # mantissa, then an explicit exponent (E/D) or NASTRAN's implicit one (1.0-3 = 1.0E-3)
 _REAL = re.compile(r"([+-]?(?:\d+\.\d*|\.\d+|\d+))(?:[ED]([+-]?\d+)|([+-]\d+))?")
 _MAX_INT = 2**31 - 1
-
-
-class _NumberError(ValueError):
-    """A field's text is not the number its field needs (message says why)."""
 
 
 def _to_int(s: str) -> int:
@@ -203,8 +211,19 @@ class _Reader:
         self.ended = False
         # ID -> "CARD at file:line"; elements (CBAR, RBE2, CELASi) share one ID space, as do
         # properties (PBAR, PELAS)
-        self.ids: dict[str, dict[int, str]] = {"GRID": {}, "element": {}, "property": {}, "MAT1": {}}
+        self.ids: dict[str, dict[int, str]] = {"GRID": {}, "element": {}, "property": {}, "MAT1": {},
+                                               "SPCADD": {}}
         self.spc1_pending: list[tuple[int, str, list[int | tuple[int, int]], str]] = []
+        # card name -> [count, first card] of every card that is neither modelled nor NO_EFFECT
+        self.unsupported: dict[str, list] = {}
+        # GRDSET defaults, applied in finish() (bulk data is unordered: GRDSET may come last)
+        self.grdset: _Card | None = None
+        self.first_blank: dict[str, int | None] = {"CP": None, "CD": None, "SEID": None}
+        self.blank_ps: list[int] = []
+        # BAROR defaults, applied in finish(): CBARs with a blank PID, with no orientation
+        self.baror: _Card | None = None
+        self.pid_blank: list[int] = []
+        self.orient_blank: list[tuple[int, _Card]] = []
 
     # ---- physical lines of one file (and its includes) ----------------------------------
     def lines(self, text: str, file: str, base_dir: Path):
@@ -287,11 +306,48 @@ class _Reader:
 
     # ---- cards into the deck ------------------------------------------------------------
     def add(self, card: _Card) -> None:
+        if card.name in NO_EFFECT:
+            n, src = self.deck.no_effect.get(card.name, (0, card.src))
+            self.deck.no_effect[card.name] = (n + 1, src)
+            return
         parser = _PARSERS.get(card.name)
         if parser is None:
-            raise card.error(1, f"unknown card {card.name!r}; supported: "
-                             f"{', '.join(sorted(_PARSERS))}")
+            entry = self.unsupported.setdefault(card.name, [0, card])
+            entry[0] += 1
+            return
         parser(self, card)
+
+    def apply_baror(self) -> None:
+        """BAROR's PID and orientation into the CBARs that leave those fields blank."""
+        b = self.baror
+        pid = _int(b, 3, 0) if b is not None else 0
+        if pid:
+            for eid in self.pid_blank:
+                self.deck.cbars[eid] = replace(self.deck.cbars[eid], pid=pid)
+        x, g0 = _orientation(b) if b is not None else (None, None)
+        for eid, c in self.orient_blank:
+            if x is None and g0 is None:
+                raise c.error(6, "orientation vector X1 X2 X3 or grid G0 required (blank here "
+                                 "and no BAROR default)")
+            self.deck.cbars[eid] = replace(self.deck.cbars[eid], x=x, g0=g0)
+
+    def check_unsupported(self) -> None:
+        """One DeckFormatError naming every unsupported card: count and first location of each.
+
+        It points (file, line, field 1) at the first unsupported card of the deck."""
+        if not self.unsupported:
+            return
+        items = list(self.unsupported.items())      # in the order of first appearance
+        total = sum(n for n, _ in self.unsupported.values())
+        lines = []
+        for name, (n, c) in items:
+            hint = _UNSUPPORTED_HINTS.get(name, "")
+            lines.append(f"{name} x{n} (first at {c.src}){': ' + hint if hint else ''}")
+        first = items[0][1][1]
+        raise first.error(1, f"unknown card(s) or card(s) the reference solver does not model: "
+                             f"{total} card(s) of {len(items)} type(s):\n  " + "\n  ".join(lines)
+                          + f"\nsupported: {', '.join(SUPPORTED)}; accepted with no effect on a "
+                            f"linear static solve: {', '.join(sorted(NO_EFFECT))}")
 
     def claim(self, kind: str, ident: int, card: _Card, i: int) -> None:
         table = self.ids[kind]
@@ -300,7 +356,25 @@ class _Reader:
         table[ident] = f"{card.name} at {card.src}"
 
     def finish(self) -> Deck:
-        """SPC1 ``G1 THRU G2``: as in NASTRAN, grids of the range that do not exist are skipped."""
+        """GRDSET defaults into the GRIDs; SPC1 ``G1 THRU G2`` expanded (as in NASTRAN, grids of
+        the range that do not exist are skipped)."""
+        if self.grdset is not None:
+            c = self.grdset
+            for i, key, what in ((3, "CP", "coordinate systems are not supported: CP"),
+                                 (7, "CD", "coordinate systems are not supported: CD"),
+                                 (9, "SEID", "superelements are not supported: SEID")):
+                gid = self.first_blank[key]
+                value = _int(c, i, 0, minimum=0)
+                if value != 0 and gid is not None:
+                    raise c.error(i, f"{what} {value} of GRDSET is the default of every GRID whose "
+                                     f"{key} is blank, e.g. GRID {gid} at {self.deck.grids[gid].src}; "
+                                     f"GRDSET {key} must be 0 or blank")
+            ps = _components(c, 8, required=False)
+            if ps:
+                for gid in self.blank_ps:
+                    g = self.deck.grids[gid]
+                    self.deck.grids[gid] = Grid(g.id, g.xyz, ps, g.src)
+        self.apply_baror()
         for sid, comps, items, src in self.spc1_pending:
             grids: list[int] = []
             for item in items:
@@ -379,6 +453,7 @@ def _ignored_reals(card: _Card, fields) -> None:
 # card parsers
 # --------------------------------------------------------------------------------------------
 def _grid(r: _Reader, c: _Card) -> None:
+    """GRID; a blank CP, CD, PS or SEID takes the GRDSET value (applied in ``finish``)."""
     _max_fields(c, 9)
     gid = _int(c, 2)
     if _int(c, 3, 0, minimum=0) != 0:
@@ -391,63 +466,166 @@ def _grid(r: _Reader, c: _Card) -> None:
         raise c.error(9, "superelements are not supported: SEID must be blank")
     r.claim("GRID", gid, c, 2)
     r.deck.grids[gid] = Grid(gid, xyz, ps, c.src)
+    for i, key in ((3, "CP"), (7, "CD"), (9, "SEID")):
+        if not c.text(i) and r.first_blank[key] is None:
+            r.first_blank[key] = gid
+    if not c.text(8):
+        r.blank_ps.append(gid)
 
 
-def _cbar(r: _Reader, c: _Card) -> None:
-    _max_fields(c, 17)
-    eid = _int(c, 2)
-    pid = _int(c, 3, eid)
-    ga, gb = _int(c, 4), _int(c, 5)
-    x, g0 = None, None
+def _grdset(r: _Reader, c: _Card) -> None:
+    """GRDSET: defaults for the GRID fields CP (3), CD (7), PS (8), SEID (9); checked and applied
+    to the GRIDs in ``finish`` (a non-zero CP, CD or SEID is an error once a GRID would use it)."""
+    _max_fields(c, 9)
+    for i in (2, 4, 5, 6):
+        _blank(c, i, f"GRDSET field {i}")
+    for i in (3, 7, 9):
+        _int(c, i, 0, minimum=0)
+    _components(c, 8, required=False)
+    if r.grdset is not None:
+        raise c.error(1, f"only one GRDSET is allowed (the first is at {r.grdset.src})")
+    r.grdset = c
+
+
+def _orientation(c: _Card) -> tuple[tuple[float, float, float] | None, int | None]:
+    """Fields 6-8 of CBAR/BAROR: ``(x, None)``, ``(None, g0)`` or ``(None, None)`` if blank."""
     if _INT.fullmatch(c.text(6)):
-        g0 = _int(c, 6)
         for i in (7, 8):
             if c.text(i):
                 raise c.error(i, "field 6 is an integer (G0), so X2 and X3 must be blank; "
                                  "write a real X1 (e.g. 0.) for an orientation vector")
-    elif any(c.text(i) for i in (6, 7, 8)):
-        x = (_real(c, 6, 0.0), _real(c, 7, 0.0), _real(c, 8, 0.0))
-    else:
-        raise c.error(6, "orientation vector X1 X2 X3 or grid G0 required (BAROR not supported)")
-    if c.text(9) not in ("", "GGG"):
-        raise c.error(9, "offset options (OFFT) not supported (must be blank)")
-    for i, what in ((10, "pin flags (PA)"), (11, "pin flags (PB)")):
-        _blank(c, i, what, zero_ok=True)
-    for i in range(12, 18):
-        _blank(c, i, "offsets (WA/WB)", zero_ok=True)
+        return None, _int(c, 6)
+    if any(c.text(i) for i in (6, 7, 8)):
+        return (_real(c, 6, 0.0), _real(c, 7, 0.0), _real(c, 8, 0.0)), None
+    return None, None
+
+
+def _offt(c: _Card) -> None:
+    """OFFT (field 9): with every CD = 0 the global and basic systems coincide, so GGG (the
+    default) and BGG are the same; offsets in the element system (an ``O``) are not supported."""
+    if c.text(9) not in ("", "GGG", "BGG"):
+        raise c.error(9, "offset option OFFT not supported: only GGG (default) or BGG, offsets "
+                         "in the basic system")
+
+
+def _pin(c: _Card, i: int) -> str:
+    """Pin flag digits (element components 1-6 released at that end); blank or 0: none."""
+    return "" if c.text(i) in ("", "0") else _components(c, i, required=False)
+
+
+def _cbar(r: _Reader, c: _Card) -> None:
+    """CBAR: EID PID GA GB X1/G0 X2 X3 OFFT / PA PB W1A W2A W3A W1B W2B W3B.
+
+    A blank PID, orientation or OFFT takes the BAROR value (applied in ``finish``); a blank PID
+    without BAROR PID is the EID. Offsets are in the basic system (every CD is 0)."""
+    _max_fields(c, 17)
+    eid = _int(c, 2)
+    pid = _int(c, 3, eid)
+    ga, gb = _int(c, 4), _int(c, 5)
+    x, g0 = _orientation(c)
+    _offt(c)
+    pa, pb = _pin(c, 10), _pin(c, 11)
+    wa = tuple(_real(c, i, 0.0) for i in (12, 13, 14))
+    wb = tuple(_real(c, i, 0.0) for i in (15, 16, 17))
     r.claim("element", eid, c, 2)
-    r.deck.cbars[eid] = CBar(eid, pid, ga, gb, x, g0, c.src)
+    r.deck.cbars[eid] = CBar(eid, pid, ga, gb, x, g0, c.src, pa, pb,
+                             wa if any(wa) else None, wb if any(wb) else None)
+    if not c.text(3):
+        r.pid_blank.append(eid)
+    if x is None and g0 is None:
+        r.orient_blank.append((eid, c))
+
+
+def _baror(r: _Reader, c: _Card) -> None:
+    """BAROR: defaults for CBAR fields PID (3), X1 X2 X3 or G0 (6-8), OFFT (9)."""
+    _max_fields(c, 9)
+    for i in (2, 4, 5):
+        _blank(c, i, f"BAROR field {i}")
+    _int(c, 3, 0)
+    _orientation(c)
+    _offt(c)
+    if r.baror is not None:
+        raise c.error(1, f"only one BAROR is allowed (the first is at {r.baror.src})")
+    r.baror = c
 
 
 def _pbar(r: _Reader, c: _Card) -> None:
+    """PBAR: PID MID A I1 I2 J NSM / C1 C2 D1 D2 E1 E2 F1 F2 / K1 K2 I12.
+
+    K1, K2 (fields 18, 19): shear stiffness per unit length K1*A*G (plane 1), K2*A*G (plane 2).
+    Blank is NASTRAN's default, infinite shear stiffness (Euler-Bernoulli); 0.0 is taken the same
+    way (as MYSTRAN does). I12 (field 20): product of inertia, I1 * I2 > I12^2 required (QRG).
+    NASTRAN ignores K1/K2 when I12 is non-zero; here that combination is an error instead.
+    """
     _max_fields(c, 20)
     pid, mid = _int(c, 2), _int(c, 3)
     a, i1, i2, j = (_real(c, i, 0.0) for i in (4, 5, 6, 7))
-    _ignored_reals(c, [8] + list(range(10, 20)))  # NSM, stress recovery C..F, K1 K2
+    _ignored_reals(c, [8] + list(range(10, 18)))  # NSM, stress recovery points C..F
     _blank(c, 9, "field 9")
-    if _real(c, 20, 0.0) != 0.0:
-        raise c.error(20, "product of inertia I12 not supported (must be blank or 0)")
+    k: list[float | None] = []
+    for i in (18, 19):
+        value = _real(c, i, None)
+        if value is not None and value < 0.0:
+            raise c.error(i, "shear area factor must be > 0 (blank or 0.0: no shear flexibility)")
+        if value and a == 0.0:
+            raise c.error(i, "shear area factor needs a non-zero area A (NASTRAN: K1, K2 must be "
+                             "blank if A = 0.0)")
+        k.append(value or None)
+    i12 = _real(c, 20, 0.0)
+    if i12 != 0.0:
+        if not i1 * i2 > i12 * i12:
+            raise c.error(20, "product of inertia I12 needs I1 * I2 > I12^2")
+        if k[0] or k[1]:
+            raise c.error(20, "K1/K2 together with a non-zero I12: NASTRAN ignores K1/K2 then; "
+                              "remove K1/K2 (or I12)")
     r.claim("property", pid, c, 2)
-    r.deck.pbars[pid] = PBar(pid, mid, a, i1, i2, j, c.src)
+    r.deck.pbars[pid] = PBar(pid, mid, a, i1, i2, j, c.src, k[0], k[1], i12)
 
 
 def _mat1(r: _Reader, c: _Card) -> None:
+    """MAT1: MID E G NU (RHO A TREF GE ST SC SS MCSID read, no effect on a static stiffness).
+
+    Completion, as in the MSC Nastran Quick Reference Guide, MAT1 remark 3 (E = 2 (1 + NU) G):
+
+    ======  ======  ======  =========================================
+    E       G       NU      result
+    ======  ======  ======  =========================================
+    given   given   given   used as given (also when inconsistent)
+    given   given   blank   NU = E / (2 G) - 1
+    given   blank   given   G = E / (2 (1 + NU))
+    blank   given   given   E = 2 (1 + NU) G
+    given   blank   blank   G = 0, NU = 0
+    blank   given   blank   E = 0, NU = 0
+    blank   blank   any     error: E or G must be given
+    ======  ======  ======  =========================================
+
+    Ranges (QRG): E >= 0, G >= 0, -1 < NU <= 0.5 for a given NU; E = G = 0 is an error.
+    """
     _max_fields(c, 13)
     mid = _int(c, 2)
     e, g, nu = (_real(c, i, None) for i in (3, 4, 5))
     _ignored_reals(c, range(6, 13))  # RHO A TREF GE ST SC SS
     _int(c, 13, 0, minimum=0)        # MCSID
-    given = sum(v is not None for v in (e, g, nu))
-    if given < 2:
-        raise c.error(3, "MAT1 needs at least two of E, G, NU")
-    if g is None:
-        g = e / (2.0 * (1.0 + nu)) if nu != -1.0 else float("inf")
-    elif nu is None:
-        nu = e / (2.0 * g) - 1.0 if g != 0.0 else float("inf")
-    elif e is None:
-        e = 2.0 * g * (1.0 + nu)
-    if not all(np.isfinite(v) for v in (e, g, nu)):
-        raise c.error(4, "E, G, NU are inconsistent (G = E / (2 (1 + NU)) is not finite)")
+    for i, value, name in ((3, e, "E"), (4, g, "G")):
+        if value is not None and value < 0.0:
+            raise c.error(i, f"{name} must be >= 0")
+    if nu is not None and not -1.0 < nu <= 0.5:
+        raise c.error(5, "Poisson's ratio NU must satisfy -1 < NU <= 0.5")
+    if e is None and g is None:
+        raise c.error(3, "MAT1 needs E or G (blank E and G: no stiffness)")
+    if e is not None and g is not None:
+        if nu is None:
+            if g == 0.0:
+                raise c.error(4, "G = 0 with E given and NU blank: NU = E / (2 G) - 1 is undefined")
+            nu = e / (2.0 * g) - 1.0
+    elif g is None:
+        g = e / (2.0 * (1.0 + nu)) if nu is not None else 0.0
+        nu = 0.0 if nu is None else nu
+    else:
+        e = 2.0 * g * (1.0 + nu) if nu is not None else 0.0
+        nu = 0.0 if nu is None else nu
+    if e == 0.0 and g == 0.0:
+        raise c.error(3, "E and G are both zero: the material has no stiffness")
     r.claim("MAT1", mid, c, 2)
     r.deck.mat1s[mid] = Mat1(mid, e, g, nu, c.src)
 
@@ -483,6 +661,62 @@ def _spc1(r: _Reader, c: _Card) -> None:
     if not items:
         raise c.error(4, "SPC1 needs at least one grid")
     r.spc1_pending.append((sid, comps, items, c.src))
+
+
+def _spc(r: _Reader, c: _Card) -> None:
+    """SPC: SID G1 C1 D1 G2 C2 D2. Only a zero enforced value (D blank or 0.0) is supported: it
+    is the SPC1 constraint of the same set; a non-zero D is an enforced displacement (error)."""
+    _max_fields(c, 8)
+    sid = _int(c, 2)
+    for base in (3, 6):
+        if base == 6 and not any(c.text(i) for i in (6, 7, 8)):
+            break
+        g = _int(c, base)
+        comps = _components(c, base + 1, required=True)
+        if _real(c, base + 2, 0.0) != 0.0:
+            raise c.error(base + 2, "enforced displacement not supported: D must be 0.0 or blank")
+        r.spc1_pending.append((sid, comps, [g], c.src))
+
+
+def _spcadd(r: _Reader, c: _Card) -> None:
+    """SPCADD: SID S1 S2 ... (the SPC/SPC1 sets it combines). All sets of a deck apply anyway
+    (the case control, which could select one, is not read): SPCADD is checked, not needed."""
+    sid = _int(c, 2)
+    sets = [_int(c, i) for i in range(3, len(c.fields) + 1) if c.text(i)]
+    if not sets:
+        raise c.error(3, "SPCADD needs at least one set ID")
+    r.claim("SPCADD", sid, c, 2)
+    r.deck.spcadds[sid] = SpcAdd(sid, tuple(sets), c.src)
+
+
+def _crod(r: _Reader, c: _Card) -> None:
+    """CROD: EID PID (default EID) G1 G2."""
+    _max_fields(c, 5)
+    eid = _int(c, 2)
+    pid = _int(c, 3, eid)
+    ga, gb = _int(c, 4), _int(c, 5)
+    r.claim("element", eid, c, 2)
+    r.deck.rods[eid] = Rod(eid, ga, gb, pid=pid, card="CROD", src=c.src)
+
+
+def _prod(r: _Reader, c: _Card) -> None:
+    """PROD: PID MID A J C NSM (C: stress recovery, NSM: mass; no effect on the stiffness)."""
+    _max_fields(c, 7)
+    pid, mid = _int(c, 2), _int(c, 3)
+    a, j = _real(c, 4), _real(c, 5, 0.0)
+    _ignored_reals(c, (6, 7))
+    r.claim("property", pid, c, 2)
+    r.deck.prods[pid] = Prod(pid, mid, a, j, c.src)
+
+
+def _conrod(r: _Reader, c: _Card) -> None:
+    """CONROD: EID G1 G2 MID A J C NSM (C, NSM: no effect on the stiffness)."""
+    _max_fields(c, 9)
+    eid, ga, gb, mid = _int(c, 2), _int(c, 3), _int(c, 4), _int(c, 5)
+    a, j = _real(c, 6, 0.0), _real(c, 7, 0.0)
+    _ignored_reals(c, (8, 9))
+    r.claim("element", eid, c, 2)
+    r.deck.rods[eid] = Rod(eid, ga, gb, mid=mid, a=a, j=j, card="CONROD", src=c.src)
 
 
 def _rbe2(r: _Reader, c: _Card) -> None:
@@ -556,9 +790,28 @@ def _celas(r: _Reader, c: _Card) -> None:
     r.deck.springs[eid] = Spring(eid, g1, c1, g2, c2, k, pid, c.name, c.src)
 
 
-_PARSERS = {"GRID": _grid, "CBAR": _cbar, "PBAR": _pbar, "MAT1": _mat1, "SPC1": _spc1,
-            "RBE2": _rbe2, "PELAS": _pelas, "CELAS1": _celas, "CELAS2": _celas,
-            "PARAM": lambda r, c: None}
+_PARSERS = {"GRID": _grid, "GRDSET": _grdset, "CBAR": _cbar, "BAROR": _baror, "PBAR": _pbar, "CROD": _crod,
+            "PROD": _prod, "CONROD": _conrod, "MAT1": _mat1, "SPC1": _spc1, "SPC": _spc,
+            "SPCADD": _spcadd, "RBE2": _rbe2, "PELAS": _pelas, "CELAS1": _celas, "CELAS2": _celas}
+SUPPORTED = tuple(sorted(_PARSERS))
+"""Cards read into the :class:`Deck` and modelled by the reference solver."""
+
+NO_EFFECT = frozenset({
+    "PARAM",                                                  # solver parameters
+    "CONM1", "CONM2", "CMASS1", "CMASS2", "CMASS3", "CMASS4", "PMASS",   # mass
+    "EIGR", "EIGRL", "EIGB", "EIGC",                          # eigenvalue extraction
+    "FREQ", "FREQ1", "FREQ2", "TSTEP", "NLPARM",              # dynamic / nonlinear controls
+})
+"""Cards with no effect on a linear static solve: accepted, counted in ``Deck.no_effect``."""
+
+# what to do instead, for unsupported cards often found in decks written by other programs
+_LOADS = "loads are not part of the model: they come from the study's loads.csv"
+_CORD = "coordinate systems are not supported"
+_UNSUPPORTED_HINTS = {
+    **{k: _LOADS for k in ("FORCE", "FORCE1", "FORCE2", "MOMENT", "MOMENT1", "MOMENT2", "LOAD",
+                           "GRAV", "PLOAD", "PLOAD1", "PLOAD2", "PLOAD4", "TEMP", "TEMPD", "SPCD")},
+    **{k: _CORD for k in ("CORD1R", "CORD2R", "CORD1C", "CORD2C", "CORD1S", "CORD2S")},
+}
 
 
 # --------------------------------------------------------------------------------------------
@@ -585,8 +838,11 @@ def read_deck_text(text: str, name: str = "<string>", base_dir: Path | None = No
     reader.stack.append((base / Path(name).name).resolve())
     for card in reader.cards(reader.lines(text, name, base)):
         reader.add(card)
+    reader.check_unsupported()
     deck = reader.finish()
     validate(deck)
+    if deck.no_effect:
+        logging.getLogger(__name__).info("%s: %s", name, deck.summary())
     return deck
 
 
@@ -601,7 +857,8 @@ def validate(deck: Deck) -> None:
     """Cross-reference checks; raise one :class:`ModelError` listing every problem found.
 
     CBAR -> PBAR -> MAT1, CBAR end grids and G0, GA != GB, non-zero length, orientation not
-    parallel to the axis; RBE2, SPC1 and spring grids; CELAS1 -> PELAS.
+    parallel to the axis; PBAR K1/K2 need G > 0; CROD -> PROD -> MAT1, CONROD -> MAT1, rod grids
+    and length; RBE2, SPC/SPC1 and spring grids; CELAS1 -> PELAS; SPCADD -> SPC/SPC1 sets.
     """
     problems: list[str] = []
 
@@ -617,9 +874,30 @@ def validate(deck: Deck) -> None:
     for p in deck.pbars.values():
         if p.mid not in deck.mat1s:
             bad(p, "PBAR", p.pid, f"material MID {p.mid} not found (no MAT1)")
+        elif (p.k1 or p.k2) and deck.mat1s[p.mid].g == 0.0:
+            bad(p, "PBAR", p.pid, f"K1/K2 shear factors need a shear modulus, but MAT1 {p.mid} "
+                                  f"has G = 0")
+    for p in deck.prods.values():
+        if p.mid not in deck.mat1s:
+            bad(p, "PROD", p.pid, f"material MID {p.mid} not found (no MAT1)")
+    for r in deck.rods.values():
+        if r.pid is not None and r.pid not in deck.prods:
+            other = (" (it is a PBAR)" if r.pid in deck.pbars
+                     else " (it is a PELAS)" if r.pid in deck.pelas else "")
+            bad(r, r.card, r.eid, f"property PID {r.pid} not found (no PROD){other}")
+        if r.mid is not None and r.mid not in deck.mat1s:
+            bad(r, r.card, r.eid, f"material MID {r.mid} not found (no MAT1)")
+        need_grids(r, r.card, r.eid, [r.ga, r.gb], "grid")
+        if r.ga == r.gb:
+            bad(r, r.card, r.eid, f"G1 and G2 are the same grid {r.ga}")
+        elif r.ga in deck.grids and r.gb in deck.grids:
+            xa, xb = np.array(deck.grids[r.ga].xyz), np.array(deck.grids[r.gb].xyz)
+            if np.linalg.norm(xb - xa) <= _ZERO_LENGTH * max(np.abs(xa).max(), np.abs(xb).max()):
+                bad(r, r.card, r.eid, f"zero length: grids {r.ga} and {r.gb} coincide")
     for b in deck.cbars.values():
         if b.pid not in deck.pbars:
-            other = " (it is a PELAS)" if b.pid in deck.pelas else ""
+            other = (" (it is a PELAS)" if b.pid in deck.pelas
+                     else " (it is a PROD)" if b.pid in deck.prods else "")
             bad(b, "CBAR", b.eid, f"property PID {b.pid} not found (no PBAR){other}")
         need_grids(b, "CBAR", b.eid, [b.ga, b.gb] + ([b.g0] if b.g0 is not None else []), "grid")
         if b.ga == b.gb:
@@ -628,9 +906,12 @@ def validate(deck: Deck) -> None:
         if b.ga not in deck.grids or b.gb not in deck.grids:
             continue
         xa, xb = np.array(deck.grids[b.ga].xyz), np.array(deck.grids[b.gb].xyz)
-        axis = xb - xa
+        axis = xb - xa                    # v is measured from grid GA, the axis between bar ends
+        if b.wa is not None or b.wb is not None:
+            axis = axis + np.array(b.wb or (0.0, 0.0, 0.0)) - np.array(b.wa or (0.0, 0.0, 0.0))
         if np.linalg.norm(axis) <= _ZERO_LENGTH * max(np.abs(xa).max(), np.abs(xb).max()):
-            bad(b, "CBAR", b.eid, f"zero length: grids {b.ga} and {b.gb} coincide")
+            what = "the bar ends (offsets included)" if b.wa or b.wb else f"grids {b.ga} and {b.gb}"
+            bad(b, "CBAR", b.eid, f"zero length: {what} coincide")
             continue
         if b.g0 is not None:
             if b.g0 in (b.ga, b.gb):
@@ -653,6 +934,14 @@ def validate(deck: Deck) -> None:
             bad(e, "RBE2", e.eid, f"GN {e.gn} is also a dependent grid")
     for s in deck.spc1s:
         need_grids(s, "SPC1", s.sid, s.grids, "grid(s)")
+    spc_sets = {s.sid for s in deck.spc1s}
+    for a in deck.spcadds.values():
+        if a.sid in spc_sets:
+            bad(a, "SPCADD", a.sid, f"SID {a.sid} is also the ID of an SPC/SPC1 set")
+        missing = [k for k in a.sets if k not in spc_sets]
+        if missing:
+            bad(a, "SPCADD", a.sid, f"set(s) {', '.join(map(str, missing[:10]))} not found "
+                                    f"(no SPC or SPC1 with that SID)")
     for s in deck.springs.values():
         need_grids(s, s.card, s.eid, [g for g in (s.g1, s.g2) if g != 0], "grid(s)")
         if s.card == "CELAS1" and s.pid not in deck.pelas:

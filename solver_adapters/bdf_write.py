@@ -11,11 +11,12 @@ import math
 from decimal import ROUND_DOWN, ROUND_HALF_EVEN, Context, Decimal
 from typing import Iterable, Sequence
 
-from solver_adapters.deck import CBar, Deck, Grid, Mat1, PBar, Pelas, Rbe2, Spc1, Spring
+from solver_adapters.deck import CBar, Deck, Grid, Mat1, PBar, Pelas, Prod, Rbe2, Rod, Spc1, SpcAdd, Spring
 
 __all__ = ["print_int", "print_float_8", "print_float_16", "print_float_free", "print_field",
            "format_card", "write_grid", "write_cbar", "write_pbar", "write_mat1", "write_spc1",
-           "write_rbe2", "write_pelas", "write_celas1", "write_celas2", "write_spring", "write_deck"]
+           "write_rbe2", "write_pelas", "write_celas1", "write_celas2", "write_spring", "write_spcadd",
+           "write_prod", "write_rod", "write_deck"]
 
 Field = int | float | str | None
 _FORMATS = ("small", "large", "free")
@@ -164,14 +165,22 @@ def write_grid(g: Grid, fmt: str = "small") -> str:
 
 
 def write_cbar(b: CBar, fmt: str = "small") -> str:
-    """CBAR: EID, PID, GA, GB, X1 X2 X3 (orientation vector) or G0 (then X2 X3 blank)."""
+    """CBAR: EID, PID, GA, GB, X1 X2 X3 (orientation vector) or G0 (then X2 X3 blank); then, when
+    set, OFFT (blank: GGG), PA, PB, WA, WB (offsets in the basic system)."""
     orient: list[Field] = [b.g0, None, None] if b.g0 is not None else list(b.x)
-    return format_card("CBAR", [b.eid, b.pid, b.ga, b.gb, *orient], fmt)
+    fields: list[Field] = [b.eid, b.pid, b.ga, b.gb, *orient]
+    if b.pa or b.pb or b.wa is not None or b.wb is not None:
+        fields += [None, b.pa or None, b.pb or None, *(b.wa or (None,) * 3), *(b.wb or (None,) * 3)]
+    return format_card("CBAR", fields, fmt)
 
 
 def write_pbar(p: PBar, fmt: str = "small") -> str:
-    """PBAR: PID, MID, A, I1, I2, J."""
-    return format_card("PBAR", [p.pid, p.mid, p.a, p.i1, p.i2, p.j], fmt)
+    """PBAR: PID, MID, A, I1, I2, J; K1, K2, I12 (fields 18-20) when set (K blank: no shear
+    flexibility)."""
+    fields: list[Field] = [p.pid, p.mid, p.a, p.i1, p.i2, p.j]
+    if p.k1 is not None or p.k2 is not None or p.i12:
+        fields += [None] * 10 + [p.k1, p.k2, p.i12 or None]      # NSM, field 9, C1..F2 blank
+    return format_card("PBAR", fields, fmt)
 
 
 def write_mat1(m: Mat1, fmt: str = "small") -> str:
@@ -182,6 +191,23 @@ def write_mat1(m: Mat1, fmt: str = "small") -> str:
 def write_spc1(s: Spc1, fmt: str = "small") -> str:
     """SPC1: SID, C (component digits), G1, G2, ... (every grid listed, no THRU)."""
     return format_card("SPC1", [s.sid, s.components, *s.grids], fmt)
+
+
+def write_spcadd(a: SpcAdd, fmt: str = "small") -> str:
+    """SPCADD: SID, S1, S2, ..."""
+    return format_card("SPCADD", [a.sid, *a.sets], fmt)
+
+
+def write_prod(p: Prod, fmt: str = "small") -> str:
+    """PROD: PID, MID, A, J."""
+    return format_card("PROD", [p.pid, p.mid, p.a, p.j], fmt)
+
+
+def write_rod(r: Rod, fmt: str = "small") -> str:
+    """CROD: EID, PID, G1, G2; or CONROD: EID, G1, G2, MID, A, J (as the rod was read)."""
+    if r.pid is not None:
+        return format_card("CROD", [r.eid, r.pid, r.ga, r.gb], fmt)
+    return format_card("CONROD", [r.eid, r.ga, r.gb, r.mid, r.a, r.j], fmt)
 
 
 def write_rbe2(e: Rbe2, fmt: str = "small") -> str:
@@ -235,8 +261,11 @@ def write_deck(deck: Deck, fmt: str = "small") -> str:
     out += [write_grid(deck.grids[i], fmt) for i in sorted(deck.grids)]
     out += [write_cbar(deck.cbars[i], fmt) for i in sorted(deck.cbars)]
     out += [write_pbar(deck.pbars[i], fmt) for i in sorted(deck.pbars)]
+    out += [write_rod(deck.rods[i], fmt) for i in sorted(deck.rods)]
+    out += [write_prod(deck.prods[i], fmt) for i in sorted(deck.prods)]
     out += [write_mat1(deck.mat1s[i], fmt) for i in sorted(deck.mat1s)]
     out += [write_spc1(s, fmt) for s in deck.spc1s]
+    out += [write_spcadd(deck.spcadds[i], fmt) for i in sorted(deck.spcadds)]
     out += [write_rbe2(deck.rbe2s[i], fmt) for i in sorted(deck.rbe2s)]
     out += [write_pelas(a, b, fmt) for a, b in _pairs([deck.pelas[i] for i in sorted(deck.pelas)])]
     out += [write_spring(deck.springs[i], fmt) for i in sorted(deck.springs)]

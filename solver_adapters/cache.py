@@ -18,7 +18,11 @@ sha256 over everything that decides the answer:
   explicit zeros dropped, indices sorted: equal matrices give equal bytes);
 * the report labels, in order;
 * the adapter: class, ``name``, ``version`` and the options that change results (``command``,
-  ``backend``, ``misbehave``, the dialect's name and scalar settings).
+  ``backend``, ``misbehave``, the dialect's name and scalar settings);
+* the solver program itself, when the adapter has an ``identity()`` method (computed once per
+  adapter): for an external code (:meth:`solver_adapters.subprocess.CommandAdapter.identity`)
+  the sha256 of its executable and of an interpreter's script, and its version when the adapter
+  or dialect can tell. A rebuilt or replaced solver misses the cache.
 
 An adapter that is neither deck-file based nor one of ours can define ``cache_token()``
 (a string that changes whenever its answers may change); it replaces the deck fingerprint.
@@ -26,7 +30,8 @@ An adapter that is neither deck-file based nor one of ours can define ``cache_to
 Entries
 -------
 ``CACHE_DIR/<key[:2]>/<key>.bbc``: a magic line, one JSON header line (key, shape, dtype, report
-labels, cases, sha256 and length of the value bytes, adapter, time) and the raw float64 values.
+labels, cases, sha256 and length of the value bytes, adapter, time), one line
+``hmac-sha256 <hex>`` and the raw float64 values.
 An entry is written to a temporary file in the same directory, flushed, ``fsync``-ed and renamed
 over the final name with ``os.replace`` (atomic on POSIX), so a reader sees either the whole old
 entry, the whole new one or none, and two processes writing the same key leave one valid entry.
@@ -35,14 +40,32 @@ anything else (a truncated file, a flipped byte) counts as ``corrupt``, is ignor
 rewritten by the recomputed result. A failed run raises before anything is written: failures are
 never cached. The cache never makes a solve fail: an unwritable directory is counted
 (``store_errors``) and warned about once.
+
+Authentication
+--------------
+A checksum only catches accidents: whoever can write the cache folder (it travels with the
+study) can plant an entry with a matching sha256 and change results silently. So every entry
+carries an HMAC-SHA256, over the magic line, the header line and the values, keyed with a
+per-user secret kept outside any study: ``cache.key`` in the user's configuration folder
+(:func:`solver_adapters.userconfig.config_dir`: ``$BLACKBOX_CONFIG_DIR``, else
+``$XDG_CONFIG_HOME/blackbox``, else ``~/.config/blackbox``), 32 random bytes in hex, created
+with mode 0600 on first use (atomically: written to a private temporary file, then linked to
+its name, so concurrent first uses agree on one key). A key file that another user owns or that
+group or others may read is refused (:class:`~solver_adapters.userconfig.InsecureFileError`,
+saying how to fix it). An entry whose MAC does not verify - planted, altered, or written by
+another user - is never used: it counts as ``corrupt`` and ``unauthenticated``, a
+``RuntimeWarning`` names it, and the result is recomputed and stored under this user's key. A
+cache folder shared between users therefore works as a private cache for each.
 """
 
 from __future__ import annotations
 
 import hashlib
+import hmac
 import json
 import os
 import re
+import secrets
 import tempfile
 import threading
 import time
@@ -53,10 +76,12 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from solver_adapters.errors import CorruptEntry, UnauthenticEntry
 from solver_adapters.protocol import (Displacements, DofLabel, LoadMatrix, ScalarSpring, SolverAdapter,
                                       SolverStats)
+from solver_adapters.userconfig import InsecureFileError, config_dir, read_private
 
-MAGIC = b"BLACKBOX-SOLVER-CACHE 1\n"
+MAGIC = b"BLACKBOX-SOLVER-CACHE 2\n"
 SUFFIX = ".bbc"
 CACHE_DIRNAME = ".blackbox_cache"
 STALE_TMP_S = 3600.0
@@ -65,10 +90,8 @@ STALE_TMP_S = 3600.0
 _INCLUDE = re.compile(r"^\s*INCLUDE\s*(?:'([^']*)'|\"([^\"]*)\"|([^\s'\"$]+))", re.IGNORECASE)
 _RESULT_OPTIONS = ("version", "command", "backend", "misbehave")
 _COUNT_LOCK = threading.Lock()   # counters are shared by a CachedAdapter and its with_springs copies
-
-
-class CorruptEntry(ValueError):
-    """A cache file that is not a complete, valid entry for the requested key."""
+KEY_FILE = "cache.key"
+MAC_PREFIX = b"hmac-sha256 "
 
 
 @dataclass
@@ -82,9 +105,83 @@ class CacheStats:
     store_errors: int = 0
     bypassed: int = 0
     not_stored: int = 0
+    unauthenticated: int = 0
 
     def snapshot(self) -> dict[str, int]:
         return dict(vars(self))
+
+
+# --------------------------------------------------------------------------------------------
+# the user's secret (authenticates entries)
+# --------------------------------------------------------------------------------------------
+def cache_key_path(folder: str | os.PathLike | None = None) -> Path:
+    """Where the secret lives: ``cache.key`` in ``folder`` (default: the user's configuration
+    folder, :func:`solver_adapters.userconfig.config_dir`)."""
+    return Path(folder if folder is not None else config_dir()) / KEY_FILE
+
+
+def _create_key(path: Path) -> None:
+    """Write a new random key at ``path`` unless one exists: into a private (0600) temporary
+    file first, then linked to the final name, which fails if another process got there first
+    (its key is then used)."""
+    path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+    tmp = path.with_name(f".{KEY_FILE}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), 0o600)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(secrets.token_hex(32).encode() + b"\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        try:
+            os.link(tmp, path)
+        except FileExistsError:
+            pass
+        except OSError:  # a file system without hard links: exclusive create of the name itself
+            try:
+                fd2 = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), 0o600)
+            except FileExistsError:
+                return
+            with os.fdopen(fd2, "wb") as fh:
+                fh.write(tmp.read_bytes())
+    finally:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+
+
+def load_cache_key(folder: str | os.PathLike | None = None) -> bytes:
+    """This user's secret for authenticating cache entries, created on first use (see the module
+    docstring). :class:`~solver_adapters.userconfig.InsecureFileError` for a key file others
+    could read or that another user owns; ``ValueError`` for one that is not a key."""
+    path = cache_key_path(folder)
+    for attempt in range(50):
+        try:
+            data = read_private(path, forbid=0o077, what="blackbox cache key")
+        except FileNotFoundError:
+            _create_key(path)
+            continue
+        text = data.decode("ascii", errors="replace").strip()
+        if not text and attempt < 49:  # the no-hard-link fallback is still writing it
+            time.sleep(0.01)
+            continue
+        try:
+            key = bytes.fromhex(text)
+        except ValueError:
+            key = b""
+        if len(key) < 32:
+            raise ValueError(f"{path} is not a blackbox cache key (64 hex digits); remove it "
+                             f"(rm '{path}') and a new one is made on the next run")
+        return key
+    raise OSError(f"cannot create the blackbox cache key {path}")
+
+
+def _mac(secret: bytes, header_line: bytes, raw: bytes) -> bytes:
+    m = hmac.new(secret, MAGIC, hashlib.sha256)
+    m.update(header_line)
+    m.update(b"\n")
+    m.update(raw)
+    return m.hexdigest().encode()
 
 
 # --------------------------------------------------------------------------------------------
@@ -166,6 +263,9 @@ def adapter_identity(adapter: Any) -> dict[str, Any]:
         ident["dialect"] = {"name": getattr(dialect, "name", type(dialect).__name__),
                             "class": f"{type(dialect).__module__}.{type(dialect).__qualname__}",
                             **(_scalar_settings(dialect) if hasattr(dialect, "__dict__") else {})}
+    solver = getattr(adapter, "identity", None)
+    if callable(solver):
+        ident["solver"] = solver()
     return ident
 
 
@@ -214,8 +314,11 @@ def entry_path(cache_dir: str | os.PathLike, key: str) -> Path:
     return Path(cache_dir) / key[:2] / f"{key}{SUFFIX}"
 
 
-def write_entry(path: Path, key: str, result: Displacements, extra: dict[str, Any] | None = None) -> None:
-    """Write ``result`` as the entry ``path`` atomically (temp file, fsync, ``os.replace``)."""
+def write_entry(path: Path, key: str, result: Displacements, extra: dict[str, Any] | None = None, *,
+                secret: bytes | None = None) -> None:
+    """Write ``result`` as the entry ``path`` atomically (temp file, fsync, ``os.replace``),
+    authenticated with ``secret`` (default: this user's key, :func:`load_cache_key`)."""
+    secret = load_cache_key() if secret is None else secret
     values = np.ascontiguousarray(result.values, dtype="<f8")
     raw = values.tobytes()
     header = {"key": key, "shape": list(values.shape), "dtype": "<f8", "nbytes": len(raw),
@@ -227,8 +330,10 @@ def write_entry(path: Path, key: str, result: Displacements, extra: dict[str, An
     fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".part", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
+            line = json.dumps(header).encode()
             fh.write(MAGIC)
-            fh.write(json.dumps(header).encode() + b"\n")
+            fh.write(line + b"\n")
+            fh.write(MAC_PREFIX + _mac(secret, line, raw) + b"\n")
             fh.write(raw)
             fh.flush()
             os.fsync(fh.fileno())
@@ -249,20 +354,34 @@ def write_entry(path: Path, key: str, result: Displacements, extra: dict[str, An
         pass
 
 
-def read_entry(path: Path, key: str, report: Sequence[DofLabel], cases: Sequence[str]) -> Displacements:
+def read_entry(path: Path, key: str, report: Sequence[DofLabel], cases: Sequence[str], *,
+               secret: bytes | None = None) -> Displacements:
     """The stored result for ``key``; :class:`CorruptEntry` unless the file is a complete entry
-    for exactly this key, report and cases with matching checksum; ``FileNotFoundError`` if absent."""
+    with matching checksum, :class:`UnauthenticEntry` unless its HMAC verifies with ``secret``
+    (default: this user's key), :class:`CorruptEntry` unless it is for exactly this key, report
+    and cases; ``FileNotFoundError`` if absent."""
+    secret = load_cache_key() if secret is None else secret
     data = path.read_bytes()
     if not data.startswith(MAGIC):
         raise CorruptEntry("bad magic")
     end = data.find(b"\n", len(MAGIC))
     if end < 0:
         raise CorruptEntry("no header line")
+    line = data[len(MAGIC):end]
     try:
-        header = json.loads(data[len(MAGIC):end].decode())
+        header = json.loads(line.decode())
     except (UnicodeDecodeError, ValueError) as exc:
         raise CorruptEntry(f"unreadable header: {exc}") from None
-    raw = data[end + 1:]
+    mac_end = data.find(b"\n", end + 1)
+    mac = data[end + 1:mac_end] if mac_end >= 0 else b""
+    if not mac.startswith(MAC_PREFIX):
+        raise CorruptEntry("no authentication line")
+    raw = data[mac_end + 1:]
+    if not isinstance(header, dict) or hashlib.sha256(raw).hexdigest() != header.get("sha256"):
+        raise CorruptEntry("checksum mismatch")
+    if not hmac.compare_digest(mac[len(MAC_PREFIX):], _mac(secret, line, raw)):
+        raise UnauthenticEntry("authentication failed: the entry was not written with this user's "
+                               "cache key (planted, altered or someone else's)")
     report = [(int(g), int(c)) for g, c in report]
     shape = [len(report), len(cases)]
     try:
@@ -273,8 +392,6 @@ def read_entry(path: Path, key: str, report: Sequence[DofLabel], cases: Sequence
         ok = False
     if not ok:
         raise CorruptEntry("header does not match the request")
-    if hashlib.sha256(raw).hexdigest() != header.get("sha256"):
-        raise CorruptEntry("checksum mismatch")
     values = np.frombuffer(raw, dtype="<f8").reshape(shape).astype(float)
     return Displacements(tuple(report), values, tuple(cases))
 
@@ -298,11 +415,19 @@ class CachedAdapter:
 
     ``stats`` is the inner adapter's: a cache hit makes no run and changes none of its counters.
     The cache's own counters are in ``cache_stats`` (:class:`CacheStats`), shared with every
-    adapter derived through :meth:`with_springs`. Other attributes are read from ``inner``.
+    adapter derived through :meth:`with_springs`. Other attributes are read from ``inner``;
+    ``progress`` is also set on ``inner`` (the CLI's heartbeat for external solvers).
+
+    ``secret`` authenticates the entries (default: this user's key, :func:`load_cache_key`,
+    read once here). A key file others could read raises
+    :class:`~solver_adapters.userconfig.InsecureFileError`; when the key cannot be made at all
+    (no writable configuration folder) the cache is off, with a warning, and every solve
+    goes to ``inner`` (counted as ``bypassed``).
     """
 
     def __init__(self, inner: SolverAdapter, cache_dir: str | os.PathLike, *,
-                 springs: Sequence[ScalarSpring] = (), cache_stats: CacheStats | None = None):
+                 springs: Sequence[ScalarSpring] = (), cache_stats: CacheStats | None = None,
+                 secret: bytes | None = None):
         self.inner = inner
         self.cache_dir = Path(cache_dir)
         self.name = inner.name
@@ -311,6 +436,15 @@ class CachedAdapter:
         self._identity = adapter_identity(inner)
         self._deck0 = deck_fingerprint(inner)
         self._warned = False
+        if secret is None:
+            try:
+                secret = load_cache_key()
+            except InsecureFileError:
+                raise
+            except OSError as exc:
+                warnings.warn(f"solver cache: cannot create the cache key {cache_key_path()}: {exc}; "
+                              f"the cache is off for this run", RuntimeWarning, stacklevel=2)
+        self._secret = secret
 
     # ---- protocol --------------------------------------------------------------------------
     @property
@@ -325,19 +459,33 @@ class CachedAdapter:
 
     def with_springs(self, springs: Sequence[ScalarSpring]) -> "CachedAdapter":
         return CachedAdapter(self.inner.with_springs(springs), self.cache_dir,
-                             springs=self._springs + tuple(springs), cache_stats=self.cache_stats)
+                             springs=self._springs + tuple(springs), cache_stats=self.cache_stats,
+                             secret=self._secret if self._secret is not None else b"")
+
+    @property
+    def progress(self) -> Any:
+        return getattr(self.inner, "progress", None)
+
+    @progress.setter
+    def progress(self, callback: Any) -> None:
+        self.inner.progress = callback
 
     def solve(self, loads: LoadMatrix, report: Sequence[DofLabel]) -> Displacements:
         report = tuple((int(g), int(c)) for g, c in report)
         deck = deck_fingerprint(self.inner)
-        if deck != self._deck0:
+        if deck != self._deck0 or not self._secret:
             self._count("bypassed")
             return self.inner.solve(loads, report)
         key = self.key(loads, report, deck)
         path = entry_path(self.cache_dir, key)
         try:
-            hit = read_entry(path, key, report, loads.cases)
+            hit = read_entry(path, key, report, loads.cases, secret=self._secret)
         except FileNotFoundError:
+            hit = None
+        except UnauthenticEntry as exc:
+            self._count("corrupt")
+            self._count("unauthenticated")
+            warnings.warn(f"solver cache: ignored {path}: {exc}; recomputing", RuntimeWarning, stacklevel=2)
             hit = None
         except (CorruptEntry, OSError):
             self._count("corrupt")
@@ -366,7 +514,7 @@ class CachedAdapter:
             return
         try:
             write_entry(path, key, Displacements(report, values, loads.cases),
-                        {"adapter": self.name, "inner_runs": self.inner.stats.runs})
+                        {"adapter": self.name, "inner_runs": self.inner.stats.runs}, secret=self._secret)
         except OSError as exc:
             self._count("store_errors")
             if not self._warned:
@@ -381,7 +529,7 @@ class CachedAdapter:
             setattr(self.cache_stats, what, getattr(self.cache_stats, what) + 1)
 
     def __getattr__(self, attr: str) -> Any:
-        if attr.startswith("_") or attr in ("inner", "cache_dir", "cache_stats", "name"):
+        if attr.startswith("_") or attr in ("inner", "cache_dir", "cache_stats", "name", "progress"):
             raise AttributeError(attr)
         return getattr(self.inner, attr)
 

@@ -52,7 +52,6 @@ pytest is imported only when pytest runs the base class.
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import shutil
@@ -66,6 +65,7 @@ import numpy as np
 import psutil
 import scipy.sparse as sp
 
+from solver_adapters.errors import CheckFailure
 from solver_adapters.protocol import (DofLabel, LoadMatrix, ScalarSpring, SolverAdapter, SolverError,
                                       SolverTimeoutError, UnknownDofError)
 
@@ -154,10 +154,6 @@ class ConformanceReport:
         return out / "conformance.json", out / "conformance.md"
 
 
-class CheckFailure(AssertionError):
-    """A conformance check saw the adapter break the protocol (message: what and where)."""
-
-
 @dataclass(frozen=True)
 class Misbehaviour:
     """How to make an adapter fail on purpose, for the ``misbehaviour[S]`` checks.
@@ -187,7 +183,8 @@ def builtin_misbehaviour(adapter_name: str, timeout_s: float = 2.0) -> Misbehavi
     from solver_adapters.legacy import FRAMESOLVE, MISBEHAVIOURS, LegacyAdapter
 
     def make(deck: Path, switch: str, root: Path) -> SolverAdapter:
-        return LegacyAdapter(deck, timeout_s=timeout_s, misbehave=switch, workdir_root=root)
+        # the misbehave flag changes the command line of our own program: consent is implied
+        return LegacyAdapter(deck, timeout_s=timeout_s, misbehave=switch, workdir_root=root, trusted=True)
 
     return Misbehaviour(make, tuple(MISBEHAVIOURS), str(FRAMESOLVE), timeout_s=timeout_s)
 
@@ -209,22 +206,10 @@ def adapter_rtol(adapter: Any, override: float | None = None) -> float:
 # decks and loads
 # --------------------------------------------------------------------------------------------
 def read_loads_csv(path: str | Path) -> LoadMatrix:
-    """``case,grid,component,value`` (CONTRACT.md) as a :class:`LoadMatrix`, cases in order of
-    first appearance (the study reader in ``blackbox.study`` checks more; this one only reads)."""
-    entries: dict[tuple[str, DofLabel], float] = {}
-    with Path(path).open(newline="") as fh:
-        for row in csv.DictReader(fh):
-            if not row.get("case") or row["case"].lstrip().startswith("#"):
-                continue
-            key = (row["case"].strip(), (int(row["grid"]), int(row["component"])))
-            entries[key] = entries.get(key, 0.0) + float(row["value"])
-    cases = list(dict.fromkeys(c for c, _ in entries))
-    dofs = list(dict.fromkeys(d for _, d in entries))
-    ci, di = {c: j for j, c in enumerate(cases)}, {d: i for i, d in enumerate(dofs)}
-    rows = [di[d] for _, d in entries]
-    cols = [ci[c] for c, _ in entries]
-    vals = sp.csc_matrix((list(entries.values()), (rows, cols)), shape=(len(dofs), len(cases)))
-    return LoadMatrix(tuple(dofs), vals, tuple(cases))
+    """``loads.csv`` beside a fixture deck, through the project's one reader of that file."""
+    from solver_adapters.tables import read_loads
+
+    return read_loads(path)
 
 
 def fixture_decks() -> dict[str, Path]:
@@ -233,7 +218,7 @@ def fixture_decks() -> dict[str, Path]:
 
 
 def write_generated_deck(folder: str | Path) -> tuple[Path, LoadMatrix]:
-    """A small two-storey 3D frame written to ``folder``, exercising the contract's card subset:
+    """A small two-storey 3D frame written to ``folder``, exercising the card subset of docs/study-format.md:
     free-field main file with an ``INCLUDE`` of a large-field property file, GRID PS, two SPC1
     sets, CBAR with an orientation vector and with G0, an RBE2 flexible joint of 4 branches, a
     CELAS2 between branch grids and a CELAS1/PELAS pair. Returns the deck and 4 load cases.

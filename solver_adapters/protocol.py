@@ -13,8 +13,9 @@ Batch
     Many load cases solved in one call: one factorization, many right-hand sides. The
     black-box condensation of Chapter 3 relies on this: ``n_B + L`` right-hand sides in one run.
 
-Errors are typed and all derive from :class:`SolverError` (see ``STYLE.md``: translate foreign
-failure codes into ours).
+Errors are typed and all derive from :class:`SolverError` (defined in
+:mod:`solver_adapters.errors`, re-exported here): a solver's crash, garbage output, timeout or
+singular stiffness is always a :class:`SolverError` subclass, whatever adapter saw it.
 """
 
 from __future__ import annotations
@@ -25,75 +26,17 @@ from typing import Protocol, Sequence, runtime_checkable
 import numpy as np
 import scipy.sparse as sp
 
+# every error class lives in solver_adapters.errors; re-exported here because this is the one
+# module of solver_adapters that blackbox's method layers may import
+from solver_adapters.errors import (COMPONENT_NAMES, AdapterNotFound, CheckFailure,  # noqa: F401
+                                    ConsentError, CorruptEntry, DeckFormatError, FactorizationError,
+                                    InsecureFileError, ModelError, OptionError, PluginConflictError,
+                                    PluginLoadError, RegistryError, SolverError, SolverRunError,
+                                    SolverTimeoutError, TableFormatError, UnauthenticEntry,
+                                    UnknownDofError, UnknownPluginError, UnstableStructureError)
+
 DofLabel = tuple[int, int]
 """``(grid id, component 1..6)``."""
-
-COMPONENT_NAMES = {1: "T1", 2: "T2", 3: "T3", 4: "R1", 5: "R2", 6: "R3"}
-
-
-# --------------------------------------------------------------------------------------------
-# errors
-# --------------------------------------------------------------------------------------------
-class SolverError(Exception):
-    """Base class of every error raised by a solver adapter or while reading its input."""
-
-
-class DeckFormatError(SolverError):
-    """A bulk-data deck that cannot be read: says file, line, card and field."""
-
-    def __init__(self, message: str, *, file: str | None = None, line: int | None = None,
-                 card: str | None = None, field: int | str | None = None, value: str | None = None):
-        self.file, self.line, self.card, self.field, self.value = file, line, card, field, value
-        where = []
-        if file is not None:
-            where.append(f"{file}" + (f":{line}" if line is not None else ""))
-        if card is not None:
-            where.append(f"card {card}")
-        if field is not None:
-            where.append(f"field {field}")
-        if value is not None:
-            where.append(f"value {value!r}")
-        prefix = ", ".join(where)
-        super().__init__(f"{prefix}: {message}" if prefix else message)
-
-
-class ModelError(SolverError):
-    """A deck that reads fine but describes an inconsistent model (missing IDs, conflicts)."""
-
-
-class UnstableStructureError(SolverError):
-    """The stiffness is singular: a mechanism or an unconstrained DOF. ``dofs`` names them."""
-
-    def __init__(self, message: str, dofs: Sequence[DofLabel] = ()):
-        self.dofs = tuple(dofs)
-        shown = ", ".join(f"{g}:{COMPONENT_NAMES.get(c, c)}" for g, c in self.dofs[:12])
-        more = f" (+{len(self.dofs) - 12} more)" if len(self.dofs) > 12 else ""
-        super().__init__(f"{message}" + (f" [grid:component {shown}{more}]" if shown else ""))
-
-
-class UnknownDofError(SolverError):
-    """A load or a requested output names a DOF label the adapter does not have."""
-
-    def __init__(self, dofs: Sequence[DofLabel], what: str = "DOF"):
-        self.dofs = tuple(dofs)
-        shown = ", ".join(f"({g},{c})" for g, c in self.dofs[:10])
-        super().__init__(f"unknown {what} label(s) {shown}" + (" ..." if len(self.dofs) > 10 else ""))
-
-
-class SolverRunError(SolverError):
-    """An external solver run failed. Carries the exit code and the tail of its log."""
-
-    def __init__(self, message: str, *, returncode: int | None = None, log_tail: str = "",
-                 workdir: str | None = None):
-        self.returncode, self.log_tail, self.workdir = returncode, log_tail, workdir
-        extra = f" (exit code {returncode})" if returncode is not None else ""
-        kept = f"\nrun directory kept for inspection: {workdir}" if workdir else ""
-        tail = f"\n--- solver log tail ---\n{log_tail}" if log_tail else ""
-        super().__init__(f"{message}{extra}{kept}{tail}")
-
-
-class SolverTimeoutError(SolverRunError):
-    """An external solver run exceeded its wall-clock limit and was killed (whole process tree)."""
 
 
 # --------------------------------------------------------------------------------------------

@@ -3,15 +3,19 @@
 Three layers, each usable alone:
 
 * :func:`run_solver` starts a command in a directory, polls the whole process tree (wall clock,
-  resident memory summed over the tree every ~50 ms), kills the *tree* on timeout and returns a
-  :class:`RunRecord`. It never leaves a process behind.
+  resident memory summed over the tree every ~50 ms, an optional heartbeat callback), kills the
+  *tree* on timeout and returns a :class:`RunRecord`. It never leaves a process behind, not even
+  when the calling process is killed (a guard process, :mod:`solver_adapters._guard`);
+  :func:`install_termination_handlers` makes SIGTERM/SIGHUP end a run the way Ctrl-C does.
 * A :class:`Dialect` knows one input/output format: it writes the run deck (the user's bulk data
   plus loads, output requests and extra springs) and reads the displacements back. The NASTRAN
   dialect lives in :mod:`solver_adapters.nastran`; users add their own through the entry-point
   group ``blackbox.dialects`` (:func:`get_dialect`).
 * :class:`CommandAdapter` implements :class:`~solver_adapters.protocol.SolverAdapter` for any
   (command, dialect) pair: one run per ``solve`` call (chunked only above the dialect's
-  ``max_cases_per_run``), a fresh directory per run, so runs may go in parallel.
+  ``max_cases_per_run``), a fresh directory per run, so runs may go in parallel. It runs a
+  command only with the user's consent (:func:`check_command_consent`), removes failed runs'
+  folders unless asked to keep them and cleans the stale folders of killed runs.
 
 A legacy code's exit status means little (MYSTRAN exits 0 after fatal errors, ``MYSTRAN.md``
 "Running it"), so deciding success is the dialect's job; the runner only reports what happened.
@@ -20,23 +24,30 @@ A legacy code's exit status means little (MYSTRAN exits 0 after fatal errors, ``
 from __future__ import annotations
 
 import copy
+import hashlib
+import json
 import os
+import select
 import shutil
 import signal
+import stat
 import subprocess
+import sys
 import tempfile
 import threading
 import time
+import warnings
 from dataclasses import dataclass
-from importlib.metadata import entry_points
 from pathlib import Path
-from typing import Any, Protocol, Sequence, runtime_checkable
+from typing import Any, Callable, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 import psutil
 
+from solver_adapters.errors import ConsentError
 from solver_adapters.protocol import (Displacements, DofLabel, LoadMatrix, ScalarSpring, SolverError,
                                       SolverRunError, SolverStats, SolverTimeoutError, UnknownDofError)
+from solver_adapters.userconfig import config_file, read_config
 
 POLL_S = 0.05
 """Process-tree polling interval (memory, timeout); the first polls come sooner (from 2 ms,
@@ -144,18 +155,133 @@ def kill_tree(procs: Sequence[psutil.Process], grace_s: float = 2.0) -> None:
     psutil.wait_procs(alive, timeout=grace_s)
 
 
+GUARD = Path(__file__).resolve().with_name("_guard.py")
+"""The guard process each solver runs under (see :mod:`solver_adapters._guard`)."""
+
+HEARTBEAT_S = 5.0
+"""Default interval of the ``progress`` callback of :func:`run_solver` (seconds)."""
+
+STATUS_WAIT_S = 30.0
+"""How long :func:`run_solver` waits for the guard to report that the solver started."""
+
+ProgressCallback = Callable[[float, str], None]
+"""``progress(elapsed_s, last_line)``: called during a run with the seconds since its start and
+the last non-blank line the solver wrote (stdout, else stderr; '' before any output)."""
+
+
+def last_line(path: Path, max_bytes: int = 4096) -> str:
+    """The last non-blank line of a text file, reading only its last ``max_bytes`` ('' if none)."""
+    try:
+        with open(path, "rb") as fh:
+            fh.seek(0, os.SEEK_END)
+            size = fh.tell()
+            fh.seek(max(0, size - max_bytes))
+            data = fh.read()
+    except OSError:
+        return ""
+    for row in reversed(data.decode("utf-8", errors="replace").splitlines()):
+        if row.strip():
+            return row.rstrip()
+    return ""
+
+
+def _pdeathsig_preexec() -> Callable[[], None] | None:
+    """A ``preexec_fn`` that gives the child SIGKILL when this thread dies (Linux), for the rare
+    case that the guard cannot be used; None elsewhere. ``prctl`` is looked up here, in the
+    parent, so the child only makes the call."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        import ctypes
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+    parent = os.getpid()
+
+    def preexec() -> None:
+        prctl(1, signal.SIGKILL, 0, 0, 0)          # PR_SET_PDEATHSIG
+        if os.getppid() != parent:                  # the parent died before the call: do not run
+            os.kill(os.getpid(), signal.SIGKILL)
+    return preexec
+
+
+def _start(cmd: tuple[str, ...], workdir: Path, out, err, env: dict[str, str] | None
+           ) -> tuple[subprocess.Popen, int]:
+    """Start ``cmd`` under the guard; return the guard's Popen and the solver's PID.
+    ``OSError`` (with the solver's errno) when the command cannot be executed."""
+    if not (os.name == "posix" and sys.executable and GUARD.is_file()):
+        proc = subprocess.Popen(cmd, cwd=workdir, stdin=subprocess.DEVNULL, stdout=out, stderr=err,
+                                env=env, start_new_session=True, preexec_fn=_pdeathsig_preexec())
+        return proc, proc.pid
+    r, w = os.pipe()
+    try:
+        proc = subprocess.Popen([sys.executable, "-I", "-S", str(GUARD), str(os.getpid()), str(w), "--", *cmd],
+                                cwd=workdir, stdin=subprocess.DEVNULL, stdout=out, stderr=err, env=env,
+                                start_new_session=True, pass_fds=(w,))
+    except BaseException:
+        os.close(r)
+        raise
+    finally:
+        os.close(w)
+    try:
+        status = b""
+        deadline = time.monotonic() + STATUS_WAIT_S
+        with os.fdopen(r, "rb", buffering=0) as fh:
+            while b"\n" not in status and time.monotonic() < deadline:
+                ready, _, _ = select.select([fh], [], [], 0.5)
+                if ready:
+                    chunk = fh.read(4096)
+                    if not chunk:
+                        break
+                    status += chunk
+    except BaseException:
+        _stop_guard(proc)
+        raise
+    word, _, rest = status.decode(errors="replace").strip().partition(" ")
+    if word == "started":
+        return proc, int(rest)
+    _stop_guard(proc)
+    if word == "error":
+        code, _, text = rest.partition(" ")
+        raise OSError(int(code), f"{text}: {cmd[0]!r}")
+    raise OSError(f"the solver guard did not start the command (status {status!r}, exit code "
+                  f"{proc.returncode})")
+
+
+def _stop_guard(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.terminate()  # the guard kills what it started, then exits
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
 def run_solver(command: Sequence[str], workdir: Path, timeout_s: float, log_name: str = "solver",
-               env: dict[str, str] | None = None) -> RunRecord:
+               env: dict[str, str] | None = None, *, progress: ProgressCallback | None = None,
+               progress_every_s: float = HEARTBEAT_S) -> RunRecord:
     """Run ``command`` in ``workdir`` with a wall-clock limit; return a :class:`RunRecord`.
 
     stdout and stderr go to ``<log_name>.stdout`` / ``<log_name>.stderr`` in ``workdir`` (files,
-    not pipes: a chatty solver cannot block). The child starts in its own session; every
-    descendant seen while polling is remembered, and at the end (normal exit, timeout or an
-    interrupt of this call) any of them still alive, and the child's process group, are killed.
+    not pipes: a chatty solver cannot block). The command runs below a small guard process
+    (:mod:`solver_adapters._guard`) in a session of its own; every descendant seen while polling
+    is remembered, and at the end (normal exit, timeout or an interrupt of this call) any of them
+    still alive, the guard and its process group are killed.
+
+    No solver process outlives the calling process, however it ends: on Linux the guard is a
+    child subreaper (no descendant can escape to init) and gets a parent-death signal, so a
+    SIGKILL of this process still ends the whole solver tree; the death signal is tied to the
+    *thread* that called this function, which stays blocked here until the run is over. SIGTERM
+    and SIGHUP take the interrupt path once :func:`install_termination_handlers` was called.
+
+    ``progress`` (optional) is called from this thread about every ``progress_every_s`` seconds
+    as ``progress(elapsed_s, last_line)`` (see :data:`ProgressCallback`); an exception it raises
+    ends the run like an interrupt.
 
     Raises :class:`SolverRunError` if the command cannot be started and
-    :class:`SolverTimeoutError` (with the log tail) after ``timeout_s`` seconds.
-    A nonzero exit code is *not* an error here; the caller decides.
+    :class:`SolverTimeoutError` (with the log tail; ``workdir`` attribute set) after
+    ``timeout_s`` seconds. A nonzero exit code is *not* an error here; the caller decides.
     """
     workdir = Path(workdir)
     cmd = tuple(str(c) for c in command)
@@ -163,37 +289,48 @@ def run_solver(command: Sequence[str], workdir: Path, timeout_s: float, log_name
         raise ValueError("command is empty")
     if not timeout_s > 0:
         raise ValueError(f"timeout_s must be > 0, got {timeout_s!r}")
+    if progress is not None and not progress_every_s > 0:
+        raise ValueError(f"progress_every_s must be > 0, got {progress_every_s!r}")
     out_path, err_path = workdir / f"{log_name}.stdout", workdir / f"{log_name}.stderr"
     t0 = time.perf_counter()
     with open(out_path, "wb") as out, open(err_path, "wb") as err:
         try:
-            proc = subprocess.Popen(cmd, cwd=workdir, stdin=subprocess.DEVNULL, stdout=out, stderr=err,
-                                    env=env, start_new_session=True)
+            proc, solver_pid = _start(cmd, workdir, out, err, env)
         except OSError as exc:
-            raise SolverRunError(f"cannot start solver command {list(cmd)}: {exc}",
-                                 workdir=str(workdir)) from exc
+            raise SolverRunError(f"cannot start solver command {list(cmd)}: {exc}") from exc
     seen: dict[int, psutil.Process] = {}
     peak = 0
     timed_out = False
     root: psutil.Process | None = None
     pause = 0.002
+    beat = t0 + progress_every_s
     try:
         root = psutil.Process(proc.pid)
+        try:
+            seen[solver_pid] = psutil.Process(solver_pid)
+        except psutil.Error:
+            pass
         while True:
-            procs = _tree(root)
-            for p in procs[1:]:
+            tree = _tree(root)
+            procs = tree if solver_pid == proc.pid else tree[1:]  # the guard's memory is not the solver's
+            for p in procs:
                 seen.setdefault(p.pid, p)
-            peak = max(peak, _tree_rss(procs), *(_high_water(p.pid) for p in procs))
+            if procs:
+                peak = max(peak, _tree_rss(procs), *(_high_water(p.pid) for p in procs))
             if proc.poll() is not None:
                 break
-            if time.perf_counter() - t0 > timeout_s:
+            now = time.perf_counter()
+            if now - t0 > timeout_s:
                 timed_out = True
                 break
+            if progress is not None and now >= beat:
+                beat = now + progress_every_s
+                progress(now - t0, last_line(out_path) or last_line(err_path))
             time.sleep(pause)
             pause = min(2 * pause, POLL_S)
     finally:
         leftovers = [p for p in seen.values() if p.is_running()]
-        if proc.returncode is None and root is not None:  # timeout or interrupted: the root too
+        if proc.returncode is None and root is not None:  # timeout or interrupted: the guard too
             leftovers.insert(0, root)
         kill_tree(leftovers)
         _killpg(proc.pid)
@@ -203,9 +340,11 @@ def run_solver(command: Sequence[str], workdir: Path, timeout_s: float, log_name
     record = RunRecord(cmd, proc.returncode, wall, peak, tail_text(out_path), tail_text(err_path),
                        workdir, out_path, err_path)
     if timed_out:
-        raise SolverTimeoutError(f"solver exceeded its time limit of {timeout_s:g} s after "
+        exc = SolverTimeoutError(f"solver exceeded its time limit of {timeout_s:g} s after "
                                  f"{wall:.1f} s and was killed with its process tree: {list(cmd)}",
-                                 log_tail=record.log_tail(), workdir=str(workdir))
+                                 log_tail=record.log_tail())
+        exc.workdir = str(workdir)  # attribute only: whether the folder is kept is the caller's choice
+        raise exc
     return record
 
 
@@ -215,6 +354,27 @@ def _killpg(pgid: int) -> None:
         os.killpg(pgid, signal.SIGKILL)
     except (ProcessLookupError, PermissionError, OSError):
         pass
+
+
+def install_termination_handlers(signals: Sequence[int] = (signal.SIGTERM, signal.SIGHUP)) -> dict[int, Any]:
+    """Make SIGTERM and SIGHUP interrupt the program as Ctrl-C (SIGINT) does: a
+    ``KeyboardInterrupt`` in the main thread, so a running :func:`run_solver` kills its solver
+    tree and the adapter removes (or keeps, see ``keep_failed``) its run folder before the
+    program ends. A second such signal ends the program at once (the default action); the guard
+    still takes the solvers with it.
+
+    Call it once from the main thread (``signal.signal`` works only there), e.g. at the start of
+    the command-line entry point. Returns the previous handlers by signal number.
+    """
+    previous: dict[int, Any] = {}
+
+    def handler(signum: int, frame: Any) -> None:
+        signal.signal(signum, signal.SIG_DFL)
+        raise KeyboardInterrupt(f"terminated by {signal.Signals(signum).name}")
+
+    for sig in signals:
+        previous[int(sig)] = signal.signal(sig, handler)
+    return previous
 
 
 # --------------------------------------------------------------------------------------------
@@ -249,48 +409,303 @@ class Dialect(Protocol):
         ...
 
 
-BUILTIN_DIALECTS = {"nastran": "solver_adapters.nastran:NastranDialect",
-                    "legacy": "solver_adapters.legacy:LegacyDialect"}
 DIALECT_GROUP = "blackbox.dialects"
 
 
-def _load(target: str) -> Any:
-    module, _, attr = target.partition(":")
-    obj = __import__(module, fromlist=[attr])
-    return getattr(obj, attr)
-
-
 def known_dialects() -> dict[str, str]:
-    """Name -> ``module:object`` for the builtin dialects and those of entry-point group
-    ``blackbox.dialects`` (builtins win on a name clash)."""
-    found = {ep.name: ep.value for ep in entry_points(group=DIALECT_GROUP)}
-    return {**found, **BUILTIN_DIALECTS}
+    """Name -> ``module:object`` of the built-in dialects and those of entry-point group
+    ``blackbox.dialects`` (one :class:`solver_adapters.registry.Registry` for both)."""
+    from solver_adapters.registry import DIALECTS
+    return DIALECTS.targets()
 
 
 def get_dialect(name: str, **options: Any) -> Dialect:
-    """A dialect instance by name: builtin first, then entry-point group ``blackbox.dialects``."""
-    known = known_dialects()
-    if name not in known:
-        raise ValueError(f"unknown solver dialect {name!r}; known: {', '.join(sorted(known))}. "
-                         f"A package can add one with an entry point in group {DIALECT_GROUP!r} "
-                         f"(name = 'module:DialectClass').")
-    if name in BUILTIN_DIALECTS:
-        factory = _load(BUILTIN_DIALECTS[name])
-    else:
-        factory = next(ep for ep in entry_points(group=DIALECT_GROUP) if ep.name == name).load()
-    return factory(**options)
+    """A dialect instance by name (built-in or entry point of group ``blackbox.dialects``) made
+    with ``options``, which are checked against what the dialect accepts first.
+
+    Raises the registry's errors (all :class:`~solver_adapters.protocol.RegistryError`, a
+    ``ValueError``): an unknown name lists the known ones, an entry point that fails to import
+    or clashes with a built-in is named, an unknown option is named with the accepted ones.
+    """
+    from solver_adapters.registry import DIALECTS
+    return DIALECTS.create(name, **options)
+
+
+# --------------------------------------------------------------------------------------------
+# consent: an external command runs only when the user said so
+# --------------------------------------------------------------------------------------------
+TRUST_FLAG = "--trust-command"
+"""The command-line flag that gives consent for one run (wired by the CLI)."""
+
+
+def resolve_program(program: str, env: dict[str, str] | None = None) -> Path | None:
+    """The absolute, symlink-free path of the program a command line would execute: a name
+    without a slash is searched on ``PATH`` (of ``env`` when given), a path is taken relative to
+    the current directory. None when there is no such executable file."""
+    if os.sep in program or (os.altsep and os.altsep in program):
+        p = Path(program).expanduser()
+        return p.resolve() if p.is_file() else None
+    path = (env or os.environ).get("PATH", os.defpath)
+    found = shutil.which(program, path=path)
+    return Path(found).resolve() if found else None
+
+
+def trusted_commands(config_dir: str | os.PathLike | None = None) -> list[Path]:
+    """The programs listed under ``trusted_commands`` in the user's ``config.toml`` (resolved).
+    ``ValueError`` for a list that is not one of absolute paths."""
+    cfg = read_config(config_dir)
+    listed = cfg.get("trusted_commands", [])
+    where = config_file(config_dir)
+    if not isinstance(listed, list) or not all(isinstance(x, str) for x in listed):
+        raise ValueError(f"{where}: trusted_commands must be a list of strings (absolute paths of programs)")
+    out = []
+    for entry in listed:
+        p = Path(entry).expanduser()
+        if not p.is_absolute():
+            raise ValueError(f"{where}: trusted_commands entry {entry!r} is not an absolute path; "
+                             f"write the full path of the program, e.g. {shutil.which(entry) or '/path/to/' + entry!r}")
+        out.append(p.resolve())
+    return out
+
+
+def check_command_consent(command: Sequence[str], *, trusted: bool,
+                          config_dir: str | os.PathLike | None = None) -> Path | None:
+    """Refuse to prepare a run of ``command`` the user has not agreed to.
+
+    Passes when ``trusted`` (the CLI's ``--trust-command``) or when the program ``command[0]``,
+    resolved to an absolute path (:func:`resolve_program`), is listed under ``trusted_commands``
+    in the user's own ``config.toml`` (``config_dir`` or :func:`~solver_adapters.userconfig.config_dir`;
+    never a file of the study). Returns the resolved program (None if it cannot be found and
+    ``trusted``). Raises :class:`~solver_adapters.errors.ConsentError` saying how to give consent.
+
+    Consent is per program: trusting an interpreter (``python``, ``sh``) trusts every script
+    it may be given.
+    """
+    cmd = [str(c) for c in command]
+    if not cmd:
+        raise ValueError("command is empty")
+    program = resolve_program(cmd[0])
+    if trusted:
+        return program
+    where = config_file(config_dir)
+    shown = " ".join(cmd)
+    if program is None:
+        raise ConsentError(f"the external command `{shown}` will not run: its program {cmd[0]!r} is "
+                           f"not an executable file{'' if os.sep in cmd[0] else ' on PATH'}, so it "
+                           f"cannot be checked against your trusted commands. Give its absolute "
+                           f"path in the command, then consent as described when you run it again "
+                           f"(or pass {TRUST_FLAG} to run it without the check).")
+    if program in trusted_commands(config_dir):
+        return program
+    listed = where.is_file()
+    raise ConsentError(
+        f"the external command `{shown}` will not run without your consent: it executes the "
+        f"program {program} on this machine, and this command line comes from the study (or its "
+        f"caller), not from you.\n"
+        f"If you trust that program, either\n"
+        f"  * pass {TRUST_FLAG} (consent for this run only), or\n"
+        f"  * list it in your own configuration file {where}"
+        + (" (add it to the existing trusted_commands list):" if listed else ":") + "\n"
+        f"        trusted_commands = [\"{program}\"]")
+
+
+# --------------------------------------------------------------------------------------------
+# run folders
+# --------------------------------------------------------------------------------------------
+RUN_PREFIX = "blackbox-run-"
+"""Name prefix of every run folder :class:`CommandAdapter` makes."""
+
+RUN_MARKER = ".blackbox-run.json"
+"""File in every run folder: JSON with ``blackbox_run``, the creating process (``pid``,
+``pid_created``), ``created`` (epoch seconds) and the ``command``. A folder is recognised as ours
+only with both the prefix and a valid marker."""
+
+STALE_RUN_S = 24 * 3600.0
+"""A run folder older than this whose process is gone was left by a killed run."""
+
+_CLEANED_ROOTS: set[str] = set()
+_CLEAN_LOCK = threading.Lock()
+
+
+def make_run_dir(root: str | os.PathLike | None, name: str, command: Sequence[str] = ()) -> Path:
+    """A fresh run folder ``<root>/blackbox-run-<name>-XXXX`` (root: the system temporary
+    folder by default) with its :data:`RUN_MARKER`."""
+    if root is not None:
+        Path(root).mkdir(parents=True, exist_ok=True)
+    safe = "".join(c if c.isascii() and (c.isalnum() or c in "-_.") else "_" for c in name) or "run"
+    workdir = Path(tempfile.mkdtemp(prefix=f"{RUN_PREFIX}{safe}-", dir=root))
+    me = psutil.Process()
+    marker = {"blackbox_run": 1, "pid": me.pid, "pid_created": me.create_time(), "created": time.time(),
+              "command": [str(c) for c in command]}
+    (workdir / RUN_MARKER).write_text(json.dumps(marker))
+    return workdir
+
+
+def _run_dir_age(folder: Path, now: float) -> float | None:
+    """Seconds since ``folder`` was made, if it is one of our run folders whose process is gone
+    (None otherwise: not ours, not this user's, a symlink, or its process still running)."""
+    try:
+        st = os.lstat(folder)
+        if not stat.S_ISDIR(st.st_mode) or (hasattr(os, "getuid") and st.st_uid != os.getuid()):
+            return None
+        marker = json.loads((folder / RUN_MARKER).read_text())
+        if not (isinstance(marker, dict) and marker.get("blackbox_run") == 1):
+            return None
+        created = float(marker["created"])
+        pid, pid_created = int(marker["pid"]), float(marker["pid_created"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    try:
+        if abs(psutil.Process(pid).create_time() - pid_created) < 1.0:
+            return None  # the process that made it is still running
+    except psutil.Error:
+        pass
+    return now - created
+
+
+def clean_stale_run_dirs(root: str | os.PathLike | None = None, *, max_age_s: float = STALE_RUN_S,
+                         now: float | None = None) -> list[Path]:
+    """Remove our run folders under ``root`` (default: the system temporary folder) older than
+    ``max_age_s`` whose process has ended, i.e. left behind by a killed run; return them.
+
+    Only folders named ``blackbox-run-*`` that hold a valid :data:`RUN_MARKER` and belong to
+    this user are considered; a folder of a run still in progress is never touched.
+    """
+    folder = Path(root) if root is not None else Path(tempfile.gettempdir())
+    now = time.time() if now is None else now
+    removed = []
+    try:
+        candidates = [p for p in folder.iterdir() if p.name.startswith(RUN_PREFIX)]
+    except OSError:
+        return removed
+    for p in sorted(candidates):
+        age = _run_dir_age(p, now)
+        if age is not None and age > max_age_s:
+            shutil.rmtree(p, ignore_errors=True)
+            if not p.exists():
+                removed.append(p)
+    return removed
+
+
+def _clean_stale_once(root: Path | None) -> list[Path]:
+    """:func:`clean_stale_run_dirs` the first time a run folder root is used in this process,
+    reported as a warning when it removed anything."""
+    key = str(Path(root).resolve() if root is not None else Path(tempfile.gettempdir()).resolve())
+    with _CLEAN_LOCK:
+        if key in _CLEANED_ROOTS:
+            return []
+        _CLEANED_ROOTS.add(key)
+    removed = clean_stale_run_dirs(root)
+    if removed:
+        warnings.warn(f"removed {len(removed)} stale blackbox run folder(s) left by killed runs "
+                      f"(older than {STALE_RUN_S / 3600:g} h) in {key}: "
+                      f"{', '.join(p.name for p in removed[:5])}{' ...' if len(removed) > 5 else ''}",
+                      RuntimeWarning, stacklevel=3)
+    return removed
+
+
+# --------------------------------------------------------------------------------------------
+# the solver's identity (part of the cache key)
+# --------------------------------------------------------------------------------------------
+_DIGESTS: dict[tuple, str] = {}
+_DIGEST_LOCK = threading.Lock()
+
+
+def file_sha256(path: Path) -> str:
+    """sha256 of a file's bytes, remembered per (path, inode, size, mtime) for this process."""
+    st = os.stat(path)
+    key = (str(path), st.st_ino, st.st_size, st.st_mtime_ns)
+    with _DIGEST_LOCK:
+        hit = _DIGESTS.get(key)
+    if hit is None:
+        h = hashlib.sha256()
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+        hit = h.hexdigest()
+        with _DIGEST_LOCK:
+            _DIGESTS[key] = hit
+    return hit
+
+
+def program_files(command: Sequence[str]) -> list[Path]:
+    """The files a command line executes or reads as code: its program (resolved on PATH) and
+    every other argument that names an existing file (an interpreter's script), placeholders
+    excepted. Absolute, symlink-free, in order, without repeats."""
+    out: list[Path] = []
+    cmd = [str(c) for c in command]
+    first = resolve_program(cmd[0]) if cmd else None
+    if first is not None:
+        out.append(first)
+    for arg in cmd[1:]:
+        if "{" in arg or not arg or arg.startswith("-"):
+            continue
+        p = Path(arg).expanduser()
+        try:
+            if p.is_file():
+                p = p.resolve()
+                if p not in out:
+                    out.append(p)
+        except OSError:
+            continue
+    return out
 
 
 # --------------------------------------------------------------------------------------------
 # the adapter
 # --------------------------------------------------------------------------------------------
+def _add_line(exc: BaseException, line: str) -> None:
+    """Append ``line`` to an exception's message unless it is there already."""
+    msg = str(exc.args[0]) if exc.args else str(exc)
+    if line not in msg:
+        exc.args = (f"{msg}\n{line}", *exc.args[1:])
+
+
 def _note_workdir(exc: SolverError, workdir: Path) -> None:
-    """Add the kept run directory to an error raised without it (message and attribute)."""
-    if getattr(exc, "workdir", None):
-        return
+    """Name the kept run directory in the error (message and ``workdir`` attribute)."""
     exc.workdir = str(workdir)
-    exc.args = (f"{exc.args[0] if exc.args else exc}\nrun directory kept for inspection: {workdir}",
-                *exc.args[1:])
+    _add_line(exc, f"run directory kept for inspection: {workdir}")
+
+
+def _note_removed(exc: SolverError, record: RunRecord | None) -> None:
+    """The run directory is about to be deleted: keep its log tail in the error if the error has
+    none yet, and say that the folder is gone and how to keep it."""
+    exc.workdir = None
+    if record is not None and isinstance(exc, SolverRunError) and not exc.log_tail:
+        exc.log_tail = record.log_tail()
+        if exc.log_tail:
+            _add_line(exc, f"--- solver log tail ---\n{exc.log_tail}")
+    _add_line(exc, "(run directory removed; keep_failed=True keeps failed runs for inspection)")
+
+
+def _deck_bytes(deck: Path) -> dict[str, bytes]:
+    """The deck and the files it INCLUDEs, ``{absolute path: bytes}`` (a chunk's travel kit)."""
+    from solver_adapters.cache import deck_files
+
+    return {str(p): p.read_bytes() for p in deck_files(deck) if p.is_file()}
+
+
+def _run_chunk(args) -> tuple[np.ndarray, SolverStats]:
+    """One column block of :meth:`CommandAdapter.solve` run by a copy of the adapter (on a
+    worker, or in this process): its values and the copy's stats. When the deck files are not
+    where the client had them, with the same bytes (no shared file system), they are written
+    into a temporary folder with the same layout and the copy runs from there."""
+    adapter, files, loads, report = args
+    own = copy.copy(adapter)
+    own.stats, own._lock, own.executor = SolverStats(), threading.Lock(), None
+    same = all(Path(p).is_file() and Path(p).read_bytes() == data for p, data in files.items())
+    if same:
+        return own._run(loads, report), own.stats
+    base = Path(os.path.commonpath([str(Path(p).parent) for p in files]))
+    with tempfile.TemporaryDirectory(prefix="blackbox-deck-") as tmp:
+        for p, data in files.items():
+            target = Path(tmp) / Path(p).relative_to(base)
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_bytes(data)
+        moved = Path(tmp) / Path(own.deck_path).relative_to(base)
+        own.deck_path = moved
+        own._base = BaseDeck(moved, own._base.model)
+        return own._run(loads, report), own.stats
 
 
 class CommandAdapter:
@@ -302,18 +717,33 @@ class CommandAdapter:
     the deck path is appended. ``command=None`` takes the dialect's default.
 
     Each ``solve`` is one run (several only when the batch exceeds the dialect's
-    ``max_cases_per_run``) in a fresh ``tempfile.mkdtemp`` directory under ``workdir_root``,
-    deleted on success and kept on failure when ``keep_failed`` (its path is in the error).
+    ``max_cases_per_run``) in a fresh run folder ``blackbox-run-<name>-*`` under ``workdir_root``
+    (default: the system temporary folder; :func:`make_run_dir`), deleted on success. A failed
+    run's folder is deleted too, after its log tail went into the error, unless ``keep_failed``
+    (then its path is in the error). Run folders that a killed process left behind for more than
+    :data:`STALE_RUN_S` are removed, with a warning, the first time a root is used.
+
+    Consent: the command runs only when ``trusted`` (the CLI's ``--trust-command``) or its
+    program is listed in the user's own ``config.toml`` (:func:`check_command_consent`, checked
+    here, before anything runs: :class:`~solver_adapters.errors.ConsentError` otherwise). The
+    dialect's own default command (``command=None`` or equal to it) is installed code and needs
+    no consent.
+
+    ``progress``: an optional ``progress(elapsed_s, last_line)`` callback called about every
+    ``progress_every_s`` seconds while the solver runs (:func:`run_solver`); an attribute, so a
+    caller can set it after construction.
     """
 
     def __init__(self, deck_path: str | os.PathLike, command: Sequence[str] | None = None,
-                 dialect: str | Dialect = "nastran", timeout_s: float = 600.0, keep_failed: bool = True,
+                 dialect: str | Dialect = "nastran", timeout_s: float = 600.0, keep_failed: bool = False,
                  workdir_root: str | os.PathLike | None = None, name: str = "command",
-                 springs: Sequence[ScalarSpring] = ()):
+                 springs: Sequence[ScalarSpring] = (), *, trusted: bool = False,
+                 progress: ProgressCallback | None = None, progress_every_s: float = HEARTBEAT_S):
         self.deck_path = Path(deck_path).resolve()
         self.dialect = get_dialect(dialect) if isinstance(dialect, str) else dialect
+        default = self.dialect.command(self.deck_path)
         if command is None:
-            command = self.dialect.command(self.deck_path)
+            command = default
             if command is None:
                 raise ValueError(f"dialect {self.dialect.name!r} has no default command: give one, "
                                  f"e.g. ['my-solver', '{{deck}}']")
@@ -322,10 +752,19 @@ class CommandAdapter:
             raise ValueError("command is empty")
         if not timeout_s > 0:
             raise ValueError(f"timeout_s must be > 0, got {timeout_s!r}")
+        if not progress_every_s > 0:
+            raise ValueError(f"progress_every_s must be > 0, got {progress_every_s!r}")
+        own_default = default is not None and self.command == [str(c) for c in default]
+        program = check_command_consent(self.command, trusted=bool(trusted) or own_default)
+        self._argv0 = (self.command[0], str(program) if program is not None else self.command[0])
         self.timeout_s = float(timeout_s)
         self.keep_failed = bool(keep_failed)
         self.workdir_root = Path(workdir_root) if workdir_root is not None else None
         self.name = name
+        self.progress = progress
+        self.progress_every_s = float(progress_every_s)
+        self._solver_identity: dict[str, Any] | None = None
+        _clean_stale_once(self.workdir_root)
         self.stats = SolverStats()
         self._lock = threading.Lock()
         from solver_adapters.bdf import read_deck  # the reader is only needed here
@@ -342,6 +781,23 @@ class CommandAdapter:
 
     def grid_xyz(self) -> dict[int, tuple[float, float, float]]:
         return dict(self._xyz)
+
+    def identity(self) -> dict[str, Any]:
+        """What identifies the solver program (part of the cache key, computed once): the sha256
+        of every file the command executes (:func:`program_files`: the program, an interpreter's
+        script) and the solver's version when the adapter (``version``) or the dialect
+        (``solver_version(command)``) can tell."""
+        if self._solver_identity is None:
+            files = program_files(self.command)
+            ident: dict[str, Any] = {"programs": [{"name": f.name, "sha256": file_sha256(f)} for f in files]}
+            version = getattr(self, "version", None)
+            ask = getattr(self.dialect, "solver_version", None)
+            if version is None and callable(ask):
+                version = ask(self.command)
+            if version is not None:
+                ident["version"] = str(version)
+            self._solver_identity = ident
+        return self._solver_identity
 
     def with_springs(self, springs: Sequence[ScalarSpring]) -> "CommandAdapter":
         """Same model, command and dialect with ``springs`` appended (written by the dialect).
@@ -360,9 +816,55 @@ class CommandAdapter:
         if loads.n_cases == 0 or not report:
             return Displacements(report, np.zeros((len(report), loads.n_cases)), loads.cases)
         chunk = getattr(self.dialect, "max_cases_per_run", None) or loads.n_cases
-        blocks = [self._run(loads.select(range(j, min(j + chunk, loads.n_cases))), report)
-                  for j in range(0, loads.n_cases, chunk)]
+        executor = self.executor
+        side_by_side = executor is not None and loads.n_cases > 1
+        if side_by_side:      # one run per worker (or per ``chunks``), each a separate solver process
+            n = int(self.chunks or getattr(executor, "workers", 1))
+            chunk = min(chunk, -(-loads.n_cases // max(1, n)))
+            side_by_side = chunk < loads.n_cases
+        ranges = [range(j, min(j + chunk, loads.n_cases)) for j in range(0, loads.n_cases, chunk)]
+        if not side_by_side:
+            blocks = [self._run(loads.select(r), report) for r in ranges]
+        else:
+            files = _deck_bytes(self.deck_path)
+            outs = executor.map(_run_chunk, [(self, files, loads.select(r), report) for r in ranges])
+            blocks = []
+            for values, stats in outs:          # the copies' runs counted here, in order
+                self._merge_stats(stats)
+                blocks.append(values)
         return Displacements(report, np.hstack(blocks), loads.cases)
+
+    # ---- runs side by side (``executor``) ---------------------------------------------------
+    executor: Any = None
+    """An object with ``map(fn, items) -> list`` (:mod:`blackbox.parallel`): when set, a ``solve``
+    with several cases is cut into ``chunks`` (default: ``executor.workers``) contiguous column
+    blocks, each run as a separate solver process through ``executor.map``; the blocks are put
+    back in order. Each column is solved on its own by the solver either way, so the result is
+    the serial one (for a solver whose answer for one load case does not depend on the others
+    in its run)."""
+    chunks: int | None = None
+
+    def __getstate__(self) -> dict:
+        # sent to a worker: no lock, no executor (a cluster client), no terminal callback
+        state = self.__dict__.copy()
+        state.pop("_lock", None)
+        state["executor"] = None
+        state["progress"] = None
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
+
+    def _merge_stats(self, other: SolverStats) -> None:
+        with self._lock:
+            s = self.stats
+            s.runs += other.runs
+            s.factorizations += other.factorizations
+            s.right_hand_sides += other.right_hand_sides
+            s.wall_s += other.wall_s
+            s.peak_rss_bytes = max(s.peak_rss_bytes, other.peak_rss_bytes)
+            s.history.extend(other.history)
 
     # ---- one run -------------------------------------------------------------------------
     def _checked_springs(self, springs: Sequence[ScalarSpring]) -> tuple[ScalarSpring, ...]:
@@ -382,18 +884,19 @@ class CommandAdapter:
     def _command_for(self, deck: Path) -> list[str]:
         subs = {"{deck}": str(deck), "{deck_name}": deck.name, "{workdir}": str(deck.parent)}
         if not any(k in arg for arg in self.command for k in ("{deck}", "{deck_name}")):
-            return [*self.command, str(deck)]
-        out = []
-        for arg in self.command:
-            for k, v in subs.items():
-                arg = arg.replace(k, v)
-            out.append(arg)
+            out = [*self.command, str(deck)]
+        else:
+            out = []
+            for arg in self.command:
+                for k, v in subs.items():
+                    arg = arg.replace(k, v)
+                out.append(arg)
+        if out and out[0] == self._argv0[0]:  # run the very program consent was given for
+            out[0] = self._argv0[1]
         return out
 
     def _run(self, loads: LoadMatrix, report: tuple[DofLabel, ...]) -> np.ndarray:
-        if self.workdir_root is not None:
-            self.workdir_root.mkdir(parents=True, exist_ok=True)
-        workdir = Path(tempfile.mkdtemp(prefix=f"{self.name}-", dir=self.workdir_root))
+        workdir = make_run_dir(self.workdir_root, self.name, self.command)
         record = None
         times = {}
         try:
@@ -401,10 +904,18 @@ class CommandAdapter:
             deck = self.dialect.write_deck(workdir, self._base, loads, report, self.springs)
             times["write_s"] = time.perf_counter() - t0
             record = run_solver(self._command_for(Path(deck)), workdir, self.timeout_s,
-                                log_name=self.name)
+                                log_name=self.name, progress=self.progress,
+                                progress_every_s=self.progress_every_s)
             t0 = time.perf_counter()
-            values = np.asarray(self.dialect.read_results(workdir, Path(deck), loads, report, record),
-                                dtype=float)
+            try:
+                values = np.asarray(self.dialect.read_results(workdir, Path(deck), loads, report, record),
+                                    dtype=float)
+            except SolverError:
+                raise
+            except Exception as exc:  # garbage output is a solver failure, whatever the dialect raised
+                raise SolverRunError(f"dialect {self.dialect.name!r} could not read the solver's output: "
+                                     f"{type(exc).__name__}: {exc}", returncode=record.returncode,
+                                     log_tail=record.log_tail()) from exc
             times["parse_s"] = time.perf_counter() - t0
             expected = (len(report), loads.n_cases)
             if values.shape != expected:
@@ -415,21 +926,24 @@ class CommandAdapter:
                 raise SolverRunError("solver returned non-finite displacements",
                                      returncode=record.returncode, log_tail=record.log_tail())
         except BaseException as exc:
-            self._account(loads, record, workdir, ok=False, error=type(exc).__name__)
-            if self.keep_failed and isinstance(exc, SolverError):
+            keep = self.keep_failed and isinstance(exc, SolverError)
+            self._account(loads, record, workdir if keep else None, ok=False, error=type(exc).__name__)
+            if keep:
                 _note_workdir(exc, workdir)
-            else:
+            else:  # an interrupt, or not asked to keep: the error already holds the log tail
+                if isinstance(exc, SolverError):
+                    _note_removed(exc, record)
                 shutil.rmtree(workdir, ignore_errors=True)
             raise
         self._account(loads, record, workdir, ok=True, times=times)
         shutil.rmtree(workdir, ignore_errors=True)
         return values
 
-    def _account(self, loads: LoadMatrix, record: RunRecord | None, workdir: Path, ok: bool,
+    def _account(self, loads: LoadMatrix, record: RunRecord | None, workdir: Path | None, ok: bool,
                  error: str | None = None, times: dict | None = None) -> None:
         with self._lock:
             s = self.stats
-            entry = {"ok": ok, "cases": loads.n_cases, "workdir": None if ok else str(workdir),
+            entry = {"ok": ok, "cases": loads.n_cases, "workdir": None if ok or workdir is None else str(workdir),
                      "error": error, **(times or {})}
             if record is not None:
                 s.runs += 1

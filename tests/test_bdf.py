@@ -13,7 +13,7 @@ import pytest
 from solver_adapters.bdf import parse_int, parse_real, read_deck, read_deck_text
 from solver_adapters.bdf_write import (format_card, print_float_8, print_float_16,
                                        print_float_free, write_deck)
-from solver_adapters.deck import CBar, Deck, Grid, Mat1, PBar, Pelas, Rbe2, Spc1, Spring
+from solver_adapters.deck import CBar, Deck, Grid, Mat1, PBar, Pelas, Rbe2, Rod, Spc1, Spring
 from solver_adapters.protocol import DeckFormatError, ModelError
 
 
@@ -58,7 +58,10 @@ def no_src(deck: Deck) -> dict:
             "spc1s": [strip(v) for v in deck.spc1s],
             "rbe2s": {k: strip(v) for k, v in deck.rbe2s.items()},
             "pelas": {k: strip(v) for k, v in deck.pelas.items()},
-            "springs": {k: strip(v) for k, v in deck.springs.items()}}
+            "springs": {k: strip(v) for k, v in deck.springs.items()},
+            "rods": {k: strip(v) for k, v in deck.rods.items()},
+            "prods": {k: strip(v) for k, v in deck.prods.items()},
+            "spcadds": {k: strip(v) for k, v in deck.spcadds.items()}}
 
 
 def assert_names(exc: DeckFormatError, file: str, line: int, card: str, field: int) -> None:
@@ -131,11 +134,20 @@ CARDS = [
     ("CBAR", ["3", "1", "2", "1", ".0", "0.", "1.", "GGG", "", "", "0.", "0.", "0.", "0.", "0.",
               "0."], "cbars", 3, CBar(3, 1, 2, 1, x=(0.0, 0.0, 1.0))),
     ("PBAR", ["2", "1", "1.-2", "2.-6", "3.-6", "4.-6", "0.1", "", "1.", "1.", "-1.", "1.", "1.",
-              "-1.", "-1.", "-1.", "0.5", "0.5"], "pbars", 2, PBar(2, 1, 1e-2, 2e-6, 3e-6, 4e-6)),
+              "-1.", "-1.", "-1.", "0.5", "0.6"], "pbars", 2,
+     PBar(2, 1, 1e-2, 2e-6, 3e-6, 4e-6, k1=0.5, k2=0.6)),
+    ("PBAR", ["2", "1", "1.-2", "2.-6", "3.-6", "4.-6", "", "", "", "", "", "", "", "", "", "",
+              "0.", ""], "pbars", 2, PBar(2, 1, 1e-2, 2e-6, 3e-6, 4e-6)),   # K1 = 0.: as blank
     ("MAT1", ["2", "2.1+11", "", "0.3", "7850."], "mat1s", 2,
      Mat1(2, 2.1e11, 2.1e11 / (2 * 1.3), 0.3)),
     ("MAT1", ["2", "2.0E11", "8.0E10"], "mat1s", 2, Mat1(2, 2.0e11, 8.0e10, 2.0e11 / 1.6e11 - 1)),
     ("MAT1", ["2", "", "8.0D10", ".25"], "mat1s", 2, Mat1(2, 2 * 8.0e10 * 1.25, 8.0e10, 0.25)),
+    ("MAT1", ["2", "2.1+11"], "mat1s", 2, Mat1(2, 2.1e11, 0.0, 0.0)),    # QRG: G = NU = 0
+    ("MAT1", ["2", "", "8.+10"], "mat1s", 2, Mat1(2, 0.0, 8e10, 0.0)),   # QRG: E = NU = 0
+    ("MAT1", ["2", "2.+11", "7.+10", ".5"], "mat1s", 2, Mat1(2, 2e11, 7e10, 0.5)),  # as given
+    ("SPC", ["5", "1", "123456", "0.", "2", "53"], "spc1s", 1, Spc1(5, "35", (2,))),
+    ("CONROD", ["12", "1", "2", "1", "2.-4", "3.-8", "0.1", "0.5"], "rods", 12,
+     Rod(12, 1, 2, mid=1, a=2e-4, j=3e-8, card="CONROD")),
     ("SPC1", ["3", "321", "1", "2", "3", "", "4", "4", "3", "2", "1"], "spc1s", 0,
      Spc1(3, "123", (1, 2, 3, 4, 4, 3, 2, 1))),
     ("SPC1", ["1", "123456", "1", "THRU", "99"], "spc1s", 0,    # absent grids of a range skipped
@@ -349,18 +361,39 @@ MALFORMED = [
     ("SEID", "GRID,5,,0.,0.,0.,,,3\n", 8, "GRID", 9, "superelements"),
     ("PS repeated digit", "GRID,5,,0.,0.,0.,,121\n", 8, "GRID", 8, "without repeats"),
     ("PS digit 7", "GRID,5,,0.,0.,0.,,7\n", 8, "GRID", 8, "digits 1-6"),
-    ("CBAR pin flags", small("CBAR", "9", "1", "1", "2", "0.", "0.", "1.") + small("", "123"),
-     9, "CBAR", 10, "pin flags"),
-    ("CBAR pin flags PB", "CBAR,9,1,1,2,0.,0.,1.\n,,456\n", 9, "CBAR", 11, "pin flags"),
-    ("CBAR offsets", "CBAR,9,1,1,2,0.,0.,1.\n,,,0.1\n", 9, "CBAR", 12, "offsets"),
+    ("CBAR pin flag 7", small("CBAR", "9", "1", "1", "2", "0.", "0.", "1.") + small("", "127"),
+     9, "CBAR", 10, "digits 1-6"),
+    ("CBAR pin flags PB repeated", "CBAR,9,1,1,2,0.,0.,1.\n,,4566\n", 9, "CBAR", 11, "repeats"),
+    ("CBAR offset not a real", "CBAR,9,1,1,2,0.,0.,1.\n,,,abc\n", 9, "CBAR", 12, "not a real"),
     ("CBAR OFFT", "CBAR,9,1,1,2,0.,0.,1.,EEG\n", 8, "CBAR", 9, "OFFT"),
+    ("CBAR OFFT element system", "CBAR,9,1,1,2,0.,0.,1.,GOO\n", 8, "CBAR", 9, "OFFT"),
+    ("BAROR twice", "BAROR,,1,,,0.,0.,1.\nBAROR,,1\n", 9, "BAROR", 1, "only one BAROR"),
+    ("BAROR G0 and X2", "BAROR,,1,,,3,1.\n", 8, "BAROR", 7, "G0"),
     ("CBAR G0 with X2", "CBAR,9,1,1,2,3,1.,0.\n", 8, "CBAR", 7, "G0"),
     ("CBAR no orientation", "CBAR,9,1,1,2\n", 8, "CBAR", 6, "orientation"),
     ("CBAR too many fields", "CBAR,9,1,1,2,0.,0.,1.\n,,,,,,,,,\n,1\n", 10, "CBAR", 18,
      "at most 17"),
-    ("MAT1 one constant", "MAT1,2,2.1+11\n", 8, "MAT1", 3, "at least two"),
-    ("MAT1 none", "MAT1,2\n", 8, "MAT1", 3, "at least two"),
-    ("PBAR I12", "PBAR,2,1,1.,1.,1.,1.\n,,,,,,,,\n,,,1.\n", 10, "PBAR", 20, "I12"),
+    ("MAT1 NU 0.7", "MAT1,2,2.1+11,,0.7\n", 8, "MAT1", 5, "-1 < NU <= 0.5"),
+    ("MAT1 NU -1", "MAT1,2,2.1+11,,-1.\n", 8, "MAT1", 5, "-1 < NU <= 0.5"),
+    ("MAT1 none", "MAT1,2\n", 8, "MAT1", 3, "E or G"),
+    ("MAT1 only NU", "MAT1,2,,,.3\n", 8, "MAT1", 3, "E or G"),
+    ("MAT1 negative E", "MAT1,2,-1.,,.3\n", 8, "MAT1", 3, ">= 0"),
+    ("MAT1 G zero, NU blank", "MAT1,2,2.+11,0.\n", 8, "MAT1", 4, "undefined"),
+    ("MAT1 E and G zero", "MAT1,2,0.,,.3\n", 8, "MAT1", 3, "both zero"),
+    ("SPC enforced value", "SPC,1,1,123,0.1\n", 8, "SPC", 5, "enforced displacement"),
+    ("SPC second enforced value", "SPC,1,1,123,,2,3,-1.\n", 8, "SPC", 8, "enforced displacement"),
+    ("SPC no component", "SPC,1,1\n", 8, "SPC", 4, "required component"),
+    ("PBAR K1 negative", "PBAR,2,1,1.,1.,1.,1.\n,,,,,,,,\n,-1.\n", 10, "PBAR", 18, "> 0"),
+    ("PBAR K2 without area", "PBAR,2,1,,1.,1.,1.\n,,,,,,,,\n,,1.\n", 10, "PBAR", 19, "area"),
+    ("GRDSET twice", "GRDSET,,,,,,,3\nGRDSET,,,,,,,3\n", 9, "GRDSET", 1, "only one GRDSET"),
+    ("GRDSET CP used", "GRDSET,,2\n", 8, "GRDSET", 3, "coordinate systems are not supported"),
+    ("GRDSET CD used", "GRDSET,,,,,,1\n", 8, "GRDSET", 7, "GRID 1 at bad.bdf:1"),
+    ("GRDSET SEID used", "GRDSET,,,,,,,,4\n", 8, "GRDSET", 9, "superelements"),
+    ("GRDSET X1", "GRDSET,,,1.\n", 8, "GRDSET", 4, "must be blank"),
+    ("CROD too many fields", "CROD,9,1,1,2,3\n", 8, "CROD", 6, "at most 5"),
+    ("PROD without A", "PROD,9,1\n", 8, "PROD", 4, "required real"),
+    ("PBAR I12 too large", "PBAR,2,1,1.,1.,1.,1.\n,,,,,,,,\n,,,1.\n", 10, "PBAR", 20, "I1 * I2 > I12^2"),
+    ("PBAR I12 with K1", "PBAR,2,1,1.,1.,1.,1.\n,,,,,,,,\n,.8,,.5\n", 10, "PBAR", 20, "NASTRAN ignores"),
     ("CELAS2 without K", "CELAS2,9,,1,1\n", 8, "CELAS2", 3, "required real"),
     ("CELAS scalar point", "CELAS2,9,1.,1,0\n", 8, "CELAS2", 5, "scalar points"),
     ("CELAS both grounded", "CELAS2,9,1.\n", 8, "CELAS2", 4, "grounded"),
@@ -391,8 +424,8 @@ def test_malformed(text, line, card, field, why):
 
 
 def test_continuation_error_names_continuation_line():
-    text = BASE + small("CBAR", "9", "1", "1", "2", "0.", "0.", "1.") + "$ c\n" + small("", "", "2")
-    with pytest.raises(DeckFormatError, match="continuation line, field 3") as info:
+    text = BASE + small("CBAR", "9", "1", "1", "2", "0.", "0.", "1.") + "$ c\n" + small("", "", "7")
+    with pytest.raises(DeckFormatError, match="digits 1-6 .*continuation line, field 3") as info:
         read_deck_text(text, name="p.bdf")
     assert_names(info.value, "p.bdf", 10, "CBAR", 11)
 
@@ -416,6 +449,14 @@ MODEL_ERRORS = [
     ("SPC1 missing grid", "SPC1,4,123,1,97\n", "SPC1 4", "97"),
     ("spring missing grid", "CELAS2,20,1.,96,1\n", "CELAS2 20", "96"),
     ("CELAS1 missing PELAS", "CELAS1,20,8,1,1\n", "CELAS1 20", "PID 8"),
+    ("CROD PBAR as PROD", "CROD,20,1,1,2\n", "CROD 20", "it is a PBAR"),
+    ("CROD missing grid", "PROD,9,1,1.\nCROD,20,9,1,95\n", "CROD 20", "95"),
+    ("CONROD missing MAT1", "CONROD,20,1,2,9,1.\n", "CONROD 20", "MID 9"),
+    ("CONROD zero length", "GRID,9,,0.,0.,0.\nCONROD,20,1,9,1,1.\n", "CONROD 20", "zero length"),
+    ("PROD missing MAT1", "PROD,9,8,1.\n", "PROD 9", "MID 8"),
+    ("CBAR PROD as PBAR", "PROD,9,1,1.\nCBAR,20,9,1,2,0.,0.,1.\n", "CBAR 20", "it is a PROD"),
+    ("SPCADD missing set", "SPC1,3,123,1\nSPCADD,9,3,4\n", "SPCADD 9", "set(s) 4 not found"),
+    ("SPCADD SID of a set", "SPC,9,1,123\nSPCADD,9,9\n", "SPCADD 9", "also the ID of an SPC"),
 ]
 
 

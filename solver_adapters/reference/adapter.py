@@ -11,7 +11,7 @@ import scipy.sparse as sp
 
 from solver_adapters.deck import Deck
 from solver_adapters.protocol import (Displacements, DofLabel, LoadMatrix, ModelError, ScalarSpring,
-                                      SolverStats, UnknownDofError)
+                                      SolverStats, UnknownDofError, UnstableStructureError)
 from solver_adapters.reference.model import BACKENDS, Assembled, Factorization, assemble
 
 
@@ -80,13 +80,18 @@ class ReferenceAdapter:
         F_f = (m.T.T @ F_g).toarray(order="F")      # column-major: no copy in the solvers
         U_f = fact.solve(F_f) if loads.n_cases else np.zeros((m.T.shape[1], 0))
         U_f = U_f.reshape(m.T.shape[1], loads.n_cases)
-        values = m.T[m.g_index(report), :] @ U_f if report else np.zeros((0, loads.n_cases))
+        values = np.asarray(m.T[m.g_index(report), :] @ U_f if report else np.zeros((0, loads.n_cases)))
+        if not np.all(np.isfinite(values)):   # never hand non-finite numbers to the method
+            bad = sorted({report[i] for i in np.flatnonzero(~np.all(np.isfinite(values), axis=1))})
+            raise UnstableStructureError("the reference solver produced non-finite displacements: the "
+                                         "stiffness is too ill-conditioned for these loads (or the loads "
+                                         "overflow)", bad)
         wall = time.perf_counter() - t0
         self.stats.runs += 1
         self.stats.right_hand_sides += loads.n_cases
         self.stats.wall_s += wall
         self.stats.history.append({"right_hand_sides": loads.n_cases, "wall_s": wall})
-        return Displacements(report, np.asarray(values), loads.cases)
+        return Displacements(report, values, loads.cases)
 
     def with_springs(self, springs: Sequence[ScalarSpring]) -> "ReferenceAdapter":
         return ReferenceAdapter(self.deck, backend=self.backend,

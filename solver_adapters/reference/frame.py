@@ -1,4 +1,20 @@
-"""3D Euler-Bernoulli frame element (CBAR without offsets, pins or shear flexibility), vectorized.
+"""3D frame element (CBAR; CROD as its axial + torsion part), vectorized.
+
+Pin flags (:func:`release_pins`, static condensation of the local matrix) and rigid offsets
+(:func:`offset_transform`, applied to the global matrix) are applied by the assembly to the few
+elements that have them.
+
+Bending is Euler-Bernoulli unless a shear area is given (PBAR K1/K2): then Timoshenko, with the
+shear flexibility ratio of each bending plane
+
+    phi = 12 E I / (G As L^2),   As = K A  (K1 for plane 1 with I1, K2 for plane 2 with I2),
+
+and the bending terms 12EI/(L^3 (1+phi)), 6EI/(L^2 (1+phi)), (4+phi)EI/(L (1+phi)),
+(2-phi)EI/(L (1+phi)) (Przemieniecki eq. 5.115 with its shear parameter). ``As = inf`` (K blank)
+gives phi = 0 and the same floating-point operations as the Euler-Bernoulli terms, so those
+results are bit for bit unchanged. The element is exact for end loads (constant shear): a
+cantilever's tip deflection is P L^3 / (3 E I) + P L / (K G A) with any number of elements.
+A product of inertia I12 (PBAR) couples the two bending planes (:func:`_coupling_entries`).
 
 Local axes follow NASTRAN's CBAR: x from GA to GB; the orientation vector v lies in plane 1
 (the element x-y plane); z = x cross v; y = z cross x. Plane-1 bending (deflection along y,
@@ -6,7 +22,8 @@ rotation about z) uses I1; plane-2 bending (deflection along z, rotation about y
 Local DOF order at each end: u, v, w, theta_x, theta_y, theta_z.
 
 Reference: Przemieniecki, *Theory of Matrix Structural Analysis* (1968), eq. 5.115 (the 12x12
-space-frame stiffness with shear deformation set to zero); MSC Nastran Reference Manual, CBAR.
+space-frame stiffness with shear deformation); MSC Nastran Reference Manual, CBAR; MSC Nastran
+Quick Reference Guide, PBAR remark 5 (shear stiffness per unit length K1*A*G, K2*A*G).
 
 Layout: the public functions take and return element-major arrays ``(ne, 12, 12)``. The
 assembly uses the entry-major variants (``*_em``, arrays ``(12, 12, ne)``): every matrix entry is
@@ -19,12 +36,60 @@ from __future__ import annotations
 import numpy as np
 
 
-def _entries(L, E, G, A, I1, I2, J):
-    """The upper-triangle entries ``{(i, j): values over elements}`` of the local stiffness."""
+def shear_ratio(L, E, G, I, As):
+    """``phi = 12 E I / (G As L^2)`` per element; exactly 0 where ``As`` is infinite (no shear
+    flexibility), also when ``G`` or ``I`` is 0 there."""
+    As = np.asarray(As, float)
+    finite = np.isfinite(As)
+    if not finite.any():
+        return np.zeros(np.shape(L))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        phi = 12.0 * E * I / (G * np.where(finite, As, 1.0) * L**2)
+    return np.where(finite, phi, 0.0)
+
+
+# bending DOFs of plane 1 (v, theta_z at A and B) and plane 2 (w, theta_y), and the signs that
+# make plane 2's DOFs (w, -theta_y) follow the same convention as plane 1's (v, theta_z)
+_PLANE1 = (1, 5, 7, 11)
+_PLANE2 = (2, 4, 8, 10)
+_SIGN2 = (1.0, -1.0, 1.0, -1.0)
+
+
+def _coupling_entries(L, E, I12) -> dict:
+    """Entries coupling the two bending planes through the product of inertia I12 = int y z dA.
+
+    The bending energy is 1/2 int kappa^T E [[I1, I12], [I12, I2]] kappa with kappa = (v'', w''),
+    so in the DOFs q1 = (v_A, theta_zA, v_B, theta_zB), q2 = (w_A, -theta_yA, w_B, -theta_yB)
+    the stiffness is E [[I1 kb, I12 kb], [I12 kb, I2 kb]], kb the unit Euler-Bernoulli matrix.
+    A cantilever's tip flexibility is then (L^3 / 3E) [[I1, I12], [I12, I2]]^-1 (as MYSTRAN)."""
+    e12 = E * I12
+    kb = ((12 / L**3, 6 / L**2, -12 / L**3, 6 / L**2),
+          (6 / L**2, 4 / L, -6 / L**2, 2 / L),
+          (-12 / L**3, -6 / L**2, 12 / L**3, -6 / L**2),
+          (6 / L**2, 2 / L, -6 / L**2, 4 / L))
+    out = {}
+    for a, p in enumerate(_PLANE1):
+        for b, q in enumerate(_PLANE2):
+            out[(min(p, q), max(p, q))] = _SIGN2[b] * e12 * kb[a][b]
+    return out
+
+
+def _entries(L, E, G, A, I1, I2, J, As1=None, As2=None, I12=None):
+    """The upper-triangle entries ``{(i, j): values over elements}`` of the local stiffness.
+
+    ``As1``/``As2``: shear areas of planes 1 and 2 (``None`` or ``inf``: Euler-Bernoulli);
+    ``I12``: product of inertia (``None`` or all 0: uncoupled planes; not combined with shear
+    areas, as in NASTRAN, which ignores K1/K2 when I12 is non-zero)."""
     ea, gj = E * A / L, G * J / L
-    b1, b2, b3, b4 = 12 * E * I1 / L**3, 6 * E * I1 / L**2, 4 * E * I1 / L, 2 * E * I1 / L
-    c1, c2, c3, c4 = 12 * E * I2 / L**3, 6 * E * I2 / L**2, 4 * E * I2 / L, 2 * E * I2 / L
-    return {(0, 0): ea, (6, 6): ea, (0, 6): -ea,
+    p1 = shear_ratio(L, E, G, I1, np.inf if As1 is None else As1)
+    p2 = shear_ratio(L, E, G, I2, np.inf if As2 is None else As2)
+    d1, d2 = 1.0 + p1, 1.0 + p2
+    b1, b2 = 12 * E * I1 / L**3 / d1, 6 * E * I1 / L**2 / d1
+    b3, b4 = (4 + p1) * E * I1 / L / d1, (2 - p1) * E * I1 / L / d1
+    c1, c2 = 12 * E * I2 / L**3 / d2, 6 * E * I2 / L**2 / d2
+    c3, c4 = (4 + p2) * E * I2 / L / d2, (2 - p2) * E * I2 / L / d2
+    coupling = _coupling_entries(L, E, I12) if I12 is not None and np.any(I12) else {}
+    return coupling | {(0, 0): ea, (6, 6): ea, (0, 6): -ea,
             (3, 3): gj, (9, 9): gj, (3, 9): -gj,
             # plane 1: v (1, 7) and theta_z (5, 11), I1
             (1, 1): b1, (7, 7): b1, (1, 7): -b1,
@@ -37,19 +102,27 @@ def _entries(L, E, G, A, I1, I2, J):
 
 
 def local_stiffness_em(L: np.ndarray, E: np.ndarray, G: np.ndarray, A: np.ndarray,
-                       I1: np.ndarray, I2: np.ndarray, J: np.ndarray) -> np.ndarray:
-    """Local 12x12 stiffness of each of ``ne`` elements, entry-major: shape ``(12, 12, ne)``."""
+                       I1: np.ndarray, I2: np.ndarray, J: np.ndarray,
+                       As1: np.ndarray | None = None, As2: np.ndarray | None = None,
+                       I12: np.ndarray | None = None) -> np.ndarray:
+    """Local 12x12 stiffness of each of ``ne`` elements, entry-major: shape ``(12, 12, ne)``.
+
+    ``As1``, ``As2``: shear areas K1*A, K2*A (``None``/``inf``: no shear flexibility);
+    ``I12``: product of inertia (``None``/0: none)."""
     k = np.zeros((12, 12, np.shape(L)[0]))
-    for (i, j), val in _entries(L, E, G, A, I1, I2, J).items():
+    for (i, j), val in _entries(L, E, G, A, I1, I2, J, As1, As2, I12).items():
         k[i, j] = val
         k[j, i] = val
     return k
 
 
 def local_stiffness(L: np.ndarray, E: np.ndarray, G: np.ndarray, A: np.ndarray,
-                    I1: np.ndarray, I2: np.ndarray, J: np.ndarray) -> np.ndarray:
+                    I1: np.ndarray, I2: np.ndarray, J: np.ndarray,
+                    As1: np.ndarray | None = None, As2: np.ndarray | None = None,
+                    I12: np.ndarray | None = None) -> np.ndarray:
     """Local 12x12 stiffness for each of ``ne`` elements, shape ``(ne, 12, 12)``."""
-    return np.ascontiguousarray(local_stiffness_em(L, E, G, A, I1, I2, J).transpose(2, 0, 1))
+    return np.ascontiguousarray(
+        local_stiffness_em(L, E, G, A, I1, I2, J, As1, As2, I12).transpose(2, 0, 1))
 
 
 def rotation_matrices(xa: np.ndarray, xb: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -108,3 +181,44 @@ def global_stiffness(R: np.ndarray, k_local: np.ndarray) -> np.ndarray:
     """``T^T k T`` with ``T = blockdiag(R, R, R, R)`` for every element, shape ``(ne, 12, 12)``."""
     kg = global_stiffness_em(R, np.ascontiguousarray(np.asarray(k_local).transpose(1, 2, 0)))
     return np.ascontiguousarray(kg.transpose(2, 0, 1))
+
+
+def release_pins(k: np.ndarray, released: list[int]) -> np.ndarray:
+    """Pin flags: the local stiffness ``(m, 12, 12)`` with the local DOFs ``released`` (0-11; end A
+    0-5, end B 6-11, order u v w theta_x theta_y theta_z) condensed out by static condensation,
+
+        k_cc - k_cr k_rr^-1 k_rc,   released rows and columns zero,
+
+    i.e. the element transmits no force or moment in a released component (MSC Nastran
+    Reference Manual, CBAR pin flags). Raises ``ValueError`` with the element positions whose
+    ``k_rr`` is singular (the releases leave the element a rigid-body motion: e.g. the same
+    axial or transverse component released at both ends)."""
+    r = np.asarray(released, dtype=int)
+    c = np.setdiff1d(np.arange(12), r)
+    k_rr = k[:, r][:, :, r]
+    scale = np.abs(k_rr).max(axis=(1, 2))
+    bad = np.flatnonzero(~(np.linalg.cond(k_rr) < 1e10) | (scale == 0.0))
+    if bad.size:
+        raise ValueError(bad)
+    k_rc = k[:, r][:, :, c]
+    out = np.zeros_like(k)
+    cond = k[:, c][:, :, c] - np.einsum("mri,mrj->mij", k_rc, np.linalg.solve(k_rr, k_rc))
+    out[np.ix_(np.arange(k.shape[0]), c, c)] = 0.5 * (cond + cond.transpose(0, 2, 1))
+    return out
+
+
+def offset_transform(kg: np.ndarray, wa: np.ndarray, wb: np.ndarray) -> np.ndarray:
+    """Rigid offsets: ``T^T kg T`` for global element stiffnesses ``(m, 12, 12)`` whose ends sit at
+    ``grid + w`` (``wa``, ``wb``: ``(m, 3)``, basic system). The bar end moves with its grid as
+    a rigid body: u_end = u_grid + theta_grid x w, theta_end = theta_grid, so
+    ``T = blockdiag([[I, -S(wa)], [0, I]], [[I, -S(wb)], [0, I]])`` with ``S(w) a = w x a``."""
+    m = kg.shape[0]
+    T = np.broadcast_to(np.eye(12), (m, 12, 12)).copy()
+    for off, w in ((0, wa), (6, wb)):
+        wx, wy, wz = w[:, 0], w[:, 1], w[:, 2]
+        # -S(w): rows are the end translation, columns the grid rotation
+        T[:, off + 0, off + 4], T[:, off + 0, off + 5] = wz, -wy
+        T[:, off + 1, off + 3], T[:, off + 1, off + 5] = -wz, wx
+        T[:, off + 2, off + 3], T[:, off + 2, off + 4] = wy, -wx
+    out = np.einsum("mji,mjk,mkl->mil", T, kg, T)
+    return 0.5 * (out + out.transpose(0, 2, 1))

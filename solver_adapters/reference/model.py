@@ -1,5 +1,8 @@
 """Assembly, constraints and factorization of the reference frame model.
 
+Elements: CBAR (Euler-Bernoulli or, with PBAR K1/K2, Timoshenko bending; pin flags; offsets) and
+CROD/CONROD (axial + torsion), element matrices in ``frame.py``; CELAS springs.
+
 ``u_g = T u_f``: every grid component (g-set, 6 per grid) is a combination of the independent
 free components (f-set). SPC1 and GRID PS components get a zero row; RBE2 dependent components
 are exact rigid-body combinations of the independent grid's six components (no penalty):
@@ -29,7 +32,7 @@ import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 
 from solver_adapters.deck import Deck
-from solver_adapters.protocol import (DofLabel, ModelError, ScalarSpring, SolverError,
+from solver_adapters.protocol import (DofLabel, FactorizationError, ModelError, ScalarSpring,
                                       UnstableStructureError)
 from solver_adapters.reference import frame
 
@@ -89,33 +92,98 @@ def _grid_pos(grid_ids: np.ndarray, ids, what: str) -> np.ndarray:
     return p
 
 
+_N_PROPS = 9   # E, G, A, I1, I2, J, As1, As2 (shear areas K1*A, K2*A; inf: none), I12
+
+
 def _element_arrays(deck: Deck, grid_ids: np.ndarray, xyz: np.ndarray):
-    """Bars sorted by EID with end positions, orientation vectors and section properties."""
+    """Bars sorted by EID, then rods (CROD/CONROD) sorted by EID, with end positions,
+    orientation vectors and section properties ``(ne, 9)`` (see ``_N_PROPS``).
+
+    A rod is the frame element with I1 = I2 = 0 (axial EA/L and torsion GJ/L only); its
+    orientation vector is the basic axis least aligned with it, which only fixes local y and z,
+    on which a rod's stiffness does not depend.
+    """
     bars = sorted(deck.cbars.values(), key=lambda b: b.eid)
-    ne = len(bars)
-    ia = _grid_pos(grid_ids, np.fromiter((b.ga for b in bars), np.int64, ne), "CBAR")
-    ib = _grid_pos(grid_ids, np.fromiter((b.gb for b in bars), np.int64, ne), "CBAR")
+    rods = sorted(deck.rods.values(), key=lambda r: r.eid)
+    nb = len(bars)
+    elems = bars + rods
+    ne = len(elems)
+    ia = _grid_pos(grid_ids, np.fromiter((b.ga for b in elems), np.int64, ne), "element")
+    ib = _grid_pos(grid_ids, np.fromiter((b.gb for b in elems), np.int64, ne), "element")
     xa, xb = xyz[ia], xyz[ib]
-    has_g0 = np.fromiter((b.g0 is not None for b in bars), bool, ne)
-    v = np.array([b.x if b.g0 is None else (0.0, 0.0, 0.0) for b in bars], float).reshape(-1, 3)
+    has_g0 = np.zeros(ne, bool)
+    has_g0[:nb] = np.fromiter((b.g0 is not None for b in bars), bool, nb)
+    v = np.zeros((ne, 3))
+    v[:nb] = np.array([b.x if b.g0 is None else (0.0, 0.0, 0.0) for b in bars], float).reshape(-1, 3)
     if has_g0.any():
         g0 = _grid_pos(grid_ids, [bars[i].g0 for i in np.flatnonzero(has_g0)], "CBAR G0")
         v[has_g0] = xyz[g0] - xa[has_g0]
-    pids = np.fromiter((b.pid for b in bars), np.int64, ne)
+    if rods:
+        d = np.abs(xb[nb:] - xa[nb:])
+        v[np.arange(nb, ne), np.argmin(d, axis=1)] = 1.0
+    pids = np.fromiter((b.pid for b in bars), np.int64, nb)
     table = {}
     for pid in np.unique(pids).tolist():
         p = deck.pbars[pid]
         m = deck.mat1s[p.mid]
-        table[pid] = (m.e, m.g, p.a, p.i1, p.i2, p.j)
+        as1 = p.k1 * p.a if p.k1 else np.inf
+        as2 = p.k2 * p.a if p.k2 else np.inf
+        table[pid] = (m.e, m.g, p.a, p.i1, p.i2, p.j, as1, as2, p.i12)
     uniq = np.array(sorted(table), dtype=np.int64)
-    props = np.array([table[p] for p in uniq.tolist()], float).reshape(-1, 6)
-    props = props[np.searchsorted(uniq, pids)]
-    return bars, ia, ib, xa, xb, v, props
+    props = np.empty((ne, _N_PROPS))
+    bar_props = np.array([table[p] for p in uniq.tolist()], float).reshape(-1, _N_PROPS)
+    props[:nb] = bar_props[np.searchsorted(uniq, pids)]
+    for k, r in enumerate(rods):
+        mid, a, j = deck.rod_section(r)
+        m = deck.mat1s[mid]
+        props[nb + k] = (m.e, m.g, a, 0.0, 0.0, j, np.inf, np.inf, 0.0)
+    # pin flags as a bit mask of released local DOFs (bit i: DOF i, end A 0-5, end B 6-11)
+    pins = np.zeros(ne, np.int64)
+    offs = None
+    for k, b in enumerate(bars):
+        if b.pa or b.pb:
+            pins[k] = sum(1 << (int(ch) - 1) for ch in b.pa) + sum(1 << (int(ch) + 5) for ch in b.pb)
+        if b.wa is not None or b.wb is not None:
+            if offs is None:
+                offs = np.zeros((ne, 6))
+            offs[k] = (*(b.wa or (0.0, 0.0, 0.0)), *(b.wb or (0.0, 0.0, 0.0)))
+    return elems, ia, ib, xa, xb, v, props, pins, offs
+
+
+def _pins_and_offsets(kl: np.ndarray, kg_of, s: int, pins: np.ndarray, offs, elems) -> np.ndarray:
+    """Chunk ``s:s+m`` of the element stiffnesses: pin flags condensed out of the local matrices
+    ``kl`` (entry-major), then the global matrices ``kg_of(kl)`` moved to the grids by the rigid
+    offsets. Only elements with pins or offsets are touched (others stay bit for bit as they were)."""
+    m = kl.shape[2]
+    chunk_pins = pins[s:s + m]
+    for mask in np.unique(chunk_pins[chunk_pins != 0]).tolist():
+        idx = np.flatnonzero(chunk_pins == mask)
+        released = [i for i in range(12) if mask >> i & 1]
+        try:
+            kl[:, :, idx] = frame.release_pins(kl[:, :, idx].transpose(2, 0, 1), released).transpose(1, 2, 0)
+        except ValueError as exc:
+            b = elems[s + int(idx[int(exc.args[0][0])])]
+            raise ModelError(f"{b.src}: CBAR {b.eid}: pin flags PA={b.pa or 'blank'} "
+                             f"PB={b.pb or 'blank'} leave the bar a rigid-body motion (e.g. the "
+                             f"same axial, torsion or transverse component released at both "
+                             f"ends)") from None
+    kg = kg_of(kl)
+    if offs is not None:
+        idx = np.flatnonzero(np.any(offs[s:s + m] != 0.0, axis=1))
+        if idx.size:
+            w = offs[s + idx]
+            kg[:, :, idx] = frame.offset_transform(kg[:, :, idx].transpose(2, 0, 1),
+                                                   w[:, :3], w[:, 3:]).transpose(1, 2, 0)
+    return kg
 
 
 def _assemble_bars(ia: np.ndarray, ib: np.ndarray, R: np.ndarray, L: np.ndarray,
-                   props: np.ndarray, n_grids: int) -> sp.csr_matrix:
+                   props: np.ndarray, n_grids: int, pins: np.ndarray | None = None,
+                   offs: np.ndarray | None = None, elems=None) -> sp.csr_matrix:
     """Sum of the bars' global stiffness matrices, assembled by 6x6 grid blocks.
+
+    ``pins`` (bit masks of released local DOFs) and ``offs`` (WA, WB per element, ``(ne, 6)``)
+    are applied by :func:`_pins_and_offsets`; ``elems`` names the element in errors.
 
     Each bar adds four 6x6 blocks (aa, bb, ab, ba). The distinct grid pairs (the block pattern)
     come from one ``np.unique`` over 4 * n_bars keys, the block sums from one sparse product
@@ -126,7 +194,12 @@ def _assemble_bars(ia: np.ndarray, ib: np.ndarray, R: np.ndarray, L: np.ndarray,
     blocks = np.empty((4, ne, 6, 6))
     for s in range(0, ne, _CHUNK):
         e = slice(s, s + _CHUNK)
-        kg = frame.global_stiffness_em(R[e], frame.local_stiffness_em(L[e], *props[e].T))
+        kl = frame.local_stiffness_em(L[e], *props[e].T)
+        if (pins is not None and pins[e].any()) or (offs is not None and offs[e].any()):
+            kg = _pins_and_offsets(kl, lambda k: frame.global_stiffness_em(R[e], k), s, pins,
+                                   offs, elems)
+        else:
+            kg = frame.global_stiffness_em(R[e], kl)
         m = kg.shape[2]
         for q, (r0, c0) in enumerate(((0, 0), (6, 6), (0, 6), (6, 0))):
             blocks[q, s:s + m] = kg[r0:r0 + 6, c0:c0 + 6].transpose(2, 0, 1)
@@ -158,21 +231,25 @@ def assemble(deck: Deck, extra_springs: tuple[ScalarSpring, ...] = (),
     grid_ids = np.array(sorted(deck.grids), dtype=np.int64)
     n_g = 6 * len(grid_ids)
     xyz = np.array([deck.grids[g].xyz for g in grid_ids.tolist()], float).reshape(-1, 3)
-    bars, ia, ib, xa, xb, v, props = _element_arrays(deck, grid_ids, xyz)
+    bars, ia, ib, xa, xb, v, props, pins, offs = _element_arrays(deck, grid_ids, xyz)
     tm["elements_read_s"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     K_gg = sp.csr_matrix((n_g, n_g))
     if bars:
         try:
-            R, L = frame.rotation_matrices(xa, xb, v)
+            if offs is None:
+                R, L = frame.rotation_matrices(xa, xb, v)
+            else:                     # the bar runs between its ends, v stays measured from GA
+                R, L = frame.rotation_matrices(xa + offs[:, :3], xb + offs[:, 3:], v)
         except ValueError as exc:
             b = bars[int(exc.args[0][0])]
-            raise ModelError(f"{b.src}: CBAR {b.eid}: orientation vector is parallel to the bar "
-                             f"axis GA={b.ga} -> GB={b.gb}") from None
+            raise ModelError(f"{b.src}: {getattr(b, 'card', 'CBAR')} {b.eid}: orientation vector "
+                             f"is parallel to the bar axis GA={b.ga} -> GB={b.gb}") from None
         if np.any(L <= 0):
             b = bars[int(np.flatnonzero(L <= 0)[0])]
-            raise ModelError(f"{b.src}: CBAR {b.eid}: zero length (GA={b.ga}, GB={b.gb} coincide)")
-        K_gg = _assemble_bars(ia, ib, R, L, props, len(grid_ids))
+            raise ModelError(f"{b.src}: {getattr(b, 'card', 'CBAR')} {b.eid}: zero length "
+                             f"(GA={b.ga}, GB={b.gb} coincide)")
+        K_gg = _assemble_bars(ia, ib, R, L, props, len(grid_ids), pins, offs, bars)
     tm["elements_s"] = time.perf_counter() - t1
 
     t1 = time.perf_counter()
@@ -382,11 +459,9 @@ _PARDISO_ERRORS = {-1: "input inconsistent", -2: "not enough memory", -3: "reord
                    -11: "read/write error with OOC files", -12: "pardiso_64 called from 32-bit library"}
 
 
-class _PardisoError(SolverError):
-    def __init__(self, code: int, phase: int):
-        self.code = code
-        super().__init__(f"MKL PARDISO failed in phase {phase}: error {code} "
-                         f"({_PARDISO_ERRORS.get(code, 'unknown')})")
+def _pardiso_error(code: int, phase: int) -> FactorizationError:
+    return FactorizationError(f"MKL PARDISO failed in phase {phase}: error {code} "
+                              f"({_PARDISO_ERRORS.get(code, 'unknown')})", code=code, phase=phase)
 
 
 class PardisoLDLT:
@@ -408,7 +483,7 @@ class PardisoLDLT:
         A.sum_duplicates()
         A.sort_indices()
         if A.nnz >= 2**31:
-            raise SolverError("matrix too large for 32-bit PARDISO indexing (nnz >= 2^31)")
+            raise FactorizationError("matrix too large for 32-bit PARDISO indexing (nnz >= 2^31)")
         self.n = A.shape[0]
         self.a = np.ascontiguousarray(A.data, dtype=np.float64)
         self.ia = A.indptr.astype(np.int32)
@@ -425,7 +500,7 @@ class PardisoLDLT:
             return
         try:
             self._factor(2)
-        except _PardisoError as exc:
+        except FactorizationError as exc:
             if exc.code not in (-4, -7):
                 raise
             self.close()
@@ -470,7 +545,7 @@ class PardisoLDLT:
                     None if b is None else b.ctypes.data, None if x is None else x.ctypes.data,
                     ctypes.byref(err))
         if err.value != 0:
-            raise _PardisoError(err.value, phase)
+            raise _pardiso_error(err.value, phase)
 
     @property
     def perturbed(self) -> int:
@@ -500,7 +575,7 @@ class PardisoLDLT:
             getdiag(self.pt.ctypes.data_as(ptp), df.ctypes.data, da.ctypes.data,
                     ctypes.byref(ctypes.c_int32(1)), ctypes.byref(err))
         if err.value != 0:
-            raise _PardisoError(err.value, 0)
+            raise _pardiso_error(err.value, 0)
         ratio = np.empty(self.n)
         ratio[self.perm] = np.abs(df) / da          # df, da are in pivot order: perm[k] is DOF
         return ratio
