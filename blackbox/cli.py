@@ -1,7 +1,9 @@
-"""The ``blackbox`` command (CONTRACT.md section 2).
+"""The ``blackbox`` command: one sub-command per capability (docs/commands.md).
 
-Every sub-command exits non-zero with a one-paragraph message on bad input; ``--debug`` shows
-the traceback instead.
+Exit codes: 0 done; 2 bad input (study, deck, options, ``--out``); 3 the solver failed; 4 the
+command finished but its result is not usable as it stands (not converged, a parameter not
+identifiable, or a diagnosis left unexplained) -- the reasons are printed. A message is one
+paragraph; ``--debug`` (anywhere on the command line) shows the traceback instead.
 """
 
 from __future__ import annotations
@@ -14,24 +16,37 @@ from pathlib import Path
 
 import numpy as np
 
-from blackbox.errors import IdentificationError, StudyError
-from solver_adapters.protocol import SolverError
+from blackbox.commands.output import check_out, write_output
+from blackbox.errors import BlackboxError
+from solver_adapters.errors import ConsentError
+from solver_adapters.protocol import DeckFormatError, ModelError, SolverError, UnknownDofError
+
+EXIT_OK, EXIT_BAD_INPUT, EXIT_SOLVER, EXIT_UNUSABLE = 0, 2, 3, 4
+"""The documented exit codes (docs/commands.md)."""
+
+_BAD_INPUT_SOLVER_ERRORS = (DeckFormatError, ModelError, UnknownDofError)
+"""Solver-side errors that are the user's input, not the solver's failure."""
 
 
-def _write_csv(path: Path, header: list[str], rows) -> None:
-    with path.open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(header)
-        w.writerows(rows)
+def _out_for(args, command: str) -> Path:
+    """``--out`` checked before any work (the study itself is protected)."""
+    protect = (Path(args.study),) if getattr(args, "study", None) is not None and Path(args.study).is_dir() else ()
+    return check_out(args.out, command, protect=protect)
+
+
+def _warn(lines: list[str]) -> None:
+    for w in lines:
+        print(f"  warning: {w}", flush=True)
 
 
 # --------------------------------------------------------------------------------------------
 # sub-commands
 # --------------------------------------------------------------------------------------------
 def cmd_solve(args) -> int:
+    from blackbox.adapters import make_adapter_for
     from blackbox.study import load_study
-    from blackbox.workflows import make_adapter_for
 
+    out_dir = _out_for(args, "solve")
     study = load_study(args.study)
     adapter = make_adapter_for(study, args.adapter)
     report = adapter.dofs()
@@ -40,103 +55,117 @@ def cmd_solve(args) -> int:
     wall = time.perf_counter() - t0
     if not np.all(np.isfinite(out.values)):
         raise SolverError(f"adapter {adapter.name!r} returned non-finite displacements")
-    args.out.mkdir(parents=True, exist_ok=True)
-    rows = ((case, g, c, repr(float(out.values[i, j])))
-            for j, case in enumerate(out.cases) for i, (g, c) in enumerate(out.dofs))
-    _write_csv(args.out / "displacements.csv", ["case", "grid", "component", "value"], rows)
+
+    def write(folder: Path) -> list[str]:
+        with (folder / "displacements.csv").open("w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["case", "grid", "component", "value"])
+            w.writerows((case, g, c, repr(float(out.values[i, j])))
+                        for j, case in enumerate(out.cases) for i, (g, c) in enumerate(out.dofs))
+        return ["displacements.csv"]
+
+    write_output(out_dir, "solve", write)
     print(f"solved {len(out.cases)} case(s) x {len(report)} DOFs with {adapter.name!r} in "
-          f"{wall:.3f} s ({adapter.stats.runs} solver run(s)) -> {args.out / 'displacements.csv'}")
-    return 0
+          f"{wall:.3f} s ({adapter.stats.runs} solver run(s)) -> {out_dir / 'displacements.csv'}")
+    return EXIT_OK
 
 
 def cmd_simulate(args) -> int:
-    from blackbox.workflows import simulate_study
+    from blackbox.commands import simulate
 
-    rec = simulate_study(args.study, args.truth, args.out, args.adapter)
-    print(f"simulated {rec['n_measurements']} measurements over {len(rec['cases'])} case(s) "
-          f"({rec['solver_runs']} solver run(s)) -> {args.out / 'measurements.csv'}")
-    return 0
+    out = _out_for(args, "simulate")
+    res = simulate.run(args.study, args.truth, adapter=args.adapter)
+    write_output(out, "simulate", res.write)
+    print(f"simulated {res.n_measurements} measurements over {len(res.record['cases'])} case(s) "
+          f"({res.record['solver_runs']} solver run(s)) -> {out / 'measurements.csv'}")
+    return EXIT_OK
 
 
 def cmd_identify(args) -> int:
-    import json
+    from blackbox.commands import identify
 
-    from blackbox.report import fit_report, identification_plots
-    from blackbox.study import load_study
-    from blackbox.workflows import identify_study, make_adapter_for, truth_of
-
-    study = load_study(args.study, need_measurements=True)
-    adapter = make_adapter_for(study, args.adapter)
+    out = _out_for(args, "identify")
 
     def progress(rec) -> bool:
         print(f"  iteration {rec.iteration:2d}  {rec.phase:<11s} chi2 = {rec.objective:.6g}", flush=True)
         return False
 
+    from blackbox.study import load_study
+    study = load_study(args.study, need_measurements=True)
     print(f"identify {study.name}: {len(study.measurements)} measurements, joints "
-          f"{[j.name for j in study.config.joints]}, adapter {adapter.name!r}")
-    run = identify_study(study, adapter, model=args.model, progress=progress)
-    r = run.result
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "result.json").write_text(json.dumps(r.to_json_dict(run.solver), indent=2))
-    truth = truth_of(study)
-    (args.out / "report.md").write_text(
-        fit_report(r, title=f"Identification of {study.name}", solver=run.solver, truth=truth)
-        + "\n![convergence](convergence.png)\n\n![estimates](estimates.png)\n\n![residuals](residuals.png)\n")
-    plots = identification_plots(r, run.fit_obs, args.out, truth=truth)
+          f"{[j.name for j in study.config.joints]}", flush=True)
+    res = identify.run(study, adapter=args.adapter, model=args.model, progress=progress,
+                       stages=_Throttled())
+    print("  writing the report and plots", flush=True)
+    files = write_output(out, "identify", res.write)
+    r, cost = res.result, res.solver
     print(f"{'converged' if r.converged else 'NOT converged'} in {r.iterations} iterations "
-          f"({r.message}); reduced chi2 = {r.reduced_chi2:.4g}; {run.solver['runs']} solver run(s)"
-          + (f" + {run.solver['cached_batches']} batch(es) from the cache"
-             if run.solver.get("cached_batches") else "")
-          + f", {run.solver['right_hand_sides']} right-hand sides -> {args.out}"
-          + ("" if plots else " (no plots: install matplotlib)"))
-    return 0 if r.converged else 3
+          f"({r.message}); reduced chi2 = {r.reduced_chi2:.4g}; {cost.runs} solver run(s)"
+          + (f" + {cost.cached_batches} batch(es) from the cache" if cost.cached_batches else "")
+          + f", {cost.right_hand_sides} right-hand sides, adapter {cost.adapter!r} -> {out}"
+          + ("" if any(f.endswith(".png") for f in files) else " (no plots: install matplotlib)"))
+    _warn(list(r.warnings))
+    if not res.ok:
+        why = [] if r.converged else ["the estimation did not converge"]
+        bad = [f"{j}.{n}" for j, n, ok in zip(r.param_joint, r.param_names, r.identifiable) if not ok]
+        if bad:
+            why.append(f"not identifiable from these data: {', '.join(bad)} (rank {r.rank} of {r.n_params})")
+        print(f"blackbox identify: result not usable as it stands: {'; '.join(why)} (exit {EXIT_UNUSABLE})",
+              file=sys.stderr)
+        return EXIT_UNUSABLE
+    return EXIT_OK
 
 
 def cmd_compare(args) -> int:
-    """``blackbox compare STUDY``: simple vs complex joint model (Chapter 6), ``blackbox.compare_run``."""
-    from blackbox.compare_run import compare_study
+    """``blackbox compare STUDY``: simple vs complex joint model (Chapter 6)."""
+    from blackbox.commands import compare
 
-    res = compare_study(args.study, args.out, args.adapter, log=lambda s: print(s, flush=True))
-    se = res["strain_energy"]
+    out = _out_for(args, "compare")
+    res = compare.run(args.study, adapter=args.adapter, log=lambda s: print(s, flush=True))
+    write_output(out, "compare", res.write)
+    se = res.document["strain_energy"]
     print(f"isolated joint: E_complex = {se['complex']:.4e}, E_simple = {se['simple']:.4e}, "
-          f"R = {100 * se['relative_difference']:.1f} % -> {args.out / 'comparison.json'}")
-    ok = all(m["converged"] for m in res["models"].values())
-    return 0 if ok else 3
+          f"R = {100 * se['relative_difference']:.1f} % -> {out / 'comparison.json'}")
+    if not res.ok:
+        bad = [m for m, d in res.document["models"].items() if not d["converged"]]
+        print(f"blackbox compare: the {' and '.join(bad)} fit did not converge (exit {EXIT_UNUSABLE})",
+              file=sys.stderr)
+        return EXIT_UNUSABLE
+    return EXIT_OK
 
 
 def cmd_diagnose(args) -> int:
-    """``blackbox diagnose STUDY``: find what the declared model lacks (``blackbox.diagnose_run``)."""
-    from blackbox.diagnose_run import run_diagnose
+    """``blackbox diagnose STUDY``: find what the declared model lacks and add it."""
+    from blackbox.commands import diagnose
 
+    out = _out_for(args, "diagnose")
     effects = tuple(e.strip() for e in args.effects.split(",") if e.strip()) if args.effects else None
-    opts = {"effects": effects} if effects else {}
-    run = run_diagnose(args.study, args.out, adapter_name=args.adapter, alpha=args.alpha,
-                       max_steps=args.max_steps, refit_top=args.refit_top,
-                       progress=lambda s: print(s, flush=True), **opts)
-    d = run.document
+    res = diagnose.run(args.study, adapter=args.adapter, alpha=args.alpha, max_steps=args.max_steps,
+                       refit_top=args.refit_top, effects=effects, progress=lambda s: print(s, flush=True))
+    write_output(out, "diagnose", res.write)
+    d = res.document
     b, a = d["before"], d["after"]
     added = ", ".join(f"{e['effect']} @ {', '.join(map(str, e['where']))[:40]}" for e in d["added"]) or "nothing"
     print(f"added {added}; reduced chi2 {b['reduced_chi2']:.4g} -> {a['reduced_chi2']:.4g} "
           f"(99% band {a['band_99'][0]:.3g}..{a['band_99'][1]:.3g}), hold-out RMS "
           f"{b['holdout_rms'] if b['holdout_rms'] is not None else float('nan'):.4g} -> "
           f"{a['holdout_rms'] if a['holdout_rms'] is not None else float('nan'):.4g}; "
-          f"{d['solver']['runs']} solver runs, {d['wall_s']:.1f} s -> {args.out}")
-    return 0
+          f"{d['solver']['runs']} solver runs, {d['wall_s']:.1f} s -> {out}")
+    return EXIT_OK
 
 
 def cmd_bench(args) -> int:
-    from blackbox.bench import CASES, main_bench
+    from blackbox.commands import bench
 
     adapters = [a.strip() for a in args.adapters.split(",") if a.strip()]
-    cases = [c.strip() for c in args.cases.split(",") if c.strip()] if args.cases else list(CASES)
-    unknown = [c for c in cases if c not in CASES]
-    if unknown:
-        raise ValueError(f"unknown bench case(s) {unknown}; known: {', '.join(CASES)}")
+    cases = [c.strip() for c in args.cases.split(",") if c.strip()] if args.cases else list(bench.CASES)
+    out = check_out(args.out, "bench")
     print(f"bench: cases {cases}, adapters {adapters}")
     command = "blackbox bench " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else "blackbox bench"
-    main_bench(args.out, args.fixtures, adapters, cases, args.repeat, command)
-    print(f"-> {args.out / 'bench.json'}, {args.out / 'bench.md'}")
-    return 0
+    res = bench.run(args.fixtures, adapters, cases, args.repeat, command=command)
+    write_output(out, "bench", res.write)
+    print(f"-> {out / 'bench.json'}, {out / 'bench.md'}")
+    return EXIT_OK
 
 
 def cmd_conformance(args) -> int:
@@ -152,7 +181,7 @@ def cmd_conformance(args) -> int:
     with tempfile.TemporaryDirectory(prefix="blackbox-conformance-") as tmp:
         if args.study is not None:
             from blackbox.study import load_study
-            from blackbox.workflows import make_adapter_for
+            from blackbox.adapters import make_adapter_for
 
             study = load_study(args.study)
 
@@ -194,7 +223,7 @@ def cmd_conformance(args) -> int:
 
 def add_cache_options(s: argparse.ArgumentParser) -> None:
     """``--no-cache`` / ``--cache-dir`` for a sub-command that builds adapters for a study
-    (``main`` hands them to ``blackbox.workflows.make_adapter_for`` through ``ADAPTER_CACHE``)."""
+    (``main`` hands them to ``blackbox.adapters.make_adapter_for`` through ``ADAPTER_CACHE``)."""
     s.add_argument("--no-cache", action="store_true",
                    help="run the solver even for batches already in the study's .blackbox_cache/")
     s.add_argument("--cache-dir", type=Path, default=None,
@@ -213,6 +242,8 @@ def _study_command(sub, name: str, help: str, func, *, cache: bool = True) -> ar
     s.add_argument("study", type=Path)
     s.add_argument("--adapter", default=None, help="override [solver] adapter")
     s.add_argument("--out", type=Path, required=True)
+    s.add_argument("--trust-command", action="store_true",
+                   help="consent, for this run, to start the study's external command (adapter \"command\")")
     if cache:
         add_cache_options(s)
     s.set_defaults(func=func)
@@ -221,7 +252,7 @@ def _study_command(sub, name: str, help: str, func, *, cache: bool = True) -> ar
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="blackbox", description=__doc__.splitlines()[0])
-    p.add_argument("--debug", action="store_true", help="show tracebacks")
+    p.add_argument("--debug", action="store_true", help="show tracebacks (accepted anywhere)")
     sub = p.add_subparsers(dest="command", required=True)
 
     _study_command(sub, "solve", "solve the study's load cases, no joint model added", cmd_solve)
@@ -234,7 +265,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", type=Path, required=True)
     s.add_argument("--adapters", default="reference", help="comma-separated, e.g. reference,mystran")
     s.add_argument("--cases", default=None, help="comma-separated subset of cube-simple,cube-complex,car-simple,car-complex")
-    s.add_argument("--repeat", type=int, default=3, help="best of N timings per row")
+    s.add_argument("--repeat", type=_positive_int, default=3, help="best of N timings per row")
     s.add_argument("--fixtures", type=Path, default=Path(__file__).resolve().parents[1] / "fixtures")
     s.set_defaults(func=cmd_bench)
 
@@ -275,32 +306,90 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
+    return v
+
+
+class _Throttled:
+    """Prints a stage's progress lines at most every ``every_s`` seconds, and the last of each
+    stage (``k/k``), so a long stage shows it is alive and a short one stays quiet."""
+
+    def __init__(self, every_s: float = 2.0):
+        self.every_s, self.last = every_s, time.perf_counter()
+
+    def __call__(self, message: str) -> None:
+        import re
+        m = re.search(r"(\d+)/(\d+)", message)
+        final = m is not None and m.group(1) == m.group(2)
+        now = time.perf_counter()
+        if final or m is None or now - self.last >= self.every_s:
+            print(f"  {message}", flush=True)
+            self.last = now
+
+
+def _heartbeat(elapsed_s: float, last_line: str) -> None:
+    """One terminal line every few seconds while an external solver runs."""
+    tail = f": {last_line.strip()[:100]}" if last_line and last_line.strip() else ""
+    print(f"  solver running, {elapsed_s:.0f} s{tail}", flush=True)
+
+
+def exit_code(exc: BaseException) -> int:
+    """The documented exit code of an error that ended a command."""
+    if isinstance(exc, SolverError) and not isinstance(exc, _BAD_INPUT_SOLVER_ERRORS + (ValueError,)):
+        return EXIT_SOLVER
+    return EXIT_BAD_INPUT
+
+
 def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv                 # accepted anywhere on the command line
+    argv = [a for a in argv if a != "--debug"]
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.debug = debug
+    from solver_adapters.subprocess import install_termination_handlers
+
+    from blackbox.adapters import ADAPTER_CACHE, SOLVER_PROGRESS, TRUST_COMMAND
+
+    import threading
+    previous = (install_termination_handlers()      # SIGTERM/SIGHUP end a run as Ctrl-C does
+                if threading.current_thread() is threading.main_thread() else {})
+    trust_token = TRUST_COMMAND.set(bool(getattr(args, "trust_command", False)))
+    beat_token = SOLVER_PROGRESS.set(_heartbeat)
     cache_token = None
     if hasattr(args, "no_cache"):  # a sub-command with --no-cache / --cache-dir (add_cache_options)
-        from blackbox.workflows import ADAPTER_CACHE
         cache_token = ADAPTER_CACHE.set(_cache_choice(args))
     try:
         return int(args.func(args) or 0)
-    except (StudyError, SolverError, IdentificationError, ValueError, OSError) as exc:
-        if args.debug:
+    except (BlackboxError, SolverError, ConsentError, ValueError, OSError) as exc:
+        if debug:
             raise
-        kind = type(exc).__name__
-        print(f"blackbox {args.command}: {kind}: {exc}", file=sys.stderr)
-        return 2
+        code = exit_code(exc)
+        what = "solver failure" if code == EXIT_SOLVER else "bad input"
+        print(f"blackbox {args.command}: {what}: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return code
     except KeyboardInterrupt:
         print(f"blackbox {args.command}: interrupted (finished solver batches are kept in the "
               f"cache; run the command again to resume)", file=sys.stderr)
         return 130
     except Exception as exc:                 # a bug, not bad input: still one paragraph
-        if args.debug:
+        if debug:
             raise
         print(f"blackbox {args.command}: unexpected {type(exc).__name__}: {exc} "
               f"(this is a bug in blackbox; run again with --debug for the traceback)", file=sys.stderr)
         return 1
     finally:
+        import signal
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        TRUST_COMMAND.reset(trust_token)
+        SOLVER_PROGRESS.reset(beat_token)
         if cache_token is not None:
             ADAPTER_CACHE.reset(cache_token)
 

@@ -47,21 +47,18 @@ import numpy as np
 from scipy import stats
 
 from blackbox.condensation import Condensed, CondensedModel
+from blackbox.errors import ComparisonError
 from blackbox.identification import IdentificationResult, Observations, identify
 from blackbox.joints import JointModel, SimpleJoint, simple_to_complex_params
 from solver_adapters.protocol import DofLabel
 
-__all__ = ["ComparisonError", "MDSE", "JointComparison", "ModelFits", "clamped_stiffness",
+__all__ = ["ComparisonError", "MDSE", "Stage", "JointComparison", "ModelFits", "clamped_stiffness",
            "isolated_flexibility", "assembly_flexibility", "mdse_load", "strain_energy",
            "evaluate_load", "compare_flexibilities", "compare_joints", "identify_both",
            "append_case", "dof_name", "likelihood_ratio", "energy_uncertainty"]
 
 _AXES = "xyz"
 _COND_MAX = 1e14        # a flexibility solve worse conditioned than this is a mechanism
-
-
-class ComparisonError(ValueError):
-    """The comparison cannot be made (a mechanism, mismatched models...); says what was given."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -320,6 +317,17 @@ def compare_joints(condensed: Condensed, simple_joints: Sequence[JointModel], k_
             b = compare_flexibilities(cj.rotation_dofs, asm_names, asm)
         out.append(JointComparison(cj.name, cj.n_branches, a, b))
     return out
+
+
+@dataclass(frozen=True, eq=False)
+class Stage:
+    """One identification of both models on a study's data, and their comparison."""
+    n_measurements: int
+    cases: tuple[str, ...]                                  # the study's load cases
+    fits: "ModelFits"
+    joints: list["JointComparison"]
+    uncertainty: list[dict]                                 # energy_uncertainty, per joint
+    fixed_load: list["JointComparison"] | None = None      # under an earlier stage's MDSE loadings
 
 
 # --------------------------------------------------------------------------------------------

@@ -1,10 +1,23 @@
-"""Every error class the tool raises, in one place (solver errors come from the protocol)."""
+"""Every error class the tool raises, in one place.
 
-from solver_adapters.protocol import (DeckFormatError, ModelError, SolverError, SolverRunError,
-                                      SolverTimeoutError, UnknownDofError, UnstableStructureError)
+The solver errors (:class:`SolverError` and its subclasses) are defined in
+``solver_adapters.errors`` and re-exported here from ``solver_adapters.protocol``. The errors of
+the method and of the study files all derive from :class:`BlackboxError`; the ones that describe
+a bad argument or option are also ``ValueError`` so that callers catching ``ValueError`` keep
+working. This module imports nothing of ``blackbox`` (every other module may import it).
+"""
+
+from solver_adapters.protocol import (DeckFormatError, FactorizationError, ModelError, OptionError,
+                                      PluginConflictError, PluginLoadError, RegistryError, SolverError,
+                                      SolverRunError, SolverTimeoutError, UnknownDofError,
+                                      UnknownPluginError, UnstableStructureError)
 
 
-class StudyError(Exception):
+class BlackboxError(Exception):
+    """Base class of every error of the method and of the study files (not of the solvers)."""
+
+
+class StudyError(BlackboxError):
     """A study folder that cannot be used: says file, line, column and what was given."""
 
     def __init__(self, message: str, *, file: str | None = None, line: int | None = None,
@@ -18,9 +31,24 @@ class StudyError(Exception):
         super().__init__(f"{where}: {message}" if where else message)
 
 
-class IdentificationError(Exception):
+class IdentificationError(BlackboxError):
     """The estimation cannot proceed (too few observations, non-finite residuals...)."""
 
 
-__all__ = ["StudyError", "IdentificationError", "DeckFormatError", "ModelError", "SolverError",
-           "SolverRunError", "SolverTimeoutError", "UnknownDofError", "UnstableStructureError"]
+class JointModelError(BlackboxError, ValueError):
+    """A joint description or a parameter vector that cannot be used (says what and what was given)."""
+
+
+class ComparisonError(BlackboxError, ValueError):
+    """The comparison cannot be made (a mechanism, mismatched models...); says what was given."""
+
+
+class DiagnosisError(BlackboxError, ValueError):
+    """The diagnosis cannot run: an option it does not know or cannot use, or a study it cannot
+    diagnose (says which and what was given)."""
+
+
+__all__ = ["BlackboxError", "StudyError", "IdentificationError", "JointModelError", "ComparisonError",
+           "DiagnosisError", "SolverError", "DeckFormatError", "ModelError", "UnstableStructureError",
+           "UnknownDofError", "SolverRunError", "SolverTimeoutError", "FactorizationError",
+           "RegistryError", "UnknownPluginError", "PluginLoadError", "PluginConflictError", "OptionError"]

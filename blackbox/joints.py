@@ -1,7 +1,7 @@
 """Flexible-joint models of Chapter 2: the simple model (Sec. 2.2) and the complex model (Sec. 2.3).
 
 A flexible joint with ``n`` branches is ``n`` coincident branch-end grids tied in translation
-(the RBE2 of the deck, ``CONTRACT.md`` Sec. 1). Its joint stiffness ``K_J`` acts on the
+(the RBE2 of the deck, ``docs/study-format.md``). Its joint stiffness ``K_J`` acts on the
 ``3 + 3n`` boundary DOFs, in this order::
 
     (g1,1) (g1,2) (g1,3)                 translations of GN = branch 1's grid (rows of zeros)
@@ -44,6 +44,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from blackbox.errors import JointModelError
 from solver_adapters.protocol import DofLabel, ScalarSpring
 
 __all__ = [
@@ -69,15 +70,11 @@ PLANES = ("x", "y", "z")
 JOINT_MODELS = ("simple", "complex")
 
 
-class JointModelError(ValueError):
-    """A joint description or a parameter vector that cannot be used (says what and what was given)."""
-
-
 # --------------------------------------------------------------------------------------------
 # DOF layout
 # --------------------------------------------------------------------------------------------
 def joint_dofs(grids: Sequence[int]) -> list[DofLabel]:
-    """The ``3 + 3n`` boundary DOF labels of a joint (``CONTRACT.md`` Sec. 1, eq. 3).
+    """The ``3 + 3n`` boundary DOF labels of a joint (``docs/study-format.md``, eq. 3).
 
     ``[(g1,1), (g1,2), (g1,3), (g1,4), (g1,5), (g1,6), (g2,4), (g2,5), (g2,6), ...]``: the
     translations of branch 1's grid (GN of the RBE2), then the rotations of every branch grid.
@@ -166,7 +163,7 @@ class JointModel(abc.ABC):
     @property
     @abc.abstractmethod
     def param_names(self) -> tuple[str, ...]:
-        """Parameter names in parameter-vector order (``CONTRACT.md`` Sec. 3)."""
+        """Parameter names in parameter-vector order (``docs/study-format.md``)."""
 
     @property
     def n_params(self) -> int:
@@ -225,7 +222,7 @@ class JointModel(abc.ABC):
 
     @abc.abstractmethod
     def initial_params(self, value: float) -> np.ndarray:
-        """The start vector of ``study.toml``'s ``initial`` (``CONTRACT.md`` Sec. 1)."""
+        """The start vector of ``study.toml``'s ``initial`` (``docs/study-format.md``)."""
 
     # ---- parameter vectors <-> dicts -------------------------------------------------------
     def to_dict(self, k: Sequence[float]) -> dict[str, float]:
@@ -516,7 +513,7 @@ class ComplexJoint(JointModel):
         return bool(lam.min() >= -1e-12 * max(float(np.abs(lam).max()), np.finfo(float).tiny))
 
     def initial_params(self, value: float) -> np.ndarray:
-        """``K_C = value * I`` (``CONTRACT.md`` Sec. 1, ``initial``)."""
+        """``K_C = value * I`` (``initial`` in ``docs/study-format.md``)."""
         return complex_params_from_kc(float(value) * np.eye(self.m))
 
 
@@ -653,13 +650,14 @@ def actual_joint_stub_kc(directions: Sequence[Sequence[float]], length: float, E
     ``K_C`` of eq. 4 / Table 2.2 (symmetric positive definite). Bending terms scale like
     ``1/length`` (``4EI/L``), so the stub length sets how flexible the joint is.
 
-    Check against Table 5.12 (cube joint at node 7, Table 3.1 members, ``length = 1e-2``): with
-    branch 1 towards node 3 (-z), branch 2 towards node 8 (-x) and branch 3 towards node 6 (-y,
-    clamped) every entry's sign and ratio agree to the table's 4 digits, but the table is
-    ``10 x`` this ``K_C`` (as if ``E, G`` -- or ``A, I, J`` -- were ten times Table 3.1's); the
-    table's ``k13 = 0.7508E5`` is ``0.7805E5`` here (= its own ``k23, k45, k46``, as the
-    joint's x<->z mirror symmetry requires) and its ``k34 = -0.1530E4`` has the opposite sign
-    here. Other branch orders or free far-end translations do not reproduce the pattern.
+    Check against Table 5.12 (cube joint at node 7, Table 3.1 members, ``length = 1e-2``; both
+    tables are in :mod:`blackbox.reference_tables`): with branch 1 towards node 3 (-z), branch 2
+    towards node 8 (-x) and branch 3 towards node 6 (-y, clamped) every entry's sign and ratio
+    agree to the table's 4 digits, but the table is ``10 x`` this ``K_C`` (as if ``E, G`` -- or
+    ``A, I, J`` -- were ten times Table 3.1's); the table's ``k13 = 0.7508E5`` is ``0.7805E5``
+    here (= its own ``k23, k45, k46``, as the joint's x<->z mirror symmetry requires) and its
+    ``k34 = -0.1530E4`` has the opposite sign here. Other branch orders or free far-end
+    translations do not reproduce the pattern.
     """
     D = np.asarray(directions, dtype=float)
     if D.ndim != 2 or D.shape[1] != 3 or D.shape[0] < 2:

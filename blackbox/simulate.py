@@ -78,11 +78,11 @@ def noise_sigma(true: np.ndarray, kinds: np.ndarray, case_idx: np.ndarray, cfg: 
     """Per-row sigma: ``relative*|u|`` floored by ``relative*floor*max|u|`` over the rows of the
     same kind (translation/rotation) and case, with ``absolute`` added in quadrature."""
     mag = np.abs(true)
-    ref = np.zeros_like(mag)
-    for c in np.unique(case_idx):
-        for k in np.unique(kinds):
-            sel = (case_idx == c) & (kinds == k)
-            ref[sel] = mag[sel].max()
+    _, group = np.unique(np.stack([np.asarray(case_idx), np.asarray(kinds)]), axis=1, return_inverse=True)
+    group = group.ravel()
+    peak = np.zeros(group.max() + 1 if group.size else 0)
+    np.maximum.at(peak, group, mag)                 # largest |u| of each (case, kind): linear time
+    ref = peak[group]
     rel = cfg.relative * np.maximum(mag, cfg.floor * ref)
     sigma = np.sqrt(rel**2 + cfg.absolute**2)
     if np.any(sigma <= 0):

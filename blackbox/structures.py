@@ -13,18 +13,20 @@ from pathlib import Path
 
 import numpy as np
 
+from blackbox.reference_tables import TABLE_3_1
 from solver_adapters.bdf_write import print_float_free
 
 
 @dataclass
 class FrameBuilder:
-    """Collects grids, bars, supports and joints; :meth:`bdf` renders the deck."""
-    E: float = 200e9
-    G: float = 80e9
-    A: float = 4.0e-4
-    I1: float = 1.333e-8
-    I2: float = 1.333e-8
-    J: float = 0.4e-8
+    """Collects grids, bars, supports and joints; :meth:`bdf` renders the deck. Every member has
+    the same section, by default the cube's (Table 3.1)."""
+    E: float = TABLE_3_1["E"]
+    G: float = TABLE_3_1["G"]
+    A: float = TABLE_3_1["A"]
+    I1: float = TABLE_3_1["Iz"]
+    I2: float = TABLE_3_1["Iy"]
+    J: float = TABLE_3_1["J"]
     grids: dict[int, tuple[float, float, float]] = field(default_factory=dict)
     bars: list[tuple[int, int, int, tuple[float, float, float]]] = field(default_factory=list)
     spcs: dict[int, str] = field(default_factory=dict)
@@ -175,7 +177,7 @@ def tube_body(n_long: int, n_around: int, length: float = 4.5, width: float = 1.
 
 def write_study(folder: Path, builder: FrameBuilder, loads: list[tuple[str, int, int, float]],
                 name: str, model: str = "simple", initial: float = 1.0e3) -> Path:
-    """Write a study folder (CONTRACT.md section 1) for a generated structure."""
+    """Write a study folder (``docs/study-format.md``) for a generated structure."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "model.bdf").write_text(builder.bdf(name))

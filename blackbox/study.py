@@ -8,19 +8,19 @@ adapter; the method modules only ever see the adapter through ``solver_adapters.
 
 from __future__ import annotations
 
-import csv
-import math
+import contextlib
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
-import scipy.sparse as sp
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from blackbox.errors import StudyError
+from solver_adapters import tables
 from solver_adapters.deck import Deck
+from solver_adapters.tables import TableFormatError
 from solver_adapters.protocol import DofLabel, LoadMatrix
 
 
@@ -35,6 +35,7 @@ class SolverConfig(_Strict):
     command: list[str] | None = None
     dialect: str = "nastran"
     backend: Literal["auto", "superlu", "pardiso"] = "auto"   # auto: PARDISO from 2e4 DOFs if installed
+    options: dict[str, Any] = {}       # [solver.options]: passed to the adapter, checked by its registry entry
 
 
 class JointConfig(_Strict):
@@ -122,9 +123,8 @@ class Study:
 # --------------------------------------------------------------------------------------------
 def read_config(path: Path) -> StudyConfig:
     try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise StudyError("study.toml not found", file=str(path)) from None
+        with _located():
+            data = tomllib.loads(tables.read_text(path))
     except tomllib.TOMLDecodeError as exc:
         raise StudyError(f"not valid TOML: {exc}", file=str(path)) from None
     try:
@@ -135,95 +135,44 @@ def read_config(path: Path) -> StudyConfig:
         raise StudyError(msgs, file=str(path)) from None
 
 
-def _rows(path: Path, header: list[str], optional: list[str] = ()):
-    """Yield ``(line_no, dict)`` for every data row, checking the header first (``optional``
-    columns may follow the required ones)."""
+@contextlib.contextmanager
+def _located():
+    """A table error from the shared CSV reader as a :class:`StudyError` (same location)."""
     try:
-        fh = path.open(newline="")
-    except FileNotFoundError:
-        raise StudyError("file not found", file=str(path)) from None
-    with fh:
-        reader = csv.reader(fh)
-        first = next(reader, None)
-        got = [h.strip() for h in first or []]
-        extra = got[len(header):]
-        if first is None or got[:len(header)] != header or extra != list(optional)[:len(extra)]:
-            allowed = ",".join(header) + "".join(f"[,{o}]" for o in optional)
-            raise StudyError(f"header must be {allowed}, got {','.join(first or [])!r}",
-                             file=str(path), line=1)
-        header = got
-        for row in reader:
-            line = reader.line_num
-            if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
-                continue
-            if len(row) != len(header):
-                raise StudyError(f"expected {len(header)} columns, got {len(row)}", file=str(path), line=line)
-            yield line, {h: c.strip() for h, c in zip(header, row)}
-
-
-def _int(text: str, path: Path, line: int, col: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise StudyError(f"expected an integer, got {text!r}", file=str(path), line=line, column=col) from None
-
-
-def _float(text: str, path: Path, line: int, col: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise StudyError(f"expected a number, got {text!r}", file=str(path), line=line, column=col) from None
-    if not math.isfinite(v):
-        raise StudyError(f"value must be finite, got {text!r}", file=str(path), line=line, column=col)
-    return v
-
-
-def _dof(rec: dict, path: Path, line: int, grids: set[int] | None) -> DofLabel:
-    if not rec["case"]:
-        raise StudyError("empty case label", file=str(path), line=line, column="case")
-    g = _int(rec["grid"], path, line, "grid")
-    c = _int(rec["component"], path, line, "component")
-    if not 1 <= c <= 6:
-        raise StudyError(f"component must be 1..6, got {c}", file=str(path), line=line, column="component")
-    if grids is not None and g not in grids:
-        raise StudyError(f"grid {g} is not in the deck", file=str(path), line=line, column="grid")
-    return (g, c)
+        yield
+    except TableFormatError as exc:
+        raise StudyError(exc.message, file=exc.file, line=exc.line, column=exc.column) from None
 
 
 def read_loads(path: Path, grids: set[int] | None = None) -> LoadMatrix:
-    """``case,grid,component,value``; cases keep their order of first appearance."""
-    entries: dict[tuple[str, DofLabel], tuple[float, int]] = {}
-    for line, rec in _rows(path, ["case", "grid", "component", "value"]):
-        dof = _dof(rec, path, line, grids)
-        val = _float(rec["value"], path, line, "value")
-        key = (rec["case"], dof)
-        if key in entries:
-            raise StudyError(f"duplicate row for case {key[0]!r} grid {dof[0]} component {dof[1]} "
-                             f"(first on line {entries[key][1]})", file=str(path), line=line)
-        entries[key] = (val, line)
-    if not entries:
-        raise StudyError("no load rows", file=str(path))
-    cases = list(dict.fromkeys(c for c, _ in entries))
-    dofs = list(dict.fromkeys(d for _, d in entries))
-    ci = {c: j for j, c in enumerate(cases)}
-    di = {d: i for i, d in enumerate(dofs)}
-    r = [di[d] for _, d in entries]
-    c = [ci[k] for k, _ in entries]
-    v = [val for val, _ in entries.values()]
-    return LoadMatrix(tuple(dofs), sp.csc_matrix((v, (r, c)), shape=(len(dofs), len(cases))), tuple(cases))
+    """``case,grid,component,value[,group]``; cases keep their order of first appearance
+    (:func:`solver_adapters.tables.read_loads`, the one reader of this file)."""
+    with _located():
+        return tables.read_loads(path, grids)
+
+
+def read_load_groups(path: Path) -> dict[str, str]:
+    """``{case: group}`` of the optional ``group`` column (empty when absent)."""
+    with _located():
+        return tables.load_groups(path)
 
 
 def read_measurements(path: Path, load_cases: set[str], grids: set[int] | None = None) -> Measurements:
     """``case,grid,component,value,sigma[,reference_grid]``; sigma > 0 and finite; every case
     must be loaded. With a ``reference_grid`` the value is the displacement relative to that
     grid's same component (Section 5.2); blank means absolute."""
+    with _located():
+        return _read_measurements(path, load_cases, grids)
+
+
+def _read_measurements(path: Path, load_cases: set[str], grids: set[int] | None) -> Measurements:
     seen: dict[tuple[str, DofLabel, DofLabel | None], int] = {}
     cases, dofs, vals, sig, lines, refs = [], [], [], [], [], []
-    for line, rec in _rows(path, ["case", "grid", "component", "value", "sigma"], ["reference_grid"]):
-        dof = _dof(rec, path, line, grids)
+    for line, rec in tables.rows(path, ["case", "grid", "component", "value", "sigma"], ["reference_grid"]):
+        dof = tables.parse_dof(rec, path, line, grids)
         ref = None
         if rec.get("reference_grid"):
-            rg = _int(rec["reference_grid"], path, line, "reference_grid")
+            rg = tables.parse_int(rec["reference_grid"], path, line, "reference_grid")
             if grids is not None and rg not in grids:
                 raise StudyError(f"reference grid {rg} is not in the deck", file=str(path), line=line,
                                  column="reference_grid")
@@ -234,8 +183,8 @@ def read_measurements(path: Path, load_cases: set[str], grids: set[int] | None =
         if rec["case"] not in load_cases:
             raise StudyError(f"case {rec['case']!r} has no loads in loads.csv", file=str(path),
                              line=line, column="case")
-        val = _float(rec["value"], path, line, "value")
-        s = _float(rec["sigma"], path, line, "sigma")
+        val = tables.parse_float(rec["value"], path, line, "value")
+        s = tables.parse_float(rec["sigma"], path, line, "sigma")
         if s <= 0:
             raise StudyError(f"sigma must be positive, got {rec['sigma']!r}", file=str(path),
                              line=line, column="sigma")
@@ -248,8 +197,32 @@ def read_measurements(path: Path, load_cases: set[str], grids: set[int] | None =
         refs.append(ref)
     if not cases:
         raise StudyError("no measurement rows", file=str(path))
+    _check_sigma_scale(path, np.array(vals), np.array(sig), lines, dofs)
     return Measurements(tuple(cases), tuple(dofs), np.array(vals), np.array(sig), tuple(lines),
                         tuple(refs) if any(r is not None for r in refs) else ())
+
+
+SIGMA_RESOLUTION = 1e-12
+"""A sigma below this times the largest measured value of its kind (translation or rotation) is
+finer than double precision can resolve after the solver's round-off: the weighted residuals
+would be noise times 1e12 or overflow. Rejected with the row's location."""
+
+
+def _check_sigma_scale(path: Path, values: np.ndarray, sigma: np.ndarray, lines, dofs) -> None:
+    rot = np.array([d[1] >= 4 for d in dofs])
+    for kind, sel in (("translation", ~rot), ("rotation", rot)):
+        if not sel.any():
+            continue
+        scale = float(np.max(np.abs(values[sel])))
+        if scale == 0.0:
+            continue
+        bad = np.flatnonzero(sel & (sigma < SIGMA_RESOLUTION * scale))
+        if bad.size:
+            i = int(bad[0])
+            raise StudyError(f"sigma {sigma[i]!r} is below {SIGMA_RESOLUTION:g} x the largest measured "
+                             f"{kind} ({scale:.3g}): no measurement is that precise, and weights that "
+                             f"large make the fit meaningless ({bad.size} such row(s))",
+                             file=str(path), line=lines[i], column="sigma")
 
 
 def check_joints(config: StudyConfig, deck, toml_path: Path) -> None:

@@ -29,43 +29,7 @@ if TYPE_CHECKING:
     from blackbox.identification import IdentificationResult, Observations
 
 
-ADAPTER_CACHE: ContextVar[bool | Path] = ContextVar("blackbox_adapter_cache", default=False)
-"""What ``make_adapter_for(..., cache=None)`` does: False (no cache), True (``STUDY/.blackbox_cache``)
-or a cache folder. The CLI sets it from ``--no-cache`` / ``--cache-dir`` for the command's duration."""
-
-
-def make_adapter_for(study: Study, name: str | None = None, deck: Path | None = None,
-                     cache: bool | str | Path | None = None) -> SolverAdapter:
-    """The study's adapter (or ``name``), optionally on another deck (a truth deck).
-
-    ``cache``: True wraps the adapter in :class:`solver_adapters.cache.CachedAdapter` with the
-    study's ``.blackbox_cache/`` folder (a repeated batch is read back instead of solved, so an
-    interrupted command resumes); a path uses that folder instead; False returns the bare
-    adapter; None (default) takes :data:`ADAPTER_CACHE` (False unless the CLI set it).
-    """
-    from solver_adapters.registry import make_adapter
-
-    if cache is None:
-        cache = ADAPTER_CACHE.get()
-
-    cfg = study.config.solver
-    name = name or cfg.adapter
-    own_deck = deck is None or Path(deck) == study.deck_path
-    deck = deck or study.deck_path
-    if name == "reference":
-        opts = {"backend": cfg.backend, "parsed": study.deck if own_deck else None}
-    elif name == "command":
-        if not cfg.command:
-            raise StudyError("adapter 'command' needs [solver] command = [\"program\", \"{deck}\"]",
-                             file=str(study.root / "study.toml"))
-        opts = {"command": cfg.command, "dialect": cfg.dialect, "timeout_s": cfg.timeout_s}
-    else:
-        opts = {"timeout_s": cfg.timeout_s}
-    adapter = make_adapter(name, deck, **opts)
-    if cache is False:
-        return adapter
-    from solver_adapters.cache import CACHE_DIRNAME, CachedAdapter
-    return CachedAdapter(adapter, study.root / CACHE_DIRNAME if cache is True else Path(cache))
+from blackbox.adapters import ADAPTER_CACHE, make_adapter_for  # noqa: E402,F401
 
 
 def study_deck(study: Study):

@@ -21,14 +21,21 @@ from __future__ import annotations
 
 import copy
 import json
+import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from blackbox import diagnose as dg
+from blackbox import diagnosis as dg
 from blackbox.cli import main as cli_main
-from blackbox.diagnose_run import prepare, run_diagnose
+from blackbox.commands import diagnose as diagnose_command
+from blackbox.commands import identify as identify_command
+from blackbox.commands.output import MARKER
+from blackbox.diagnosis.effects import (Connection, JointCoupling, LoadScale, MemberStiffness, SensorGain,
+                                        SupportFlexibility, UndeclaredJoint)
+from blackbox.errors import DiagnosisError
 from blackbox.joints import frame_element_stiffness, make_joint, spring_network
 from blackbox.structures import random_loads, star_joint_frame, tube_body, write_study
 from blackbox.workflows import simulate_study
@@ -56,7 +63,7 @@ def diagnosed(tmp_path_factory):
 
     def get(folder: str) -> dict:
         if folder not in cache:
-            run = run_diagnose(FIXTURES / folder, tmp_path_factory.mktemp(folder), plots=False)
+            run = diagnose_command.run(FIXTURES / folder, plots=False)
             cache[folder] = run.document | {"cases": list(run.study.loads.cases)}
         return cache[folder]
     return get
@@ -74,7 +81,9 @@ def test_fixture_folder(folder, diagnosed):
     if not planted:
         assert added == [], f"nothing was planted, but {added} was added"
         assert d["before"]["in_band"]
+        assert d["verdict"] == "adequate"
         return
+    assert d["verdict"] == "explained", d["verdict_detail"]
     assert added, f"{folder}: nothing added (candidates: {d['candidates'][:3]})"
     assert any(_matches(added[0], p, d["cases"]) for p in planted), \
         f"{folder}: first added {added[0]['effect']} @ {added[0]['where']}, planted {planted}"
@@ -100,6 +109,99 @@ def test_fixture_parameters_are_the_planted_ones(diagnosed):
 
 
 @pytest.mark.slow
+def test_fixture_sensor_offset_channel_and_value(diagnosed):
+    """The offset is found first on the planted channel (grid 24, component 3), with the planted
+    value (3 median sigmas of that channel) within 4 std (the same false-alarm argument as above)."""
+    d = diagnosed("sensor_offset")
+    planted = _planted("sensor_offset")[0]
+    first = d["added"][0]
+    assert (first["effect"], first["where"], first["component"]) == ("sensor_offset", [24], 3)
+    (p,) = first["parameters"]
+    assert p["name"] == "o_24_3" and abs(p["value"] - planted["offset"]) < 4 * p["std"], (p, planted)
+
+
+@pytest.mark.slow
+def test_unexplained_when_no_candidate_describes_the_effect(tmp_path, capsys):
+    """The sensor offset at grid 24 / z with only load scales to choose from: no candidate
+    describes it, the reduced chi2 stays above its band, the verdict is "unexplained" and the
+    hotspots name the planted place: grid 24 first, component 3 first. The CLI exits 4 and says
+    so (the exit code is the CLI's, checked when it is wired)."""
+    run = diagnose_command.run(FIXTURES / "sensor_offset", effects=["load_scale"], plots=False)
+    d = run.document
+    assert d["verdict"] == "unexplained", d["verdict_detail"]
+    assert not d["after"]["in_band"] and d["after"]["reduced_chi2"] > d["after"]["band_99"][1]
+    assert d["hotspots"][0]["grid"] == 24 and d["hotspot_components"][0]["component"] == 3
+    # the planted channel is 16 of 3552 fitted rows yet carries most of the excess (the offset's
+    # likelihood ratio, ~490, is about the declared fit's whole excess over n - p)
+    assert d["hotspots"][0]["share"] > 0.5
+    assert abs(sum(h["share"] for h in run.diagnosis.hotspots["components"]) - 1.0) < 1e-12
+    assert "above the 99 % band" in d["verdict_detail"] and "grids 24" in d["verdict_detail"]
+    out = tmp_path / "out"
+    out.mkdir()
+    run.write(out)
+    report = (out / "report.md").read_text()
+    assert "**unexplained**" in report and "| 24 |" in report
+
+
+def test_hotspots_and_verdict_definitions():
+    """``hotspots``: a grid's share is its clipped excess sum(z^2 - 1) over the total clipped
+    excess, per kind, largest first; groups at or below the noise get no share. ``verdict``:
+    above the band -> unexplained, else explained / adequate by whether something was added."""
+    from blackbox.diagnosis.residuals import hotspots
+    from blackbox.diagnosis.search import verdict
+    from blackbox.identification import Observations
+
+    dofs = [(1, 1), (1, 2), (2, 1), (2, 2), (3, 1), (3, 2)] * 2
+    obs = Observations(dofs=tuple(dofs), values=np.zeros(12), sigma=np.ones(12),
+                       case_index=np.repeat([0, 1], 6), case_labels=("A", "B"))
+    z = np.array([3.0, 1.0, 2.0, 0.0, 0.5, 0.5, 3.0, 1.0, 1.0, 1.0, 0.0, 0.0])
+    h = hotspots(obs, z)
+    # grid 1: 8 + 0 + 8 + 0 = 16; grid 2: 3 - 1 + 0 + 0 = 2; grid 3: 4 x (-0.75 or -1) < 0 -> 0
+    assert [(g["grid"], g["share"]) for g in h["grids"]] == [(1, 16 / 18), (2, 2 / 18)]
+    # case A: 8 + 0 + 3 - 1 - 0.75 - 0.75 = 8.5; case B: 8 + 0 + 0 + 0 - 1 - 1 = 6
+    assert [(c["case"], c["share"]) for c in h["cases"]] == [("A", 8.5 / 14.5), ("B", 6 / 14.5)]
+    # component 1: 8 + 3 - 0.75 + 8 + 0 - 1 = 17.25; component 2: 0 - 1 - 0.75 + 0 + 0 - 1 < 0
+    assert [(c["component"], c["share"]) for c in h["components"]] == [(1, 1.0)]
+    assert hotspots(obs, np.zeros(12)) == {"grids": [], "cases": [], "components": []}
+    band = (0.9, 1.1)
+    assert verdict(1.0, band, False) == "adequate" and verdict(1.0, band, True) == "explained"
+    assert verdict(1.2, band, True) == verdict(1.2, band, False) == "unexplained"
+    assert verdict(0.5, band, False) == "adequate"     # below the band: sigma overstated, no misfit
+
+
+def test_generated_load_scale_of_one_group(tmp_path):
+    """A 4-branch star frame with 17 load cases in two groups (``loads.csv``'s ``group`` column):
+    the 8 cases of group B were run with loads 6 % above nominal (simulated with
+    ``force_scale = 1.06``), the 9 of group A at nominal. The group's factor is found first, on
+    exactly group B's cases, at 1.06 within 4 std."""
+    b = star_joint_frame(4, seed=0)
+    loads = random_loads(b, 17, seed=3)
+    study = _truth_study(tmp_path, b, b, loads, "star", 1.0e5, [100, 101, 102, 103], seed=5)
+    scaled = tmp_path / "scaled"
+    toml = (tmp_path / "truth.toml").read_text()
+    (tmp_path / "truth.toml").write_text(toml.replace('deck = "truth.bdf"', 'deck = "truth.bdf"\nforce_scale = 1.06'))
+    simulate_study(tmp_path / "star_src", tmp_path / "truth.toml", scaled)
+    cases = list(dict.fromkeys(c for c, *_ in loads))
+    group_b = set(cases[1::2])                                   # L2, L4, ..., L16: 8 of 17
+    assert len(cases) == 17 and len(group_b) == 8
+    rows = (study / "measurements.csv").read_text().splitlines()
+    rows_scaled = (scaled / "measurements.csv").read_text().splitlines()
+    merged = [rows[0]] + [s if r.split(",")[0] in group_b else r for r, s in zip(rows[1:], rows_scaled[1:])]
+    (study / "measurements.csv").write_text("\n".join(merged) + "\n")
+    with (study / "loads.csv").open("w") as fh:
+        fh.write("case,grid,component,value,group\n")
+        for case, g, c, v in loads:
+            fh.write(f"{case},{g},{c},{v!r},{'B' if case in group_b else 'A'}\n")
+    d = diagnose_command.run(study, plots=False).document
+    first = d["added"][0]
+    assert first["effect"] == "load_scale" and first.get("group") == "B", d["added"]
+    assert set(first["where"]) == group_b
+    (p,) = first["parameters"]
+    assert p["name"] == "s_group_B" and abs(p["value"] - 1.06) < 4 * p["std"], p
+    assert d["verdict"] == "explained"
+
+
+@pytest.mark.slow
 def test_fixture_parameters_car(diagnosed):
     d = diagnosed("member_stiffness")
     p = d["added"][0]["parameters"][0]
@@ -119,11 +221,15 @@ def test_cli_writes_the_contract(tmp_path):
     for key in ("before", "after"):
         assert {"reduced_chi2", "rms_residual", "holdout_rms", "bic"} <= set(d[key])
     assert d["candidates"] and {"effect", "where", "delta_bic", "p_value"} <= set(d["candidates"][0])
-    assert all(c["effect"] in dg.EFFECTS for c in d["candidates"])
+    assert all(c["effect"] in dg.kinds() for c in d["candidates"])
     (a,) = d["added"]
     assert {"effect", "where", "parameters"} <= set(a)
     assert {"name", "value", "std"} <= set(a["parameters"][0])
     assert d["steps"][0]["joint_parameters_before"]["J7"]["model"] == "simple"
+    sv = d["solver"]                # without the cache every batch is a run: study, element, split deck
+    assert sv["runs"] == len(sv["by_run"]) >= 3 and sv["cached_batches"] == 0
+    assert sv["right_hand_sides"] == sum(r["right_hand_sides"] for r in sv["by_run"])
+    assert (out / "decks" / "split.bdf").exists() and (out / MARKER).exists()
     report = (out / "report.md").read_text()
     assert "## Before and after" in report and "load_scale" in report
     pytest.importorskip("matplotlib")
@@ -138,12 +244,88 @@ def test_cli_bad_input(tmp_path, capsys):
     assert cli_main(["diagnose", str(FIXTURES / "load_scale"), "--out", str(tmp_path), "--alpha", "2"]) == 2
 
 
+def test_options_and_families_are_checked_before_any_work(tmp_path):
+    """Bad options raise DiagnosisError naming what was given, before the study is even read (a
+    folder that does not exist is not reported)."""
+    missing = tmp_path / "no_such_study"
+    with pytest.raises(DiagnosisError, match=r"unknown effect kind\(s\) \['gremlins'\]"):
+        diagnose_command.run(missing, effects=["load_scale", "gremlins"])
+    with pytest.raises(DiagnosisError, match="alpha must be in"):
+        diagnose_command.run(missing, alpha=0.0)
+    with pytest.raises(DiagnosisError, match="refit_top"):
+        diagnose_command.run(missing, refit_top=0)
+
+
+def test_registry_one_family_per_module():
+    """Every family is registered under its kind, in its own module named after it; the kinds
+    are the ones diagnosis.json uses."""
+    assert set(dg.kinds()) == {"joint_coupling", "joint_translation", "undeclared_joint", "support_flexibility",
+                               "load_scale", "sensor_gain", "sensor_offset", "member_stiffness"}
+    for kind in dg.kinds():
+        cls = dg.get(kind)
+        assert cls.kind == kind and cls.__module__ == f"blackbox.diagnosis.effects.{kind}"
+        assert cls.summary
+    with pytest.raises(DiagnosisError, match="unknown effect kind 'gremlins'"):
+        dg.get("gremlins")
+
+
+def test_run_writes_nothing_until_write(tmp_path, monkeypatch):
+    """``run`` leaves the study, the working folder and the temporary folder as they were (the
+    edited decks live in a temporary folder that is removed); ``write`` puts every file it
+    names, decks included, into the given folder."""
+    study = tmp_path / "study"
+    shutil.copytree(FIXTURES / "load_scale", study)
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    monkeypatch.chdir(scratch)
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
+    before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
+    result = diagnose_command.run(study, plots=False)
+    assert sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")) == before
+    assert result.command == "diagnose"
+    out = tmp_path / "out"
+    out.mkdir()
+    files = result.write(out)
+    assert sorted(files) == sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
+    assert {"diagnosis.json", "report.md", "decks/elements.bdf", "decks/split.bdf"} <= set(files)
+    assert (out / "decks" / "split.bdf").read_text() == dict(result.decks)["split.bdf"]
+    assert json.loads((out / "diagnosis.json").read_text())["added"] == result.document["added"]
+
+
+def test_declared_fit_keeps_rigid_pairs(tmp_path):
+    """With ``rigid_pairs`` the declared fit inside diagnose is identify's: the cube with branches
+    7 and 71 of joint J7 declared rigid (its data were simulated with every pair flexible, so the
+    tie costs chi2), the same hold-out cases in both. The split deck conditioned on rigid cuts
+    with the rigid-pair penalty predicts identify's fit to 1e-6 sigma at identify's estimate
+    (penalty 1e6 x the joint's stiffness: ~1e-10 of cond(A) ~ 1e10 rounding, with margin), and
+    the refit lands at identify's chi2 to 1e-6 (identify stops at ftol 1e-10 of chi2, the refit
+    at 1e-13). Without the penalty the same parameters give a chi2 that differs by far more."""
+    study = tmp_path / "cube"
+    shutil.copytree(Path(__file__).resolve().parents[1] / "fixtures" / "cube", study)
+    toml = (study / "study.toml").read_text()
+    toml = toml.replace('model = "simple"\n', 'model = "simple"\nrigid_pairs = [[7, 71]]\n', 1)
+    toml = toml.replace("holdout_cases = []", 'holdout_cases = ["L5", "L10"]')
+    (study / "study.toml").write_text(toml)
+    ident = identify_command.run(study, profile=False).result
+    res = diagnose_command.run(study, max_steps=0, plots=False)
+    pr, declared = res.prepared, res.diagnosis.declared
+    assert pr.joints[0].rigid_pairs == ((1, 2),) and pr.joints[0].n_params == 6
+    assert res.diagnosis.nesting_error < 1e-6
+    assert declared.chi2 == pytest.approx(ident.chi2, rel=1e-6)
+    assert declared.chi2 <= ident.chi2 * (1 + 1e-9)            # the refit never ends higher
+    assert res.document["before"]["reduced_chi2"] == pytest.approx(ident.reduced_chi2, rel=1e-6)
+    np.testing.assert_allclose(pr.ident.k, ident.k, rtol=1e-9)
+    loose, om = _model(pr, dg.ModelSpec(tuple(pr.joints)), K_deck=pr.declared.deck_matrix())
+    chi2_loose = float(np.sum(((om.y - loose.predict(ident.k, om)) / om.sigma) ** 2))
+    assert abs(chi2_loose - ident.chi2) > 0.1 * ident.chi2
+
+
 # --------------------------------------------------------------------------------------------
 # properties of the method
 # --------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def cube_prepared(tmp_path_factory):
-    return prepare(FIXTURES / "support_flexibility", tmp_path_factory.mktemp("prep"))
+    return diagnose_command.prepare(FIXTURES / "support_flexibility", tmp_path_factory.mktemp("prep"))
 
 
 def test_element_stiffness_is_the_frame_element(cube_prepared):
@@ -161,11 +343,11 @@ def test_element_stiffness_is_the_frame_element(cube_prepared):
     assert pr.element_asymmetry < 1e-12            # Maxwell-Betti in the element run
 
 
-def _model(pr, spec, om_obs=None):
+def _model(pr, spec, om_obs=None, K_deck="declared"):
     o = list(dict.fromkeys(pr.study.measurements.all_dofs))
     obs = om_obs or pr.fit_obs
-    model = dg.AugmentedModel(pr.base, spec, pr.boundary, pr.K_deck, o)
-    return model, dg._ObsMap.of(obs, {d: i for i, d in enumerate(o)})
+    model = dg.AugmentedModel(pr.base, spec, pr.boundary, pr.K_deck if K_deck == "declared" else K_deck, o)
+    return model, dg.ObsMap.of(obs, {d: i for i, d in enumerate(o)})
 
 
 def test_rigid_state_is_the_declared_model(cube_prepared):
@@ -183,7 +365,7 @@ def test_compliance_form_reproduces_the_truth_deck(cube_prepared):
     on ``truth/truth.bdf``, no noise) to 1e-9 of the largest."""
     pr = cube_prepared
     planted = _planted("support_flexibility")[0]["springs"]
-    eff = next(e for e in pr.candidates if e.kind == "support_flexibility" and e.where == (1,))
+    eff = next(e for e in pr.candidates if isinstance(e, SupportFlexibility) and e.where == (1,))
     joint = pr.joints[0]
     spec, x = dg.ModelSpec(tuple(pr.joints)).add(eff, joint.initial_params(1.0e4))
     x[joint.n_params:] = [eff.k_ref[q] / planted[n] for q, n in enumerate(eff.names)]
@@ -201,18 +383,18 @@ def test_jacobians_match_central_differences(cube_prepared):
     with h = 1e-6 of the parameter's scale have truncation error ~1e-10 relative and rounding
     ~1e-16 / 1e-6 = 1e-10 of the column: 1e-5 leaves margin."""
     pr = cube_prepared
-    pick = {k: next(e for e in pr.candidates if e.kind == k)
-            for k in ("undeclared_joint", "support_flexibility", "member_stiffness", "load_scale", "sensor_gain")}
-    mem = [e for e in pr.candidates if e.kind == "member_stiffness"][3]
+    pick = {k: next(e for e in pr.candidates if isinstance(e, k))
+            for k in (UndeclaredJoint, SupportFlexibility, MemberStiffness, LoadScale, SensorGain)}
+    mem = [e for e in pr.candidates if isinstance(e, MemberStiffness)][3]
     pr.base.ensure_columns(mem.dofs, "test")
     spec, x = dg.ModelSpec(tuple(pr.joints)), pr.joints[0].initial_params(2.0e4)
     for e in list(pick.values())[:2] + [mem] + list(pick.values())[3:]:
         spec, x = spec.add(e, x)
-    spec, x = spec.add(dg.Effect("joint_coupling", ("J7",), joint="J7"), x)
+    spec, x = spec.add(JointCoupling.of("J7"), x)
     rng = np.random.default_rng(0)
     pj = spec.joint_params
-    x[pj:] = [0.3 + rng.random() if k in dg.CONNECTION_KINDS else 0.8 + 0.4 * rng.random()
-              for k in [e.kind for e in spec.effects for _ in e.names]]
+    x[pj:] = [0.3 + rng.random() if isinstance(e, Connection) else 0.8 + 0.4 * rng.random()
+              for e in spec.effects for _ in e.names]
     model, om = _model(pr, spec)
     J = model.jacobian(x, om)
     scale = np.where(np.arange(len(x)) < pj, np.max(np.abs(x[:pj])), np.maximum(np.abs(x), 1e-3))
@@ -279,7 +461,7 @@ def test_generated_star_frame_support_flexibility(tmp_path):
         truth.springs.append((201, c + 1, 0, 0, 2.0 * local[c]))
     loads = random_loads(b, 15, seed=3)
     study = _truth_study(tmp_path, b, truth, loads, "star", 1.0e5, [100, 101, 102, 103], seed=5)
-    d = run_diagnose(study, tmp_path / "out", plots=False).document
+    d = diagnose_command.run(study, plots=False).document
     assert d["added"] and d["added"][0]["effect"] == "support_flexibility" and d["added"][0]["where"] == [201]
     assert d["after"]["in_band"] and not d["before"]["in_band"]
     assert d["after"]["holdout_rms"] < d["before"]["holdout_rms"]
@@ -302,7 +484,7 @@ def test_generated_tube_body_undeclared_joint(tmp_path):
     loads = random_loads(b, 20, seed=4)
     measured = [g for g in sorted(b.grids) if g % 2 == 1 and g <= 7 * 8 and g not in b.spcs]
     study = _truth_study(tmp_path, b, truth, loads, "tube", 1.0e6, measured, seed=6)
-    d = run_diagnose(study, tmp_path / "out", plots=False).document
+    d = diagnose_command.run(study, plots=False).document
     assert d["added"] and d["added"][0]["effect"] == "undeclared_joint" and d["added"][0]["where"] == [node]
     assert d["after"]["in_band"]
     assert d["after"]["holdout_rms"] < d["before"]["holdout_rms"]

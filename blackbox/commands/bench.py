@@ -1,7 +1,8 @@
 """``blackbox bench``: the analogue of Table 3.3, measured in one run on this machine.
 
-Each method drives the *same* identification (the same damped Gauss-Newton iteration, the same
-start, the same measurements, the same stopping rule) to convergence; only the way predictions
+Each method drives the *same* identification (the Levenberg-Marquardt core of
+:mod:`blackbox.fitting.lm` in the coordinates of ``blackbox identify``, the same start, the same
+measurements, the same stopping rule) to convergence; only the way predictions
 and sensitivities are obtained differs:
 
 * ``blackbox``  -- black-box condensation (one batched adapter run, n_B + L right-hand sides)
@@ -30,74 +31,71 @@ from typing import Callable
 import numpy as np
 
 from blackbox import sensitivity as S
-from blackbox.condensation import CondensedModel
+from blackbox.fitting.lm import LMResult, levenberg_marquardt
+from blackbox.identification.problem import JointCoordinates
 from blackbox.joints import JointModel
 from blackbox.standard import standard_condense
 from blackbox.study import Study, load_study
-from blackbox.workflows import condensed_for_study, deck_matrix, make_adapter_for, study_joints
+from blackbox.adapters import make_adapter_for
+from blackbox.declared import declared_model
 
 CASES = {"cube-simple": "cube", "cube-complex": "cube_complex", "car-simple": "car",
          "car-complex": "car_complex"}
 METHODS = ("blackbox", "standard", "forward", "central")
 
 
-@dataclass
-class GNResult:
-    k: np.ndarray
-    iterations: int
-    chi2: float
-    converged: bool
+class _BenchProblem:
+    """The weighted least-squares problem of one method for :func:`blackbox.fitting.lm.levenberg_marquardt`:
+    the method's ``predict(k)`` and ``jacobian(k, f)``, the measurements with their sigma, and the
+    identification's coordinates (log k for springs, logm K_C for complex joints), so that every
+    method drives the same estimator. Without the springs' floor of ``blackbox identify``: the
+    full-model methods put the springs into the deck, and a spring at the floor (1e-6 of the
+    joint's stiffest) makes that structure a mechanism to the solver's check; in log k a spring
+    the data want at 0 only gets small."""
 
-
-def gauss_newton(predict: Callable[[np.ndarray], np.ndarray],
+    def __init__(self, predict: Callable[[np.ndarray], np.ndarray],
                  jacobian: Callable[[np.ndarray, np.ndarray], np.ndarray],
-                 y: np.ndarray, sigma: np.ndarray, k0: np.ndarray, joints: list[JointModel],
-                 max_iterations: int = 40, xtol: float = 1e-6, ftol: float = 1e-9) -> GNResult:
-    """Levenberg-Marquardt on ``chi2``; simple-model springs in log k, other parameters natural
-    with steps that leave the admissible set rejected. One Jacobian per iteration."""
-    from blackbox.joints import SimpleJoint
+                 y: np.ndarray, sigma: np.ndarray, joints: list[JointModel]):
+        self._predict, self._jacobian = predict, jacobian
+        self.y = np.asarray(y, dtype=float)
+        self.weights = 1.0 / np.asarray(sigma, dtype=float)
+        self.coordinates = JointCoordinates(joints)
+        self.bounds = None
+        self.n_params = self.coordinates.p
+        self._slices = [(j, sl) for j, sl in zip(joints, _slices(joints))]
 
-    logm = np.concatenate([np.full(j.n_params, isinstance(j, SimpleJoint)) for j in joints])
-    slices, start = [], 0
+    def admissible(self, k: np.ndarray) -> bool:
+        if not np.all(np.isfinite(k)) or np.max(np.abs(k)) > 1e150:
+            return False
+        return all(j.is_admissible(k[sl], strict=True) for j, sl in self._slices)
+
+    def predict(self, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        try:
+            f = self._predict(k)
+        except np.linalg.LinAlgError:                  # singular: reported as non-finite
+            f = np.full(self.y.shape, np.nan)
+        return f, f
+
+    def jacobian(self, k: np.ndarray, f: np.ndarray) -> np.ndarray:
+        return self._jacobian(k, f)
+
+
+def _slices(joints: list[JointModel]) -> list[slice]:
+    out, start = [], 0
     for j in joints:
-        slices.append((j, slice(start, start + j.n_params)))
+        out.append(slice(start, start + j.n_params))
         start += j.n_params
+    return out
 
-    def admissible(k):
-        return np.all(np.isfinite(k)) and all(j.is_admissible(k[sl], strict=True) for j, sl in slices)
 
-    def chi2(f):
-        r = (y - f) / sigma
-        return float(r @ r)
-
-    k = np.asarray(k0, float).copy()
-    f = predict(k)
-    F = chi2(f)
-    lam = 1e-3
-    for it in range(1, max_iterations + 1):
-        J = jacobian(k, f) / sigma[:, None]
-        J = J * np.where(logm, k, 1.0)                     # d/d(log k) for springs
-        r = (y - f) / sigma
-        A = J.T @ J
-        g = J.T @ r
-        while True:
-            step = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-300), g)
-            k_t = np.where(logm, k * np.exp(np.clip(step, -5, 5)), k + step)
-            if admissible(k_t):
-                f_t = predict(k_t)
-                F_t = chi2(f_t)
-                if F_t <= F:
-                    break
-            lam *= 10.0
-            if lam > 1e12:
-                return GNResult(k, it, F, True)
-        rel = np.max(np.abs(np.where(logm, step, step / np.maximum(np.abs(k), 1e-300))))
-        dec = (F - F_t) / max(F, 1e-300)
-        k, f, F = k_t, f_t, F_t
-        lam = max(lam / 10.0, 1e-9)
-        if rel < xtol or dec < ftol:
-            return GNResult(k, it, F, True)
-    return GNResult(k, max_iterations, F, False)
+def fit(predict: Callable[[np.ndarray], np.ndarray], jacobian: Callable[[np.ndarray, np.ndarray], np.ndarray],
+        y: np.ndarray, sigma: np.ndarray, k0: np.ndarray, joints: list[JointModel],
+        max_iterations: int = 40, xtol: float = 1e-6, ftol: float = 1e-9) -> LMResult:
+    """Weighted least squares from ``k0`` by the core of :mod:`blackbox.fitting.lm`, one Jacobian
+    per iteration (see :class:`_BenchProblem`)."""
+    prob = _BenchProblem(predict, jacobian, y, sigma, joints)
+    return levenberg_marquardt(prob, prob.coordinates.to_coords(np.asarray(k0, dtype=float)),
+                               max_iterations=max_iterations, xtol=xtol, ftol=ftol)
 
 
 class _Rows:
@@ -125,21 +123,22 @@ def run_method(study: Study, method: str, adapter_name: str) -> dict:
     """One row of the benchmark: wall time, solver runs, right-hand sides, iterations."""
     t0 = time.perf_counter()
     adapter = make_adapter_for(study, adapter_name, cache=False)
-    joints = study_joints(study)
+    declared = declared_model(study)
+    joints = list(declared.joints)
     m = study.measurements
     observed = m.all_dofs
-    k0 = np.concatenate([j.initial_params(jc.initial) for j, jc in zip(joints, study.config.joints)])
+    k0 = declared.k0
     runs0, rhs0 = adapter.stats.runs, adapter.stats.right_hand_sides
     extra = {}
     if method in ("blackbox", "standard"):
         if method == "blackbox":
-            cm = condensed_for_study(study, adapter, joints, observed)
+            cm = declared.condense(adapter, observed)
         else:
             if not hasattr(adapter, "stiffness"):
                 return {"skipped": f"adapter {adapter.name!r} exposes no assembled matrices"}
             boundary = list(dict.fromkeys([d for j in joints for d in j.dofs] + list(observed)))
             c = standard_condense(adapter, study.loads, boundary)
-            cm = CondensedModel(c, joints, _embed(deck_matrix(study, joints), len(boundary)))
+            cm = declared.condensed_model(c)
             extra = {"factorizations": 1, "standard_rhs": c.right_hand_sides}
         gather = _Rows(study, list(cm.c.boundary) + list(cm.c.observed))
 
@@ -151,8 +150,11 @@ def run_method(study: Study, method: str, adapter_name: str) -> dict:
             dB, dO = cm.sensitivities(k)
             return gather(np.concatenate([dB, dO], axis=1)).T
     else:
-        deck_joints = [(j, np.full(j.n_params, jc.deck_stiffness)) for j, jc in
-                       zip(study_joints(study, "simple"), study.config.joints) if jc.deck_stiffness]
+        if declared.rigid_pairs():
+            return {"skipped": "rigid branch pairs are a penalty in the condensed space; the "
+                               "full-model methods have no such tie"}
+        deck_joints = [(j, np.full(j.n_params, ks)) for j, ks in
+                       zip(declared_model(study, "simple").joints, declared.deck_stiffness) if ks]
         rel_step = 1e-3 if adapter.name == "mystran" else 1e-6   # MYSTRAN prints 7 digits
         gather = _Rows(study, observed)
 
@@ -177,7 +179,7 @@ def run_method(study: Study, method: str, adapter_name: str) -> dict:
                     km[p] -= h
                     cols.append((predict(kp) - predict(km)) / (2 * h))
             return np.stack(cols, axis=1)
-    gn = gauss_newton(predict, jacobian, m.values, m.sigma, k0, joints)
+    gn = fit(predict, jacobian, m.values, m.sigma, k0, joints)
     wall = time.perf_counter() - t0
     runs = adapter.stats.runs - runs0
     rhs = adapter.stats.right_hand_sides - rhs0
@@ -185,14 +187,6 @@ def run_method(study: Study, method: str, adapter_name: str) -> dict:
         runs, rhs = 0, extra["standard_rhs"]
     return {"wall_s": wall, "solver_runs": runs, "right_hand_sides": rhs, "iterations": gn.iterations,
             "converged": gn.converged, "chi2": gn.chi2, "k": gn.k.tolist(), **extra}
-
-
-def _embed(K: np.ndarray | None, n: int) -> np.ndarray | None:
-    if K is None:
-        return None
-    out = np.zeros((n, n))
-    out[:K.shape[0], :K.shape[0]] = K
-    return out
 
 
 def run_bench(fixtures: Path, adapters: list[str], cases: list[str], repeat: int = 1,
@@ -235,36 +229,32 @@ def run_bench(fixtures: Path, adapters: list[str], cases: list[str], repeat: int
     return rows
 
 
-def bench_markdown(rows: list[dict], meta: dict) -> str:
-    out = ["# Benchmark: identification cost by sensitivity method (analogue of Table 3.3)", "",
-           f"Machine: {meta['machine']}; {meta['cpus']} CPU(s); Python {meta['python']}; measured "
-           f"{meta['date']} in one run (best of {meta['repeat']}). Command: `{meta['command']}`.", "",
-           "| case | adapter | method | wall (s) | solver runs | right-hand sides | iterations | "
-           "ratio to black-box | same estimate | chi2 / black-box chi2 |",
-           "|---|---|---|---|---|---|---|---|---|---|"]
-    for r in rows:
-        out.append(f"| {r['case']} | {r['adapter']} | {r['method']} | {r['wall_s']:.4f} | {r['solver_runs']} | "
-                   f"{r['right_hand_sides']} | {r['iterations']} | {r['ratio_to_blackbox']:.2f} | "
-                   f"{'yes' if r['same_estimate_as_blackbox'] else 'NO'} | {r['chi2_to_blackbox']:.6f} |")
-    out += ["", "Dissertation, Table 3.3 (IBM 3090, CPU s): cube 0.14 / 0.12 / 0.58 / 0.93 and car "
-            "8.89 / 8.85 / 58.49 / 86.71 for black-box / standard / forward / central "
-            "(ratios to black-box: cube 0.86 / 4.1 / 6.6, car 1.00 / 6.6 / 9.8).", "",
-            "`standard` counts one factorization of K_II and no adapter run: it needs the solver's "
-            "matrices, which a black-box code does not give. 'Same estimate': every parameter within "
-            "1e-3 of the fit's largest; where the likelihood is flat along a direction (the cube's "
-            "near-rigid complex joint) methods stop at different points of the same minimum, which "
-            "the chi2 ratio shows; through MYSTRAN the finite differences also carry its 7 printed "
-            "digits (relative step 1e-3).", ""]
-    return "\n".join(out)
+@dataclass(frozen=True)
+class BenchResult:
+    """The benchmark's rows (``bench.json``) and how they were measured."""
+    rows: list[dict]
+    meta: dict
+    command: str = "bench"
+
+    def write(self, out: Path) -> list[str]:
+        from blackbox.reports.bench import bench_markdown
+
+        (Path(out) / "bench.json").write_text(json.dumps(self.rows, indent=2))
+        (Path(out) / "bench.md").write_text(bench_markdown(self.rows, self.meta))
+        return ["bench.json", "bench.md"]
 
 
-def main_bench(out: Path, fixtures: Path, adapters: list[str], cases: list[str], repeat: int,
-               command: str) -> list[dict]:
+def run(fixtures: Path, adapters: list[str], cases: list[str], repeat: int = 1, *, command: str = "blackbox bench",
+        progress=print) -> BenchResult:
+    """Every method on every case and adapter; ``repeat``: best of that many timings (in-process)."""
     import os
-    rows = run_bench(fixtures, adapters, cases, repeat)
+
+    if repeat < 1:
+        raise ValueError(f"repeat must be at least 1, got {repeat}")
+    unknown = [c for c in cases if c not in CASES]
+    if unknown:
+        raise ValueError(f"unknown bench case(s) {unknown}; known: {', '.join(CASES)}")
+    rows = run_bench(Path(fixtures), adapters, cases, repeat, progress=progress)
     meta = {"machine": platform.platform(), "cpus": os.cpu_count(), "python": platform.python_version(),
             "date": time.strftime("%Y-%m-%d %H:%M:%S"), "repeat": repeat, "command": command}
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "bench.json").write_text(json.dumps(rows, indent=2))
-    (out / "bench.md").write_text(bench_markdown(rows, meta))
-    return rows
+    return BenchResult(rows, meta)

@@ -1,0 +1,289 @@
+"""``blackbox diagnose STUDY``: find what the declared model lacks, add it, report before and after.
+
+:func:`run` checks the options, reads the study and runs three decks through the study's adapter
+(:func:`prepare_study`), each in one batched run:
+
+1. the study's deck: the declared model's condensation and identification
+   (:meth:`blackbox.declared.DeclaredModel.condense`, rigid pairs included, and
+   :func:`blackbox.identification.identify`);
+2. the element deck: every member alone, clamped at end a -> each member's ``K_e``;
+3. the split deck: the study's deck cut by every selected connection family and bridged by ``K0``
+   springs (:func:`blackbox.diagnosis.decks.split_deck`), with unit loads at the joint boundary and
+   the measured DOFs, unit pair loads and the study's load cases.
+
+The edited decks are run from a temporary folder, removed afterwards; their text is kept. Then
+the loop of :mod:`blackbox.diagnosis.search`. :func:`run` returns a :class:`DiagnosisResult`; its
+:meth:`~DiagnosisResult.write` puts ``diagnosis.json``, ``report.md``, the plots and the edited
+decks (``decks/elements.bdf``, ``decks/split.bdf``) into a folder.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import math
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from blackbox.adapters import make_adapter_for
+from blackbox.commands.common import as_study
+from blackbox.declared import DeclaredModel, SolverCost, declared_model
+from blackbox.diagnosis.decks import SplitDeck, element_deck, split_deck
+from blackbox.diagnosis.document import diagnosis_document, verdict_detail
+from blackbox.diagnosis.effects import CandidateContext, Effect, families
+from blackbox.diagnosis.residuals import default_holdout
+from blackbox.diagnosis.runs import RunRecord, element_stiffness
+from blackbox.diagnosis.search import Diagnosis, diagnose
+from blackbox.diagnosis.split import SplitBase
+from blackbox.errors import DiagnosisError
+from blackbox.identification import IdentificationResult, Observations, identify
+from blackbox.study import Study, read_load_groups
+from solver_adapters.bdf_write import write_deck
+from solver_adapters.deck import Deck
+from solver_adapters.protocol import DofLabel, SolverAdapter
+
+__all__ = ["DiagnosisResult", "Prepared", "run", "prepare", "prepare_study", "check_options"]
+
+
+# --------------------------------------------------------------------------------------------
+# the three decks' runs and the candidates
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class Prepared:
+    """The study, its declared model (with the diagnosis's hold-out), the declared fit, the
+    members' stiffness, the split run and the candidates; ``decks``: ``(file name, text)`` of the
+    edited decks; ``log``: every solver run so far (the loop appends its own)."""
+    study: Study
+    declared: DeclaredModel
+    fit_obs: Observations
+    hold_obs: Observations | None
+    holdout: tuple[str, ...]
+    declared_holdout: bool
+    K_deck: np.ndarray | None
+    ident: IdentificationResult | None
+    K_e: dict[int, np.ndarray]
+    element_asymmetry: float
+    split: SplitDeck
+    base: SplitBase
+    candidates: tuple[Effect, ...]
+    decks: tuple[tuple[str, str], ...]
+    log: list[RunRecord]
+    declared_cost: SolverCost
+    element_adapter: SolverAdapter
+
+    @property
+    def deck(self) -> Deck:
+        return self.study.deck
+
+    @property
+    def joints(self) -> list:
+        return list(self.declared.joints)
+
+    @property
+    def boundary(self) -> list[DofLabel]:
+        return self.declared.boundary
+
+    @property
+    def adapter_name(self) -> str:
+        return self.base.adapter.name
+
+    def solver_cost(self) -> SolverCost:
+        """What the three decks' runs cost so far (the declared condensation, the element run,
+        the split runs). Right-hand sides count every batch, solved or read back from the cache
+        (as :meth:`SolverCost.of_batch` counts the condensation's)."""
+        cost = self.declared_cost + SolverCost.of(self.element_adapter) + SolverCost.of(self.base.adapter)
+        return dataclasses.replace(cost, right_hand_sides=sum(r.right_hand_sides for r in self.log))
+
+
+def _residual_rms(obs: Observations, r: np.ndarray) -> dict[int, float]:
+    acc: dict[int, float] = {}
+    for (g, _), z in zip(obs.dofs, r):
+        acc[g] = acc.get(g, 0.0) + z * z
+    return {g: math.sqrt(v) for g, v in acc.items()}
+
+
+def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapter], deck_dir: Path, *,
+                  max_joint_candidates: int = 300, effects: Sequence[str] | None = None,
+                  say: Callable[[str], None] | None = None) -> Prepared:
+    """Fit the declared model, run the element and the split deck (written into ``deck_dir``),
+    list the candidates of the families ``effects`` (default: all). ``adapter_for(path)``: the
+    adapter for the deck at ``path`` (``None``: the study's own deck)."""
+    say = say or (lambda msg: None)
+    fams = families(effects)
+    if study.measurements is None:
+        raise DiagnosisError(f"study {study.name!r} has no measurements.csv: nothing to diagnose")
+    deck = study.deck
+    if not deck.cbars:
+        raise DiagnosisError(f"the deck of study {study.name!r} has no CBAR members: the diagnosis "
+                             "builds its edited decks from members")
+    deck_dir = Path(deck_dir)
+    log: list[RunRecord] = []
+
+    # ---- observations, hold-out ----------------------------------------------------------------
+    dm = declared_model(study)
+    obs = Observations.from_measurements(study.measurements, study.loads.cases)
+    measured_cases = [obs.case_labels[c] for c in dict.fromkeys(obs.case_index.tolist())]
+    declared_holdout = tuple(dm.holdout)
+    dm = dm.with_holdout(declared_holdout or default_holdout(measured_cases))
+    fit_obs, hold_obs = dm.observations(study.loads.cases)
+
+    # ---- 1. the declared model on the study's deck ---------------------------------------------
+    adapter = adapter_for(None)
+    cost = SolverCost(adapter.name)
+    ident, K_deck = None, None
+    if dm.joints:
+        before = SolverCost.of(adapter)
+        cm = dm.condense(adapter)
+        cost = SolverCost.of_batch(cm.c, adapter, before)
+        log.append(RunRecord("declared model: condensation", study.deck_path.name,
+                             cost.right_hand_sides, cm.c.wall_s))
+        K_deck = dm.K_deck(cm.c)                 # deck springs minus the rigid-pair penalty
+        ident = identify(cm, fit_obs, dm.k0, holdout=hold_obs,
+                         **dm.options.kwargs(profile=False, bootstrap=0))
+        say(f"declared model: reduced chi2 = {ident.reduced_chi2:.4g} ({ident.n_obs} rows, "
+            f"{ident.n_params} parameters)")
+
+    # ---- 2. member stiffness from the element deck ---------------------------------------------
+    decks = []
+    edeck, emembers = element_deck(deck)
+    epath = deck_dir / "elements.bdf"
+    decks.append((epath.name, write_deck(edeck, "large")))
+    epath.write_text(decks[-1][1])
+    eadapter = adapter_for(epath)
+    K_e, e_asym = element_stiffness(eadapter, emembers, log, deck=epath.name)
+
+    # ---- 3. the split deck ---------------------------------------------------------------------
+    ctx = CandidateContext(deck, tuple(dm.joints), K_e, fit_obs, tuple(study.loads.cases),
+                           _residual_rms(fit_obs, ident.residuals) if ident is not None else None,
+                           max_joint_candidates, read_load_groups(study.root / "loads.csv"))
+    sd = split_deck(deck, K_e, fams, ctx)
+    spath = deck_dir / "split.bdf"
+    decks.append((spath.name, write_deck(sd.deck, "large")))
+    spath.write_text(decks[-1][1])
+    boundary = dm.boundary
+    o_dofs = list(dict.fromkeys(list(study.measurements.all_dofs)))
+    member_ends = [d for dofs in sd.member_dofs.values() for d in dofs]
+    say(f"split deck: {len(sd.pairs)} cut DOF pairs, {len(sd.connections)} connection candidates")
+    base = SplitBase(adapter_for(spath), study.loads, sd.pairs, list(dict.fromkeys(boundary + o_dofs)),
+                     list(dict.fromkeys(boundary + o_dofs + member_ends)), log, deck=spath.name)
+
+    # ---- candidates ----------------------------------------------------------------------------
+    cands = list(sd.connections)
+    for fam in fams:
+        cands += fam.candidates(ctx, sd)
+    return Prepared(study, dm, fit_obs, hold_obs, tuple(dm.holdout), bool(declared_holdout), K_deck, ident,
+                    K_e, e_asym, sd, base, tuple(cands), tuple(decks), log, cost, eadapter)
+
+
+# --------------------------------------------------------------------------------------------
+# the command
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class DiagnosisResult:
+    """Everything one diagnosis produced: the loop's :class:`Diagnosis`, what it was prepared
+    from, the edited decks' text, the solver cost and the whole command's wall time."""
+    study: Study
+    diagnosis: Diagnosis
+    prepared: Prepared
+    decks: tuple[tuple[str, str], ...]
+    solver: SolverCost
+    wall_s: float
+    plots: bool = True
+    command: str = "diagnose"
+
+    def solver_json(self) -> dict:
+        """``diagnosis.json``'s ``solver``: the cost record, every run, the split run's checks."""
+        pr = self.prepared
+        return {**self.solver.to_json(), "by_run": [r.to_json() for r in self.diagnosis.runs],
+                "element_flexibility_asymmetry": pr.element_asymmetry, "split_pairs": len(pr.split.pairs),
+                "split_condition": pr.base.condition, "split_symmetry_error": pr.base.symmetry_error}
+
+    @functools.cached_property
+    def document(self) -> dict:
+        """``diagnosis.json`` (:mod:`blackbox.diagnosis.document`)."""
+        pr = self.prepared
+        doc = diagnosis_document(self.study.name, self.diagnosis, self.solver_json(), list(pr.holdout),
+                                 pr.declared_holdout, pr.ident)
+        doc["wall_s"] = self.wall_s
+        return doc
+
+    def to_json(self) -> dict:
+        return self.document
+
+    def write(self, out: Path) -> list[str]:
+        from blackbox.reports.diagnose import diagnosis_plots, diagnosis_report
+
+        out = Path(out)
+        (out / "diagnosis.json").write_text(json.dumps(self.document, indent=2))
+        files = ["diagnosis.json"]
+        if self.plots:
+            files += diagnosis_plots(self.diagnosis, self.prepared.deck, out)
+        (out / "report.md").write_text(diagnosis_report(self.study, self.document, files))
+        files.append("report.md")
+        (out / "decks").mkdir()
+        for name, text in self.decks:
+            (out / "decks" / name).write_text(text)
+            files.append(f"decks/{name}")
+        return files
+
+
+def check_options(alpha: float, max_steps: int, refit_top: int, max_joint_candidates: int,
+                  effects: Sequence[str] | None) -> None:
+    """The options' errors, before any work."""
+    if not 0.0 < alpha < 1.0:
+        raise DiagnosisError(f"alpha must be in (0, 1), got {alpha!r}")
+    if max_steps < 0 or refit_top < 1:
+        raise DiagnosisError(f"max_steps must be >= 0 and refit_top >= 1, got {max_steps!r}, {refit_top!r}")
+    if max_joint_candidates < 0:
+        raise DiagnosisError(f"max_joint_candidates must be >= 0, got {max_joint_candidates!r}")
+    families(effects)                          # unknown effect kinds: DiagnosisError
+
+
+def prepare(study: Study | str | Path, deck_dir: Path, *, adapter: str | None = None,
+            max_joint_candidates: int = 300, effects: Sequence[str] | None = None,
+            say: Callable[[str], None] | None = None) -> Prepared:
+    """:func:`blackbox.diagnosis.prepare.prepare` with the study's adapter (or the one named) on
+    each deck; the edited decks are written into ``deck_dir``, which must exist while the
+    result's split run is used (member refits run it again)."""
+    study = as_study(study, need_measurements=True)
+    return prepare_study(study, lambda path: make_adapter_for(study, adapter, deck=path), deck_dir,
+                           max_joint_candidates=max_joint_candidates, effects=effects, say=say)
+
+
+def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float = 0.01, max_steps: int = 5,
+        refit_top: int = 6, max_joint_candidates: int = 300, effects: Sequence[str] | None = None,
+        plots: bool = True, progress: Callable[[str], None] | None = None) -> DiagnosisResult:
+    """Diagnose the study (module docstring). ``alpha``: significance after the Bonferroni
+    correction; ``max_steps``: effects added at most; ``refit_top``: candidates refitted per
+    round; ``max_joint_candidates``: undeclared-joint grids considered at most (those nearest the
+    residual beyond); ``effects``: the families to consider (default: every registered one);
+    ``plots``: whether :meth:`DiagnosisResult.write` draws the plots; ``progress(message)``."""
+    t0 = time.perf_counter()
+    check_options(alpha, max_steps, refit_top, max_joint_candidates, effects)
+    say = progress or (lambda msg: None)
+    study = as_study(study, need_measurements=True)
+
+    def progress_step(step):
+        a = step.added
+        say(f"  added {a.effect.label()[:70]}: reduced chi2 {step.before.reduced_chi2:.4g} -> "
+            f"{step.after.reduced_chi2:.4g}, delta BIC {a.delta_bic:.4g}")
+
+    with tempfile.TemporaryDirectory(prefix="blackbox-diagnose-") as tmp:
+        pr = prepare(study, Path(tmp), adapter=adapter, max_joint_candidates=max_joint_candidates,
+                     effects=effects, say=say)
+        xyz = {int(g): tuple(v) for g, v in pr.base.adapter.grid_xyz().items()}
+        ident = pr.ident
+        diag = diagnose(pr.base, pr.boundary, pr.K_deck, pr.joints,
+                        ident.k if ident is not None else np.zeros(0), pr.fit_obs, pr.hold_obs,
+                        pr.candidates, alpha=alpha, refit_top=refit_top, max_steps=max_steps,
+                        declared_prediction=ident.predicted if ident is not None else None,
+                        xyz=xyz, progress=progress_step)
+        say(f"verdict: {diag.verdict}: {verdict_detail(diag)}")
+        cost = pr.solver_cost()
+    return DiagnosisResult(study, diag, pr, pr.decks, cost, time.perf_counter() - t0, plots)

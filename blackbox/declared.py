@@ -1,0 +1,343 @@
+"""The declared model of a study: what every command fits, built in one place.
+
+A study declares its joints (grids, model, start value, rigid branch pairs, springs already in
+the deck) and its identification options (hold-out cases, confidence, iteration limits).
+:func:`declared_model` turns that into a :class:`DeclaredModel`; ``identify``, ``compare``,
+``diagnose``, ``simulate`` and ``bench`` all build their condensed model through
+:meth:`DeclaredModel.condensed_model`, so the same parameters give the same response in each.
+
+Rigid branch pairs (Sec. 2.2, last paragraph): a pair named in ``rigid_pairs`` is tied by a
+penalty of ``RIGID_FACTOR`` times the stiffest rotational stiffness the structure offers at the
+joint, carried as a *negative* deck stiffness (``dK = K_J(k) - K_deck``). The joint matrices stay
+linear in ``k`` and every scheme (fixed point included) stays exact. A simple model loses the
+pair's springs; a complex model keeps its ``K_C`` and gets the same tie, because the pair's
+rigidity is a property of the structure, not of the joint model chosen to fit it.
+
+Also here: the one record of what the solver cost (:class:`SolverCost`) and the readers of a
+simulated study's truth (``truth.toml`` for ``simulate``, ``truth.json`` written by it).
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Sequence
+
+import numpy as np
+from pydantic import ValidationError
+
+from blackbox.condensation import Condensed, CondensedModel, condense
+from blackbox.errors import StudyError
+from blackbox.joints import ComplexJoint, JointModel, SimpleJoint, actual_joint_stub_kc, make_joint
+from blackbox.study import Study, joint_branches
+from solver_adapters.protocol import DofLabel, LoadMatrix, SolverAdapter
+
+if TYPE_CHECKING:
+    from blackbox.identification import Observations
+    from blackbox.simulate import TruthConfig
+
+__all__ = ["RIGID_FACTOR", "SolverCost", "FitOptions", "DeclaredModel", "declared_model",
+           "joint_model", "rigid_pair_penalty", "read_truth", "read_truth_record", "truth_values", "truth_joints",
+           "stub_params"]
+
+RIGID_FACTOR = 1e6
+"""A rigid pair's penalty: 1e6 times the stiffest rotational stiffness the structure offers at
+the joint (1 / smallest flexibility there). Rigid to ~1e-6 of the relative rotation, while the
+condensed system keeps ~10 digits in double precision."""
+
+
+# --------------------------------------------------------------------------------------------
+# what the solver cost
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SolverCost:
+    """Solver runs of a command: batches actually solved, right-hand sides, wall time, and the
+    batches read back from the run cache instead of being solved."""
+    adapter: str
+    runs: int = 0
+    right_hand_sides: int = 0
+    wall_s: float = 0.0
+    cached_batches: int = 0
+
+    @classmethod
+    def of(cls, adapter: SolverAdapter) -> "SolverCost":
+        """What ``adapter`` has done so far (its ``stats``; cache hits when it is cached)."""
+        st = adapter.stats
+        cache = getattr(adapter, "cache_stats", None)
+        return cls(adapter.name, int(st.runs), int(st.right_hand_sides), float(st.wall_s),
+                   int(cache.hits) if cache is not None else 0)
+
+    @classmethod
+    def of_batch(cls, c: Condensed, adapter: SolverAdapter, before: "SolverCost") -> "SolverCost":
+        """The cost of the one batched run that made ``c`` (``before``: :meth:`of` just before it).
+        A batch read back from the cache counts its right-hand sides but no run."""
+        hits = cls.of(adapter).cached_batches - before.cached_batches
+        rhs = c.right_hand_sides if c.solver_runs or not hits else len(c.boundary) + len(c.cases)
+        return cls(adapter.name, c.solver_runs, rhs, c.wall_s, hits)
+
+    def __add__(self, other: "SolverCost") -> "SolverCost":
+        name = self.adapter if self.adapter == other.adapter else f"{self.adapter}+{other.adapter}"
+        return SolverCost(name, self.runs + other.runs, self.right_hand_sides + other.right_hand_sides,
+                          self.wall_s + other.wall_s, self.cached_batches + other.cached_batches)
+
+    def since(self, earlier: "SolverCost") -> "SolverCost":
+        """The cost between ``earlier`` and this record of the same adapter."""
+        return SolverCost(self.adapter, self.runs - earlier.runs,
+                          self.right_hand_sides - earlier.right_hand_sides,
+                          self.wall_s - earlier.wall_s, self.cached_batches - earlier.cached_batches)
+
+    def to_json(self) -> dict:
+        return {"runs": self.runs, "right_hand_sides": self.right_hand_sides, "wall_s": self.wall_s,
+                "adapter": self.adapter, "cached_batches": self.cached_batches}
+
+
+# --------------------------------------------------------------------------------------------
+# options and the declared model
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class FitOptions:
+    """The study's ``[identification]`` options that the estimator takes."""
+    fixed_point: bool = True
+    max_iterations: int = 50
+    confidence: float = 0.95
+    bootstrap: int = 0
+    profile: bool = True
+
+    def kwargs(self, **overrides) -> dict:
+        out = {"fixed_point": self.fixed_point, "max_iterations": self.max_iterations,
+               "confidence": self.confidence, "bootstrap": self.bootstrap, "profile": self.profile}
+        out.update(overrides)
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class DeclaredModel:
+    """A study's joints as models, with start values, deck springs, rigid pairs and options."""
+    study: Study
+    joints: tuple[JointModel, ...]
+    k0: np.ndarray
+    options: FitOptions
+    holdout: tuple[str, ...] = ()
+    deck_stiffness: tuple[float, ...] = field(default=())
+
+    @property
+    def boundary(self) -> list[DofLabel]:
+        """The joints' DOFs, joint after joint (the condensation's boundary)."""
+        return [d for j in self.joints for d in j.dofs]
+
+    @property
+    def param_labels(self) -> list[tuple[str, str]]:
+        return [(j.name, n) for j in self.joints for n in j.param_names]
+
+    @property
+    def n_params(self) -> int:
+        return int(sum(j.n_params for j in self.joints))
+
+    def deck_matrix(self) -> np.ndarray | None:
+        """``K_deck`` of the simple-model springs of ``deck_stiffness`` already in the deck."""
+        blocks = []
+        for j, ks in zip(self.joints, self.deck_stiffness):
+            s = SimpleJoint(j.name, tuple(j.grids))
+            blocks.append(s.matrix(np.full(s.n_params, ks)))
+        if not any(np.any(b) for b in blocks):
+            return None
+        n = sum(b.shape[0] for b in blocks)
+        K = np.zeros((n, n))
+        i = 0
+        for b in blocks:
+            K[i:i + b.shape[0], i:i + b.shape[0]] = b
+            i += b.shape[0]
+        return K
+
+    def K_deck(self, c: Condensed) -> np.ndarray | None:
+        """What the deck already holds between the joints' DOFs, over ``c.boundary`` (which holds
+        the joints' DOFs in any order, possibly among others): the deck springs minus the
+        rigid-pair penalty (a negative deck stiffness adds the penalty to ``dK``). ``None`` when
+        neither is declared."""
+        index = {d: i for i, d in enumerate(c.boundary)}
+        n = len(c.boundary)
+        K = np.zeros((n, n))
+        found = False
+        for j, ks in zip(self.joints, self.deck_stiffness):
+            if ks:
+                s = SimpleJoint(j.name, tuple(j.grids))
+                idx = np.array([index[d] for d in j.dofs])
+                K[np.ix_(idx, idx)] += s.matrix(np.full(s.n_params, ks))
+                found = True
+        rigid = rigid_pair_penalty(c, self.joints, self.rigid_pairs())
+        if rigid is not None:
+            K -= rigid
+            found = True
+        return K if found else None
+
+    def rigid_pairs(self) -> dict[str, tuple[tuple[int, int], ...]]:
+        """Branch pairs (1-based) declared rigid, per joint name."""
+        out = {}
+        for jc in self.study.config.joints:
+            if jc.rigid_pairs:
+                out[jc.name] = tuple((jc.grids.index(a) + 1, jc.grids.index(b) + 1) for a, b in jc.rigid_pairs)
+        return out
+
+    def condensed_model(self, c: Condensed) -> CondensedModel:
+        """The declared model on a condensation whose boundary holds the joints' DOFs."""
+        return CondensedModel(c, list(self.joints), self.K_deck(c))
+
+    def condense(self, adapter: SolverAdapter, observed: Sequence[DofLabel] | None = None,
+                 loads: LoadMatrix | None = None) -> CondensedModel:
+        """The one batched run (unit loads at the joints' DOFs plus the load cases), then
+        :meth:`condensed_model`. ``observed`` defaults to every DOF the measurements need."""
+        if observed is None:
+            observed = self.study.measurements.all_dofs if self.study.measurements is not None else []
+        c = condense(adapter, loads if loads is not None else self.study.loads, self.boundary, list(observed))
+        return self.condensed_model(c)
+
+    def observations(self, cases: Sequence[str] | None = None) -> tuple["Observations", "Observations | None"]:
+        """The study's measurements as fit rows and hold-out rows (``None`` without hold-out)."""
+        from blackbox.identification import Observations
+
+        if self.study.measurements is None:
+            raise StudyError("measurements.csv not found (needed for this command)", file=str(self.study.root))
+        obs = Observations.from_measurements(self.study.measurements, list(cases or self.study.loads.cases))
+        return obs.split(list(self.holdout)) if self.holdout else (obs, None)
+
+    def with_holdout(self, holdout: Sequence[str]) -> "DeclaredModel":
+        return DeclaredModel(self.study, self.joints, self.k0, self.options, tuple(holdout), self.deck_stiffness)
+
+
+def joint_model(study: Study, name: str, model: str) -> JointModel:
+    """Joint ``name`` of the study as a ``model`` joint, its rigid pairs applied (a simple model
+    has no springs for them)."""
+    jc = next((j for j in study.config.joints if j.name == name), None)
+    if jc is None:
+        raise StudyError(f"no joint {name!r} in the study ({[j.name for j in study.config.joints]})",
+                         file=str(study.root / "study.toml"))
+    opts = {}
+    if model == "simple" and jc.rigid_pairs:      # grid pairs -> branch numbers
+        opts = {"rigid_pairs": tuple((jc.grids.index(a) + 1, jc.grids.index(b) + 1) for a, b in jc.rigid_pairs)}
+    return make_joint(jc.name, jc.grids, model, **opts)
+
+
+def declared_model(study: Study, model: str | None = None) -> DeclaredModel:
+    """The study's declared model; ``model`` ("simple" | "complex") overrides every joint's."""
+    joints, k0 = [], []
+    for jc in study.config.joints:
+        jm = joint_model(study, jc.name, model or jc.model)
+        if jm.n_params == 0:
+            raise StudyError(f"joint {jc.name!r}: every branch pair is declared rigid, so the joint has no "
+                             "parameter to identify; remove a pair from rigid_pairs, or the joint itself "
+                             "(tie its branches in the deck)", file=str(study.root / "study.toml"))
+        joints.append(jm)
+        k0.append(jm.initial_params(jc.initial))
+    cfg = study.config.identification
+    options = FitOptions(fixed_point=cfg.fixed_point, max_iterations=cfg.max_iterations,
+                         confidence=cfg.confidence, bootstrap=cfg.bootstrap, profile=cfg.profile)
+    return DeclaredModel(study, tuple(joints), np.concatenate(k0) if k0 else np.zeros(0), options,
+                         tuple(cfg.holdout_cases), tuple(float(jc.deck_stiffness) for jc in study.config.joints))
+
+
+def rigid_pair_penalty(c: Condensed, joints: Sequence[JointModel],
+                       pairs: dict[str, tuple[tuple[int, int], ...]] | None = None) -> np.ndarray | None:
+    """The rigid-pair penalty over ``c.boundary`` (``None`` when no pair is rigid).
+
+    ``pairs`` gives each joint's rigid branch pairs; by default a simple joint's own
+    ``rigid_pairs``. The penalty of joint ``j`` is ``RIGID_FACTOR / min diag(G_BB)`` over its
+    rotations: stiff against what the structure offers there."""
+    index = {d: i for i, d in enumerate(c.boundary)}
+    n = len(c.boundary)
+    out = np.zeros((n, n))
+    found = False
+    for j in joints:
+        jp = pairs.get(j.name, ()) if pairs is not None else getattr(j, "rigid_pairs", ())
+        if not jp:
+            continue
+        idx = np.array([index[d] for d in j.dofs])
+        scale = RIGID_FACTOR / float(np.min(np.diag(c.G_BB)[idx[3:]]))
+        out[np.ix_(idx, idx)] += SimpleJoint(j.name, tuple(j.grids), tuple(jp)).rigid_penalty_matrix(scale)
+        found = True
+    return out if found else None
+
+
+# --------------------------------------------------------------------------------------------
+# truths of simulated studies
+# --------------------------------------------------------------------------------------------
+def _read_text(path: Path) -> str:
+    """A text file as UTF-8 (a byte-order mark accepted); a bad byte is located."""
+    from solver_adapters.tables import TableFormatError, read_text
+
+    try:
+        return read_text(path)
+    except TableFormatError as exc:
+        raise StudyError(exc.message, file=exc.file, line=exc.line) from None
+
+
+def read_truth(path: Path) -> "TruthConfig":
+    """``truth.toml`` of ``blackbox simulate``."""
+    from blackbox.simulate import TruthConfig
+
+    try:
+        return TruthConfig.model_validate(tomllib.loads(_read_text(path)))
+    except tomllib.TOMLDecodeError as exc:
+        raise StudyError(f"not valid TOML: {exc}", file=str(path)) from None
+    except ValidationError as exc:
+        msgs = "; ".join(f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in exc.errors())
+        raise StudyError(msgs, file=str(path)) from None
+
+
+def read_truth_record(study: Study) -> dict | None:
+    """``truth.json`` written by ``blackbox simulate`` into a study (``None`` for real data)."""
+    p = study.root / "truth.json"
+    if not p.exists():
+        return None
+    try:
+        rec = json.loads(_read_text(p))
+    except json.JSONDecodeError as exc:
+        raise StudyError(f"not valid JSON: {exc}", file=str(p)) from None
+    if not isinstance(rec, dict):
+        raise StudyError("expected a JSON object", file=str(p))
+    return rec
+
+
+def truth_values(study: Study) -> dict[str, float] | None:
+    """``{"joint.param": value}`` of a simulated study's truth (``None`` for real data)."""
+    rec = read_truth_record(study)
+    if not rec:
+        return None
+    return {f"{q['joint']}.{q['name']}": float(q["value"]) for q in rec.get("parameters", [])} or None
+
+
+def stub_params(study: Study, joint: ComplexJoint, length: float) -> np.ndarray:
+    """Complex-model parameters of the stub "actual joint" (Section 5.4.1) for this deck."""
+    br = joint_branches(study.deck, joint.grids)
+    b0 = br[0]
+    K_C = actual_joint_stub_kc([b.direction for b in br], length, b0.E, b0.G, b0.A, b0.I2, b0.I1,
+                               b0.J, [b.orientation for b in br])
+    return joint.params_from_kc(K_C)
+
+
+def truth_joints(study: Study, truth: "TruthConfig", truth_path: Path) -> tuple[list[JointModel], np.ndarray]:
+    """The joint models and parameters of a ``truth.toml``."""
+    by_name = {j.name: j for j in study.config.joints}
+    models, params = [], []
+    for tj in truth.joints:
+        if tj.name not in by_name:
+            raise StudyError(f"truth joint {tj.name!r} is not a joint of the study "
+                             f"({sorted(by_name)})", file=str(truth_path))
+        jm = joint_model(study, tj.name, tj.model)
+        given = [x is not None for x in (tj.value, tj.values, tj.stub_length)]
+        if sum(given) != 1:
+            raise StudyError(f"truth joint {tj.name!r}: give exactly one of value, values, stub_length",
+                             file=str(truth_path))
+        if tj.values is not None:
+            k = jm.from_dict(tj.values)
+        elif tj.stub_length is not None:
+            if not isinstance(jm, ComplexJoint):
+                raise StudyError(f"truth joint {tj.name!r}: stub_length needs model = \"complex\"",
+                                 file=str(truth_path))
+            k = stub_params(study, jm, tj.stub_length)
+        else:
+            k = jm.initial_params(tj.value)
+        models.append(jm)
+        params.append(k)
+    return models, (np.concatenate(params) if params else np.zeros(0))

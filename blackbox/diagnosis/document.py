@@ -1,0 +1,148 @@
+"""``diagnosis.json``: a :class:`~blackbox.diagnosis.search.Diagnosis` as a JSON document.
+
+Keys: ``study``, ``before`` / ``after`` (fit statistics with the 99 % band), ``candidates`` (the
+first round's, best first), ``added`` (each effect with its parameters), ``steps`` (every round:
+statistics, the 25 best candidates, joint parameters and residual structure before and after),
+``stop_reason``, ``joint_parameters``, ``holdout``, ``settings``, ``identify_check``, ``solver``,
+``warnings``, ``method_wall_s`` (and ``wall_s``, the whole command, added by the command);
+``verdict`` (``adequate`` / ``explained`` / ``unexplained``, :func:`blackbox.diagnosis.search.verdict`)
+with ``verdict_detail`` (one sentence), ``hotspots`` (``[{"grid", "share", "n", "excess"}]``: each
+grid's share of the final fit's chi-square excess, largest first, top 10), ``hotspot_cases`` and
+``hotspot_components`` (the same per case and per component).
+"""
+
+from __future__ import annotations
+
+import math
+
+from blackbox.diagnosis.fit import Fit, chi2_band
+from blackbox.diagnosis.scoring import CandidateScore
+from blackbox.diagnosis.search import Diagnosis
+
+__all__ = ["diagnosis_document", "verdict_detail", "misfit_location"]
+
+
+def _num(v):
+    if v is None:
+        return None
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def _stats(fit: Fit, band) -> dict:
+    lo, hi = chi2_band(fit.n_obs - fit.n_params)
+    return {"reduced_chi2": _num(fit.reduced_chi2), "rms_residual": _num(fit.rms_residual),
+            "holdout_rms": _num(fit.holdout_rms), "bic": _num(fit.bic), "chi2": _num(fit.chi2),
+            "n_obs": fit.n_obs, "n_params": fit.n_params, "holdout_chi2": _num(fit.holdout_chi2),
+            "holdout_n_obs": fit.holdout_n, "band_99": [_num(lo), _num(hi)],
+            "in_band": bool(lo <= fit.reduced_chi2 <= hi)}
+
+
+def _candidate(c: CandidateScore) -> dict:
+    out = {"effect": c.effect.kind, "where": c.effect.where_json(), **c.effect.details_json(),
+           "delta_bic": _num(c.delta_bic),
+           "p_value": _num(c.p_value), "log10_p_value": _num(c.log10_p), "score": _num(c.score),
+           "df": c.df, "p_value_bonferroni": _num(c.p_adjusted), "delta_bic_method": c.delta_bic_method}
+    if c.refit is not None:
+        out.update({"refit": True, "lr": _num(c.lr), "lr_p_value": _num(c.lr_p_value),
+                    "lr_p_value_bonferroni": _num(c.lr_p_adjusted), "reduced_chi2": _num(c.refit.reduced_chi2),
+                    "holdout_delta_chi2": _num(c.holdout_delta_chi2), "decision": c.reason})
+    return out
+
+
+def _joint_params(fit: Fit) -> dict:
+    out = {}
+    for j, sl in zip(fit.spec.joints, fit.spec.joint_slices()):
+        out[j.name] = {"model": j.model_name,
+                       "parameters": {n: {"value": _num(v), "std": _num(s)}
+                                      for n, v, s in zip(j.param_names, fit.x[sl], fit.std[sl])}}
+    return out
+
+
+def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: list[str],
+                       declared_holdout: bool, ident) -> dict:
+    first = diag.steps[0].scores if diag.steps else ()
+    added = []
+    for s in diag.steps:
+        if s.added is None:
+            continue
+        e = s.added.effect
+        added.append({"effect": e.kind, "where": e.where_json(), **e.details_json(),
+                      "parameters": e.parameters(s.after),
+                      "delta_bic": _num(s.added.delta_bic), "lr_p_value": _num(s.added.lr_p_value)})
+    steps = []
+    for i, s in enumerate(diag.steps):
+        steps.append({
+            "step": i + 1,
+            "before": _stats(s.before, diag.band),
+            "after": _stats(s.after, diag.band),
+            "added": None if s.added is None else {"effect": s.added.effect.kind, "where": s.added.effect.where_json(),
+                                                   **s.added.effect.details_json(),
+                                                   "parameters": s.added.effect.parameters(s.after)},
+            "candidates": [_candidate(c) for c in s.scores[:25]],
+            "n_candidates": len(s.scores),
+            "joint_parameters_before": _joint_params(s.before),
+            "joint_parameters_after": _joint_params(s.after),
+            "residual_structure_before": _trim(s.structure_before),
+            "residual_structure_after": _trim(s.structure_after),
+            "solver_runs": s.runs,
+        })
+    return {
+        "study": study_name,
+        "before": _stats(diag.declared, diag.band),
+        "candidates": [_candidate(c) for c in first],
+        "added": added,
+        "after": _stats(diag.final, diag.band),
+        "steps": steps,
+        "stop_reason": diag.stop_reason,
+        "joint_parameters": {"declared": _joint_params(diag.declared), "final": _joint_params(diag.final)},
+        "holdout": {"cases": list(holdout), "declared_in_study": declared_holdout},
+        "settings": {"alpha": diag.alpha, "multiplicity": "Bonferroni over the candidates scored per round",
+                     "band": "99% band of chi2(n - p) / (n - p)", "candidates_by_effect": diag.n_candidates},
+        "identify_check": None if ident is None else {
+            "reduced_chi2": _num(ident.reduced_chi2), "converged": bool(ident.converged),
+            "nesting_error_sigma": _num(diag.nesting_error)},
+        "solver": runs,
+        "warnings": list(diag.warnings),
+        "method_wall_s": diag.wall_s,
+        "verdict": diag.verdict,
+        "verdict_detail": verdict_detail(diag),
+        "hotspots": [_hot(h) for h in diag.hotspots.get("grids", [])],
+        "hotspot_cases": [_hot(h) for h in diag.hotspots.get("cases", [])],
+        "hotspot_components": [_hot(h) for h in diag.hotspots.get("components", [])],
+    }
+
+
+def _hot(h: dict) -> dict:
+    return {k: (_num(v) if isinstance(v, float) else v) for k, v in h.items()}
+
+
+def misfit_location(hot: dict, top: int = 3) -> str:
+    """``grids 41 (35 %), 42 (20 %); cases L3 (...); components 2 (...)``: where the excess sits."""
+    parts = []
+    for kind, key, name in (("grids", "grid", "grids"), ("cases", "case", "cases"),
+                            ("components", "component", "components")):
+        rows = hot.get(kind, [])[:top]
+        if rows:
+            parts.append(f"{name} " + ", ".join(f"{h[key]} ({100 * h['share']:.0f} %)" for h in rows))
+    return "; ".join(parts) or "nowhere in particular"
+
+
+def verdict_detail(diag: Diagnosis) -> str:
+    """One sentence for the verdict."""
+    lo, hi = diag.band
+    r = diag.final.reduced_chi2
+    n = len(diag.added)
+    if diag.verdict == "adequate":
+        return f"the declared model fits within the noise (reduced chi2 {r:.4g}, 99 % band {lo:.4g}..{hi:.4g}); nothing added"
+    if diag.verdict == "explained":
+        return (f"{n} effect(s) added; the reduced chi2 is back within the noise band ({r:.4g}, 99 % band "
+                f"{lo:.4g}..{hi:.4g})")
+    what = f"after {n} added effect(s)" if n else "and no candidate effect is supported"
+    return (f"the reduced chi2 stays at {r:.4g}, above the 99 % band {lo:.4g}..{hi:.4g}, {what}; "
+            f"the misfit sits at {misfit_location(diag.hotspots)}")
+
+
+def _trim(st: dict) -> dict:
+    return {"per_case": st["per_case"], "per_component": st["per_component"],
+            "worst_grids": st["worst_grids"], "grid_map": st["grid_map"]}

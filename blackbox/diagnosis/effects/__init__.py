@@ -1,0 +1,23 @@
+"""The effect families a diagnosis can add, one module each, registered by name.
+
+Registration order is listing order: the connection families cut the split deck in this order
+(their cut pairs and new grids are numbered so), then the others list their candidates.
+"""
+
+from blackbox.diagnosis.effects.base import CandidateContext, Effect
+from blackbox.diagnosis.effects.connection import Connection
+from blackbox.diagnosis.effects.registry import families, get, kinds, register
+
+# the families, in listing order (importing a module registers its class)
+from blackbox.diagnosis.effects.undeclared_joint import UndeclaredJoint  # noqa: E402
+from blackbox.diagnosis.effects.joint_translation import JointTranslation  # noqa: E402
+from blackbox.diagnosis.effects.support_flexibility import SupportFlexibility  # noqa: E402
+from blackbox.diagnosis.effects.joint_coupling import JointCoupling  # noqa: E402
+from blackbox.diagnosis.effects.member_stiffness import MemberStiffness  # noqa: E402
+from blackbox.diagnosis.effects.load_scale import LoadScale  # noqa: E402
+from blackbox.diagnosis.effects.sensor_gain import SensorGain  # noqa: E402
+from blackbox.diagnosis.effects.sensor_offset import SensorOffset  # noqa: E402
+
+__all__ = ["CandidateContext", "Effect", "Connection", "register", "get", "kinds", "families",
+           "UndeclaredJoint", "JointTranslation", "SupportFlexibility", "JointCoupling", "MemberStiffness",
+           "LoadScale", "SensorGain", "SensorOffset"]

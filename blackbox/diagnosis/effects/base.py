@@ -1,0 +1,208 @@
+"""What every effect family is: a candidate effect nested in the declared model at a known value.
+
+A family is a small frozen dataclass, registered by its ``kind``
+(:func:`blackbox.diagnosis.effects.registry.register`); one instance is one candidate (a support
+at grid 1, member 88...). Everything that differs between families lives on the class:
+
+* **listing** -- :meth:`Effect.cut` edits the split deck (connections the split run must cut) and
+  returns the candidates that cut makes possible; :meth:`Effect.candidates` lists the others once
+  the split run is done. Both read a :class:`CandidateContext`.
+* **parameters** -- :attr:`Effect.names`, :attr:`Effect.nominal` (the value at which the effect is
+  absent: the declared model), :attr:`Effect.bounds`, :attr:`Effect.one_sided` (the nested value
+  is a bound, so the score test is one-sided).
+* **the augmented model** -- at most one way in, each a hook with an empty default:
+  :meth:`Effect.joint_models` (the joints change model: coupling), :meth:`Effect.stiffness_terms`
+  (``dK += (x_q - nominal_q) K_q`` on some DOFs: members), :attr:`Effect.cut_pairs` with
+  :attr:`Effect.compliance_basis` (a released cut of the split deck: connections) and
+  :meth:`Effect.output_rows` (a factor on some measured rows: load scales, sensor gains) or
+  :meth:`Effect.offset_rows` (an offset added to some measured rows: sensor offsets).
+* **scoring and refits** -- :meth:`Effect.scored_columns`, :meth:`Effect.batch_columns`
+  (a whole family scored without augmenting the model: members by reciprocity),
+  :meth:`Effect.refit_starts`, :meth:`Effect.refit_columns`, :meth:`Effect.trimmed`.
+* **reports** -- :meth:`Effect.where_json`, :meth:`Effect.label`, :meth:`Effect.parameters`,
+  :meth:`Effect.marker_points`, :attr:`Effect.summary`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, ClassVar, Sequence
+
+import numpy as np
+
+from solver_adapters.protocol import DofLabel
+
+if TYPE_CHECKING:
+    from blackbox.diagnosis.decks import SplitDeck, SplitEditor
+    from blackbox.diagnosis.fit import Fit
+    from blackbox.diagnosis.model import AugmentedModel, ModelSpec, ObsMap, State
+    from blackbox.identification import Observations
+    from blackbox.joints import JointModel
+    from solver_adapters.deck import Deck
+
+__all__ = ["CandidateContext", "Effect", "finite_or_none"]
+
+
+@dataclass(frozen=True, eq=False)
+class CandidateContext:
+    """What families list their candidates from: the study's deck, the declared joints (in the
+    study's order), each member's black-box stiffness ``K_e``, the fitted rows, the load cases,
+    the per-grid RMS of the declared fit's whitened residuals (``None`` without a declared fit),
+    the cap on undeclared-joint candidates and each case's group from the optional ``group``
+    column of ``loads.csv`` (empty without it)."""
+    deck: "Deck"
+    joints: tuple["JointModel", ...]
+    K_e: dict[int, np.ndarray]
+    fit_obs: "Observations"
+    cases: tuple[str, ...]
+    residual_rms: dict[int, float] | None
+    max_joint_candidates: int
+    groups: dict[str, str] = field(default_factory=dict)
+
+
+def finite_or_none(v) -> float | None:
+    """``float(v)``, or ``None`` when it is not finite (JSON has no inf/nan)."""
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+@dataclass(frozen=True, eq=False)
+class Effect:
+    """One candidate effect: ``where`` it acts and the names of its parameters."""
+    kind: ClassVar[str] = ""
+    summary: ClassVar[str] = ""
+
+    where: tuple
+    names: tuple[str, ...] = ()
+
+    # ---- listing ------------------------------------------------------------------------------
+    @classmethod
+    def cut(cls, editor: "SplitEditor", ctx: CandidateContext) -> list["Effect"]:
+        """Cut what this family's candidates release in the split deck; return those candidates."""
+        return []
+
+    @classmethod
+    def candidates(cls, ctx: CandidateContext, split: "SplitDeck") -> list["Effect"]:
+        """Candidates that need no cut, listed after the split deck is built."""
+        return []
+
+    # ---- identity and parameters ------------------------------------------------------------------
+    @property
+    def key(self) -> tuple:
+        return (self.kind, tuple(self.where))
+
+    @property
+    def n_params(self) -> int:
+        return len(self.names)
+
+    @property
+    def nominal(self) -> np.ndarray:
+        """The parameters at which the effect is absent (the model it extends, exactly)."""
+        return np.ones(self.n_params)
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.full(self.n_params, 0.2), np.full(self.n_params, 5.0)
+
+    @property
+    def one_sided(self) -> np.ndarray:
+        """Parameters whose nested value is a bound (score test over a cone)."""
+        return np.zeros(self.n_params, bool)
+
+    def applicable(self, spec: "ModelSpec") -> bool:
+        """Whether the effect can still be added to ``spec``."""
+        return True
+
+    # ---- how the effect enters the augmented model -------------------------------------------------
+    def joint_models(self, spec: "ModelSpec", x: np.ndarray) -> tuple[tuple["JointModel", ...], np.ndarray]:
+        """The joints after adding the effect and their parameters (default: unchanged)."""
+        return spec.joints, x[:spec.joint_params]
+
+    @property
+    def stiffness_dofs(self) -> tuple[DofLabel, ...]:
+        """DOFs of the split deck on which :meth:`stiffness_terms` act."""
+        return ()
+
+    def stiffness_terms(self) -> list[tuple[int, np.ndarray]]:
+        """``[(q, K_q)]``: ``dK += (x_q - nominal_q) K_q`` over :attr:`stiffness_dofs`."""
+        return []
+
+    @property
+    def cut_pairs(self) -> tuple[int, ...]:
+        """Indices of the split deck's cut pairs this effect releases (compliance form)."""
+        return ()
+
+    @property
+    def compliance_basis(self) -> np.ndarray | None:
+        """``(n_params, m, m)``: compliance per unit parameter over :attr:`cut_pairs`."""
+        return None
+
+    @property
+    def acts_on_output(self) -> bool:
+        """True when the parameters only scale predictions (:meth:`output_rows`) or offset them
+        (:meth:`offset_rows`), no structure."""
+        return False
+
+    def output_rows(self, om: "ObsMap") -> list[tuple[int, np.ndarray]]:
+        """``[(q, rows)]``: the predictions at ``rows`` (a mask over ``om``) are multiplied by ``x_q``."""
+        return []
+
+    def offset_rows(self, om: "ObsMap") -> list[tuple[int, np.ndarray]]:
+        """``[(q, rows)]``: ``x_q`` is added to the predictions at ``rows`` (after the factors)."""
+        return []
+
+    # ---- scoring and refits -----------------------------------------------------------------------
+    def scored_columns(self, before: "ModelSpec", after: "ModelSpec") -> tuple[np.ndarray, np.ndarray]:
+        """Columns of ``after``'s Jacobian that the score test of this effect uses, and which of
+        them are one-sided (default: the effect's own parameters, appended last)."""
+        return np.arange(before.n_params, after.n_params), self.one_sided
+
+    @classmethod
+    def batch_columns(cls, model: "AugmentedModel", st: "State", x: np.ndarray, om: "ObsMap",
+                      effects: Sequence["Effect"]) -> np.ndarray | None:
+        """Unwhitened score columns ``(n_obs, len(effects))`` of candidates NOT in ``model``
+        without building their augmented models, or ``None`` (score each by augmentation)."""
+        return None
+
+    def refit_columns(self) -> tuple[DofLabel, ...]:
+        """Unit-load columns of the split run that a refit of this effect needs."""
+        return ()
+
+    def refit_starts(self, x2: np.ndarray, step: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                     first: int) -> list[np.ndarray]:
+        """Starts of the refit: the nested point ``x2`` and one score step from it (the effect's
+        parameters are ``x2[first:]``)."""
+        starts = [x2]
+        if self.n_params and np.all(np.isfinite(step)):
+            xs = x2.copy()
+            xs[first:] = np.clip(x2[first:] + step, lo[first:], hi[first:])
+            starts.append(xs)
+        return starts
+
+    def trimmed(self, x_effect: np.ndarray) -> "Effect | None":
+        """After a refit: the effect with parameters that ended at their nested bound removed, or
+        ``None`` when every parameter stays."""
+        return None
+
+    # ---- reports ----------------------------------------------------------------------------------
+    def where_json(self) -> list:
+        return [w if isinstance(w, str) else int(w) for w in self.where]
+
+    def details_json(self) -> dict:
+        """Keys beside ``where`` that locate the effect further (a sensor's component)."""
+        return {}
+
+    def label(self) -> str:
+        return f"{self.kind} @ {', '.join(map(str, self.where))}"
+
+    def parameters(self, fit: "Fit") -> list[dict]:
+        """``[{name, value, std, ...}]`` of this effect in ``fit`` (it must be part of it)."""
+        i = next(i for i, e in enumerate(fit.spec.effects) if e.key == self.key)
+        sl = fit.spec.effect_slices()[i]
+        return [{"name": n, "value": float(v), "std": finite_or_none(s)}
+                for n, v, s in zip(fit.spec.effects[i].names, fit.x[sl], fit.std[sl])]
+
+    def marker_points(self, xyz: dict[int, np.ndarray], deck: "Deck") -> list[np.ndarray]:
+        """Where to mark the effect on a residual map (none by default)."""
+        return []

@@ -1,0 +1,62 @@
+"""``joint_translation``: a declared joint's branches are not tied rigidly in translation.
+
+Cut: the RBE2 (CM=123) that ties the joint's branch grids to its first grid is removed for those
+branches, and each translation is bridged by a spring ``K0`` (the smaller of the two branches'
+own stiffness there). Released: equal springs between every pair of branches along each global
+axis (three parameters ``ktx_J, kty_J, ktz_J``). A joint whose tie is not one RBE2 CM=123 on its
+first grid has no candidate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from blackbox.diagnosis.effects.connection import Connection, complete_graph_basis
+from blackbox.diagnosis.effects.registry import register
+from blackbox.errors import DiagnosisError
+
+__all__ = ["JointTranslation"]
+
+
+@register
+@dataclass(frozen=True, eq=False)
+class JointTranslation(Connection):
+    kind = "joint_translation"
+    summary = "a declared joint's branches move apart in translation (springs instead of its RBE2 tie)"
+
+    @classmethod
+    def cut(cls, editor, ctx) -> list["JointTranslation"]:
+        d = editor.deck
+        out = []
+        at = editor.members_at
+        for jc in ctx.joints:
+            g1, others = jc.grids[0], set(jc.grids[1:])
+            ties = [r for r in d.rbe2s.values() if r.gn == g1 and others & set(r.gm)]
+            if not ties or any(sorted(r.cm) != ["1", "2", "3"] for r in ties):
+                continue
+            for r in ties:
+                gm = tuple(x for x in r.gm if x not in others)
+                if gm:
+                    d.rbe2s[r.eid] = replace(r, gm=gm)
+                else:
+                    del d.rbe2s[r.eid]
+            br = {}                                  # branch grid -> the one member ending there
+            for g in jc.grids:
+                if len(at.get(g, ())) != 1:
+                    raise DiagnosisError(f"joint {jc.name!r}: branch grid {g} should end exactly one CBAR, "
+                                         f"it ends {len(at.get(g, ()))} ({at.get(g, [])})")
+                br[g] = at[g][0]
+            idx, k_ref = [], []
+            for c in (1, 2, 3):
+                ks = []
+                for gi in jc.grids[1:]:
+                    k0 = min(editor.kdiag(br[gi], gi, c), editor.kdiag(br[g1], g1, c))
+                    idx.append(editor.connect(k0, (gi, c), (g1, c)))
+                    ks.append(k0)
+                k_ref.append(float(np.mean(ks)))
+            k_ref = np.array(k_ref)
+            out.append(cls((jc.name,), (f"ktx_{jc.name}", f"kty_{jc.name}", f"ktz_{jc.name}"),
+                           pairs=tuple(idx), basis=complete_graph_basis(len(jc.grids), k_ref), k_ref=k_ref))
+        return out

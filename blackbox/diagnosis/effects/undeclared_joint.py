@@ -1,0 +1,88 @@
+"""``undeclared_joint``: a grid where members meet rigidly in the study is really a flexible joint.
+
+Cut: the grid is split into one grid per member (the first member keeps the original grid), the
+branches are tied in translation by an RBE2 (CM=123) as the study's joints are, and their
+rotations are bridged by springs ``K0`` (the smaller of the two members' own rotational stiffness
+at the grid). Released: equal springs between every pair of branches about each global axis
+(three parameters ``kx_G, ky_G, kz_G``; :func:`~blackbox.diagnosis.effects.connection.complete_graph_basis`).
+Candidates: grids of >= 2 members that are not a declared joint's, constrained, in an RBE2 or on a
+spring; beyond ``max_joint_candidates`` those nearest the declared fit's residual concentration.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from blackbox.diagnosis.decks import constrained_grids, members_at, rbe2_grids
+from blackbox.diagnosis.effects.connection import GridConnection, complete_graph_basis
+from blackbox.diagnosis.effects.registry import register
+from solver_adapters.deck import Deck, Rbe2
+
+__all__ = ["UndeclaredJoint", "joint_candidate_grids", "preselect"]
+
+
+def joint_candidate_grids(deck: Deck, declared_grids: set[int]) -> list[int]:
+    """Grids where >= 2 members meet that could be an undeclared flexible joint: not a declared
+    joint's grid, not constrained, not in an RBE2, no scalar spring."""
+    at = members_at(deck)
+    fixed = set(constrained_grids(deck))
+    sprung = {g for s in deck.springs.values() for g in (s.g1, s.g2) if g}
+    return [g for g in sorted(at) if len(at[g]) >= 2 and g not in declared_grids | fixed | rbe2_grids(deck) | sprung]
+
+
+def preselect(grids: list[int], limit: int, deck: Deck, residual_rms: dict[int, float]) -> list[int]:
+    """At most ``limit`` candidate grids: those nearest the residual concentration (each grid's
+    score is the largest measured-grid RMS discounted by exp(-distance / median member length))."""
+    if len(grids) <= limit:
+        return grids
+    xyz = {g.id: np.array(g.xyz) for g in deck.grids.values()}
+    lengths = [np.linalg.norm(xyz[b.ga] - xyz[b.gb]) for b in deck.cbars.values()]
+    ell = float(np.median(lengths)) or 1.0
+    meas = [(xyz[g], v) for g, v in residual_rms.items() if g in xyz]
+
+    def score(g):
+        return max((v * math.exp(-np.linalg.norm(xyz[g] - p) / ell) for p, v in meas), default=0.0)
+    return sorted(sorted(grids, key=score, reverse=True)[:limit])
+
+
+@register
+@dataclass(frozen=True, eq=False)
+class UndeclaredJoint(GridConnection):
+    kind = "undeclared_joint"
+    summary = "a grid where members meet is a flexible joint (rotation springs between its members)"
+
+    @classmethod
+    def cut(cls, editor, ctx) -> list["UndeclaredJoint"]:
+        declared = {g for j in ctx.joints for g in j.grids}
+        grids = joint_candidate_grids(ctx.deck, declared)
+        if len(grids) > ctx.max_joint_candidates and ctx.residual_rms is not None:
+            grids = preselect(grids, ctx.max_joint_candidates, ctx.deck, ctx.residual_rms)
+        at = editor.members_at
+        d = editor.deck
+        out = []
+        for g in grids:
+            eids = at[g]
+            branches = [g]
+            for eid in eids[1:]:
+                ng = editor.new_grid(g)
+                b = d.cbars[eid]
+                d.cbars[eid] = replace(b, ga=ng if b.ga == g else b.ga, gb=ng if b.gb == g else b.gb)
+                branches.append(ng)
+            eid = editor.new_eid()
+            d.rbe2s[eid] = Rbe2(eid, g, "123", tuple(branches[1:]))
+            editor.split_grids[g] = tuple(branches)
+            idx, k_ref = [], []
+            for c in (4, 5, 6):
+                ks = []
+                for i in range(1, len(eids)):
+                    k0 = min(editor.kdiag(eids[i], g, c), editor.kdiag(eids[0], g, c))
+                    idx.append(editor.connect(k0, (branches[i], c), (g, c)))
+                    ks.append(k0)
+                k_ref.append(float(np.mean(ks)))
+            k_ref = np.array(k_ref)
+            out.append(cls((g,), (f"kx_{g}", f"ky_{g}", f"kz_{g}"), pairs=tuple(idx),
+                           basis=complete_graph_basis(len(eids), k_ref), k_ref=k_ref))
+        return out

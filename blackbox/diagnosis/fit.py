@@ -1,0 +1,150 @@
+"""The refit of a model specification: weighted least squares with box bounds, and its statistics.
+
+The iteration (:func:`fit_model`) is the package's one Levenberg-Marquardt core
+(:func:`blackbox.fitting.lm.levenberg_marquardt`) in natural coordinates, with the box bounds by
+projection (:class:`~blackbox.fitting.lm.ProjectedBoxBounds`: simple-model springs ``>= 0``,
+compliances ``>= 0``, factors in their ranges) and the projected schedule
+(:data:`~blackbox.fitting.lm.PROJECTED_SCHEDULE`). Natural rather than log coordinates because
+every joint model is linear in its parameters and a spring that the data want at 0 (or a
+compliance that stays at its nested 0) gets there, which ``log k`` makes crawl. A singular trial
+point (a mechanism) is rejected. It runs to a relative decrease of chi2 below 1e-13, or until no
+damped step decreases chi2 (lambda beyond 1e12, taken as the minimum to rounding): candidates
+are compared by chi2 differences of a few units in 1e4-1e5, and a misfit declared model often
+has a spring running to infinity (a flat valley) whose column shrinks like ``1/k^2``; the
+schedule keeps that column (no dead-column test) so that the other parameters keep moving.
+
+A joint spring stops at its rigid limit (:meth:`~blackbox.diagnosis.model.AugmentedModel.rigid_limits`,
+``1e8`` times the structure's stiffness along it): far beyond, the force through the joint is a
+difference of nearly equal rotations times ``k`` and chi2 becomes rounding noise of several units
+(at ``1e19`` a relative change of ``1e-14`` in the other parameters moves chi2 by thousands), which
+the iteration would follow. When a refit ends with a spring at that limit (the flat valley of a
+misfit model), it is repeated once from those springs as stiff as the structure and the lower
+chi2 kept: the valley and a basin at a finite stiffness are both local minima.
+
+Statistics (:mod:`blackbox.fitting.statistics`, the ones ``identify`` reports): Gaussian
+likelihood with the declared sigma, ``chi2``, reduced chi-square, BIC, hold-out chi2 and RMS
+prediction error; standard deviations from the whitened Jacobian at the optimum (pivoted QR of
+the column-scaled Jacobian, ``inf`` for a parameter that is not identifiable).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from blackbox.diagnosis.model import RIGID_RATIO, AugmentedModel, ModelSpec, ObsMap
+from blackbox.errors import IdentificationError
+from blackbox.fitting.lm import PROJECTED_SCHEDULE, NaturalCoordinates, ProjectedBoxBounds, levenberg_marquardt
+from blackbox.fitting.statistics import FitStatistics, HoldoutStats, chi2_band, covariance
+
+__all__ = ["Fit", "fit_model", "std_of", "chi2_band", "GRAM_RTOL", "RANK_RTOL"]
+
+GRAM_RTOL = 1e-12           # Gram eigenvalues below this x the largest (column-scaled): rank loss
+RANK_RTOL = 1e-6            # the same in singular values (|R_ii| of the pivoted QR): sqrt(GRAM_RTOL)
+
+
+@dataclass(frozen=True, eq=False)
+class Fit:
+    """One weighted least-squares fit of a specification (Gaussian likelihood, declared sigma)."""
+    spec: ModelSpec
+    x: np.ndarray
+    std: np.ndarray
+    n_obs: int
+    n_params: int
+    chi2: float
+    reduced_chi2: float
+    rms_residual: float
+    bic: float
+    residuals: np.ndarray               # whitened, fit rows
+    predicted: np.ndarray
+    holdout_rms: float | None
+    holdout_chi2: float | None
+    holdout_n: int
+    converged: bool
+    message: str
+    J: np.ndarray                       # whitened Jacobian at x (natural coordinates)
+
+
+class _Refit:
+    """The refit as a :class:`blackbox.fitting.lm.LeastSquaresProblem`: natural coordinates,
+    projected box bounds; a point where the augmented system is singular predicts ``nan`` (the
+    core rejects it)."""
+
+    def __init__(self, model: AugmentedModel, om: ObsMap, lo: np.ndarray, hi: np.ndarray):
+        self.model, self.om = model, om
+        self.n_params = model.p
+        self.y = om.y
+        self.weights = 1.0 / om.sigma
+        self.coordinates = NaturalCoordinates()
+        self.bounds = ProjectedBoxBounds(lo, hi)
+
+    def predict(self, k: np.ndarray):
+        try:
+            st = self.model.state(k)
+            return self.model.predict(k, self.om, st), st
+        except (np.linalg.LinAlgError, ValueError):
+            return np.full(len(self.om.y), np.nan), None
+
+    def jacobian(self, k: np.ndarray, st) -> np.ndarray:
+        return self.model.jacobian(k, self.om, st)
+
+    def admissible(self, k: np.ndarray) -> bool:
+        return True
+
+
+FTOL = 1e-13                # relative decrease of chi2 that ends a refit (module docstring)
+CONVERGED_STATUS = (1, 2, 3, 4)     # 4: no damped step decreases chi2 -- the minimum to rounding
+
+
+def fit_model(model: AugmentedModel, om: ObsMap, hold: ObsMap | None, x0: np.ndarray,
+              max_iterations: int = 200) -> Fit:
+    """Weighted least squares of ``model`` at the rows ``om`` from ``x0`` (clipped into the
+    bounds, a joint spring at most :meth:`AugmentedModel.rigid_limits`, where it is rigid to
+    rounding); ``hold``: rows predicted, never fitted (module docstring)."""
+    spec = model.spec
+    _, lo, hi = spec.transforms()
+    limit = model.rigid_limits()
+    hi = np.minimum(hi, limit)
+    x = np.clip(np.asarray(x0, float), lo, hi)
+    prob = _Refit(model, om, lo, hi)
+    f0, st = prob.predict(x)
+    if st is None or not np.all(np.isfinite(f0)):
+        raise IdentificationError("the model is singular at the start of a refit")
+    if model.p:
+        def run(x_start):
+            return levenberg_marquardt(prob, x_start, max_iterations=max_iterations, xtol=0.0, ftol=FTOL,
+                                       geodesic=False, schedule=PROJECTED_SCHEDULE)
+        res = run(x)
+        # a spring that ended rigid may sit in the flat valley of a misfit model while a basin at a
+        # finite stiffness fits better: once more from those springs as stiff as the structure
+        rigid = np.isfinite(limit) & (res.x >= limit * (1.0 - 1e-9))
+        if np.any(rigid):
+            again = run(np.where(rigid, limit / RIGID_RATIO, res.x))
+            if again.chi2 < res.chi2:
+                res = again
+        x, st = res.x, res.state
+        converged, msg = res.status in CONVERGED_STATUS, res.message
+    else:
+        converged, msg = True, "no parameters"
+    f = model.predict(x, om, st)
+    w = prob.weights
+    Jn = model.jacobian(x, om, st) / om.sigma[:, None] if model.p else np.zeros((len(om.y), 0))
+    fs = FitStatistics.of(om.y, f, om.sigma, model.p, weights=w)
+    h_rms = h_chi2 = None
+    hn = 0
+    if hold is not None and len(hold.y):
+        hs = HoldoutStats.of((), hold.y, model.predict(x, hold, st), 1.0 / hold.sigma)
+        h_rms, h_chi2, hn = hs.rms_error, hs.chi2, hs.n_obs
+    return Fit(spec, x, std_of(Jn), fs.n_obs, fs.n_params, fs.chi2, fs.reduced_chi2, fs.rms_residual, fs.bic,
+               (om.y - f) * w, f, h_rms, h_chi2, hn, bool(converged), msg, Jn)
+
+
+def std_of(J: np.ndarray) -> np.ndarray:
+    """Standard deviations from the whitened Jacobian ``J``: ``sqrt diag (J^T J)^+`` with the
+    columns scaled to unit norm, ``inf`` for a parameter with a component in the numerical null
+    space (:func:`blackbox.fitting.statistics.covariance`, rank cut ``RANK_RTOL``)."""
+    if J.shape[1] == 0:
+        return np.zeros(0)
+    s = np.linalg.norm(J, axis=0)
+    return covariance(J, scale=1.0 / np.where(s > 0, s, 1.0), rank_rtol=RANK_RTOL).std

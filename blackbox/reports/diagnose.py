@@ -1,0 +1,204 @@
+"""``blackbox diagnose``'s report: ``report.md`` (before and after, the effects added, every
+round's candidates and residual structure, joint parameters, solver runs) and four plots
+(residual maps before and after, the first round's candidate ranking, the steps)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from blackbox.diagnosis.search import Diagnosis
+from blackbox.reports.plots import pyplot
+from blackbox.study import Study
+from solver_adapters.deck import Deck
+
+__all__ = ["diagnosis_report", "diagnosis_plots"]
+
+
+def _g(v, digits: int = 4) -> str:
+    return "n/a" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.{digits}g}"
+
+
+def diagnosis_report(study: Study, doc: dict, files: list[str]) -> str:
+    """``report.md`` from the ``diagnosis.json`` document; ``files``: the plots written beside it."""
+    b, a = doc["before"], doc["after"]
+    out = [f"# Diagnosis of {study.name}", "",
+           "Declared model fitted, standardized residuals tested against the declared noise, candidate "
+           "effects scored against the residual (score test), the best few refitted (likelihood ratio, "
+           f"BIC); an effect is added when its LR p-value x the number of candidates scored is below "
+           f"{doc['settings']['alpha']:g}, BIC improves and hold-out prediction does not get worse.", "",
+           "## Before and after", "",
+           "| | reduced chi2 | 99% band | RMS residual | hold-out RMS | BIC | parameters |",
+           "|---|---|---|---|---|---|---|"]
+    for name, s in (("declared", b), ("final", a)):
+        out.append(f"| {name} | {_g(s['reduced_chi2'])} | [{_g(s['band_99'][0])}, {_g(s['band_99'][1])}] | "
+                   f"{_g(s['rms_residual'])} | {_g(s['holdout_rms'])} | {_g(s['bic'], 7)} | {s['n_params']} |")
+    out += ["", f"Hold-out cases: {', '.join(doc['holdout']['cases']) or 'none'}"
+            + ("" if doc["holdout"]["declared_in_study"] else " (chosen here: every 5th measured case)") + ".",
+            f"Stopped: {doc['stop_reason']}.", ""]
+    verdict = doc.get("verdict")
+    if verdict is not None:
+        out += ["## Verdict", "", f"**{verdict}**: {doc.get('verdict_detail', '')}.", ""]
+        if verdict == "unexplained":
+            out += ["The model still lacks something that no candidate effect describes, or the data cannot "
+                    "say which. Where the remaining misfit sits (share of the chi-square excess, "
+                    "sum of z^2 - 1 over a group's rows clipped at 0):", ""]
+        if doc.get("hotspots"):
+            for title, key, col in (("grid", "hotspots", "grid"), ("case", "hotspot_cases", "case"),
+                                    ("component", "hotspot_components", "component")):
+                rows = doc.get(key, [])[:10]
+                if rows:
+                    out += [f"| {title} | share | rows | excess |", "|---|---|---|---|"]
+                    out += [f"| {h[col]} | {_g(h['share'], 3)} | {h['n']} | {_g(h['excess'])} |" for h in rows]
+                    out.append("")
+    out += ["## Effects added", ""]
+    if not doc["added"]:
+        out.append("None: the residuals are explained by the declared model and noise." if verdict != "unexplained"
+                   else "None: no candidate effect is significant after the Bonferroni correction and improves BIC.")
+    for i, e in enumerate(doc["added"], 1):
+        extra = "".join(f", {k} {e[k]}" for k in ("component", "group") if k in e)
+        out += [f"### {i}. {e['effect']} at {', '.join(map(str, e['where']))}{extra}", "",
+                f"delta BIC {_g(e['delta_bic'])}, LR p-value {_g(e['lr_p_value'], 3)}", "",
+                "| parameter | value | std |", "|---|---|---|"]
+        out += [f"| {p['name']} | {_g(p['value'])} | {_g(p['std'], 3)} |" for p in e["parameters"]]
+        out.append("")
+    out += ["## Steps", "", "| step | added | reduced chi2 before -> after | hold-out RMS before -> after | "
+            "BIC before -> after | runs |", "|---|---|---|---|---|---|"]
+    for s in doc["steps"]:
+        ad = "none" if s["added"] is None else f"{s['added']['effect']} @ {', '.join(map(str, s['added']['where']))}"
+        out.append(f"| {s['step']} | {ad} | {_g(s['before']['reduced_chi2'])} -> {_g(s['after']['reduced_chi2'])} | "
+                   f"{_g(s['before']['holdout_rms'])} -> {_g(s['after']['holdout_rms'])} | "
+                   f"{_g(s['before']['bic'], 7)} -> {_g(s['after']['bic'], 7)} | {s['solver_runs']} |")
+    for s in doc["steps"]:
+        out += ["", f"### Round {s['step']}: candidates (best 15 of {s['n_candidates']} by score p-value)", "",
+                "| effect | where | score | df | log10 p | delta BIC | decision |", "|---|---|---|---|---|---|---|"]
+        for c in s["candidates"][:15]:
+            out.append(f"| {c['effect']} | {', '.join(map(str, c['where']))[:40]} | {_g(c['score'])} | {c['df']} | "
+                       f"{_g(c['log10_p_value'])} | {_g(c['delta_bic'])} ({'refit' if c.get('refit') else 'score'}) | "
+                       f"{c.get('decision', '')} |")
+        rs = s["residual_structure_before"]
+        out += ["", "Where the residual concentrated before this round (chi2/n per group; the noise gives 1):", "",
+                "| grid | n | chi2/n | p |", "|---|---|---|---|"]
+        out += [f"| {w['grid']} | {w['n']} | {_g(w['chi2_per_n'])} | {_g(w['p_value'], 3)} |"
+                for w in rs["worst_grids"][:6]]
+        out += ["", "| component | " + " | ".join(rs["per_component"]) + " |",
+                "|---|" + "---|" * len(rs["per_component"]),
+                "| chi2/n | " + " | ".join(_g(v["chi2_per_n"]) for v in rs["per_component"].values()) + " |"]
+        cases = sorted(rs["per_case"].items(), key=lambda kv: -kv[1]["chi2_per_n"])[:6]
+        out += ["", "Cases with the largest chi2/n: " + ", ".join(f"{k} {_g(v['chi2_per_n'])}" for k, v in cases)]
+    out += ["", "## Joint parameters", "", "| joint | parameter | declared fit | final |", "|---|---|---|---|"]
+    dj, fj = doc["joint_parameters"]["declared"], doc["joint_parameters"]["final"]
+    for name, jd in dj.items():
+        final = fj.get(name, {}).get("parameters", {})
+        for pn, pv in jd["parameters"].items():
+            out.append(f"| {name} | {pn} | {_g(pv['value'])} | {_g(final.get(pn, {}).get('value'))} |")
+        if fj.get(name, {}).get("model") != jd["model"]:
+            out.append(f"| {name} | (now {fj[name]['model']} model: see diagnosis.json) | | |")
+    sv = doc["solver"]
+    out += ["", "## Solver", "", f"{sv['runs']} runs, {sv['right_hand_sides']} right-hand sides, "
+            f"{_g(sv['wall_s'], 3)} s in the solver (adapter {sv['adapter']}); whole command "
+            f"{_g(doc.get('wall_s'), 3)} s.", "", "| purpose | deck | right-hand sides | wall s |", "|---|---|---|---|"]
+    out += [f"| {r['purpose']} | {r['deck']} | {r['right_hand_sides']} | {_g(r['wall_s'], 3)} |" for r in sv["by_run"]]
+    ic = doc.get("identify_check")
+    if ic:
+        out += ["", f"The split deck reproduces the declared model to {_g(ic['nesting_error_sigma'], 2)} sigma "
+                f"(rigid state of {sv['split_pairs']} cut pairs, condition {_g(sv['split_condition'], 2)})."]
+    if doc["warnings"]:
+        out += ["", "## Warnings", ""] + [f"- {w}" for w in doc["warnings"]]
+    pics = [f for f in files if f.endswith(".png")]
+    if pics:
+        out += ["", "## Plots", ""] + [f"![{p[:-4]}]({p})" for p in pics]
+    else:
+        out += ["", "(no plots: install matplotlib)"]
+    return "\n".join(out) + "\n"
+
+
+# --------------------------------------------------------------------------------------------
+# plots
+# --------------------------------------------------------------------------------------------
+def diagnosis_plots(diag: Diagnosis, deck: Deck, out_dir: Path) -> list[str]:
+    """The residual maps before and after, the first round's candidate ranking and the
+    before/after statistics per step, as PNG files in ``out_dir`` (none without matplotlib)."""
+    plt = pyplot()
+    if plt is None:
+        return []
+    from matplotlib import colors
+    written = []
+    xyz = {g.id: np.array(g.xyz) for g in deck.grids.values()}
+    segs = [(xyz[b.ga], xyz[b.gb]) for b in deck.cbars.values()]
+    steps = diag.steps
+    dofs = steps[0].structure_before if steps else None
+    rms_before = {int(k): v["rms"] for k, v in (dofs["per_grid"].items() if dofs else [])}
+    last = steps[-1].structure_after if steps else None
+    rms_after = {int(k): v["rms"] for k, v in (last["per_grid"].items() if last else [])}
+    vmax = max([1.0] + list(rms_before.values()) + list(rms_after.values()))
+    norm = colors.LogNorm(vmin=0.5, vmax=max(vmax, 2.0))
+    marks = [(s.added.effect.kind, s.added.effect.marker_points(xyz, deck)) for s in steps if s.added is not None]
+    for name, rms, title in (("residual_map_before.png", rms_before, "declared model"),
+                             ("residual_map_after.png", rms_after, "after the added effects")):
+        fig = plt.figure(figsize=(8, 6.5))
+        ax = fig.add_subplot(projection="3d")
+        for a, b in segs:
+            ax.plot(*zip(a, b), color="0.6", lw=0.8)
+        gs = [g for g in rms if g in xyz]
+        if gs:
+            P = np.array([xyz[g] for g in gs])
+            sc = ax.scatter(P[:, 0], P[:, 1], P[:, 2], c=[max(rms[g], 0.5) for g in gs], cmap="inferno_r",
+                            norm=norm, s=40, depthshade=False, edgecolors="k", linewidths=0.3)
+            fig.colorbar(sc, ax=ax, shrink=0.6, label="RMS standardized residual per grid (noise = 1)")
+            for g in sorted(gs, key=lambda g: -rms[g])[:5]:
+                if rms[g] > 1.5:
+                    ax.text(*xyz[g], f" {g}", fontsize=7)
+        for kind, pts in marks:
+            for p in pts:
+                ax.scatter(*p, marker="*", s=220, color="tab:blue", depthshade=False)
+                ax.text(*p, f"  {kind}", fontsize=7, color="tab:blue")
+        span = np.ptp(np.array(list(xyz.values())), axis=0)
+        ax.set_box_aspect(np.maximum(span, 0.05 * span.max()))
+        ax.set_title(f"Residual map: {title}")
+        fig.tight_layout()
+        fig.savefig(out_dir / name, dpi=110)
+        plt.close(fig)
+        written.append(name)
+    if steps:
+        sc = [c for c in steps[0].scores if c.df > 0][:25]
+        fig, ax = plt.subplots(figsize=(8, max(3.5, 0.28 * len(sc) + 1.5)))
+        kinds = sorted({c.effect.kind for c in sc})
+        cmap = plt.get_cmap("tab10")
+        y = np.arange(len(sc))[::-1]
+        val = [min(-c.log10_p, 300.0) for c in sc]
+        ax.barh(y, val, color=[cmap(kinds.index(c.effect.kind)) for c in sc])
+        ax.set_yticks(y, [f"{c.effect.kind} @ {', '.join(map(str, c.effect.where))[:24]}" for c in sc], fontsize=7)
+        thr = -math.log10(diag.alpha / max(len(steps[0].scores), 1))
+        ax.axvline(thr, color="k", ls="--", lw=1, label=f"Bonferroni threshold ({len(steps[0].scores)} candidates)")
+        for yi, c in zip(y, sc):
+            if c.refit is not None:
+                ax.text(min(-c.log10_p, 300.0), yi, f" dBIC {c.delta_bic:.3g}", va="center", fontsize=6)
+        ax.set_xscale("symlog", linthresh=10)
+        ax.set_xlabel("-log10 p (score test)")
+        ax.set_title("Candidate ranking, round 1")
+        ax.legend(fontsize=7, loc="lower right")
+        fig.tight_layout()
+        fig.savefig(out_dir / "candidates.png", dpi=110)
+        plt.close(fig)
+        written.append("candidates.png")
+        fits = [steps[0].before] + [s.after for s in steps if s.added is not None]
+        labels = ["declared"] + [s.added.effect.kind for s in steps if s.added is not None]
+        fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.5))
+        a1.semilogy(range(len(fits)), [f.reduced_chi2 for f in fits], "o-")
+        lo, hi = diag.band
+        a1.axhspan(lo, hi, color="0.85", label="99% band")
+        a1.set_xticks(range(len(fits)), labels, rotation=20, fontsize=7)
+        a1.set_ylabel("reduced chi2")
+        a1.legend(fontsize=7)
+        if all(f.holdout_rms is not None for f in fits):
+            a2.semilogy(range(len(fits)), [f.holdout_rms for f in fits], "o-", color="tab:orange")
+        a2.set_xticks(range(len(fits)), labels, rotation=20, fontsize=7)
+        a2.set_ylabel("hold-out RMS prediction error")
+        fig.tight_layout()
+        fig.savefig(out_dir / "steps.png", dpi=110)
+        plt.close(fig)
+        written.append("steps.png")
+    return written
