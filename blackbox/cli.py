@@ -154,6 +154,28 @@ def cmd_diagnose(args) -> int:
     return EXIT_OK
 
 
+def cmd_design(args) -> int:
+    """``blackbox design STUDY --candidates FILE``: which loads and sensors (docs/design.md)."""
+    from blackbox.commands import design
+
+    out = _out_for(args, "design")
+    print(f"design {args.study}: {args.loads} load case(s), criterion {args.criterion}", flush=True)
+    res = design.run(args.study, args.candidates, n_loads=args.loads, n_sensors=args.sensors,
+                     criterion=args.criterion, prior=args.prior, robust=args.robust, draws=args.draws,
+                     model=args.model, adapter=args.adapter, seed=args.seed)
+    write_output(out, "design", res.write)
+    p, c = res.prediction, res.solver
+    print(f"chose {len(res.plan.loads)} case(s) of {len(res.candidates.cases)} and {len(res.plan.sensors)} "
+          f"sensor(s) of {len(res.candidates.sensors)}: widest interval {100 * p.max_relative_width:.3g} % "
+          f"(random plans: {100 * res.random_median_width:.3g} %); {c.runs} solver run(s), "
+          f"{c.right_hand_sides} right-hand sides -> {out / 'design.json'}")
+    _warn(list(res.notes))
+    if not p.identifiable.all():
+        print(f"blackbox design: the plan does not determine every parameter (exit {EXIT_UNUSABLE})", file=sys.stderr)
+        return EXIT_UNUSABLE
+    return EXIT_OK
+
+
 def cmd_bench(args) -> int:
     from blackbox.commands import bench
 
@@ -286,6 +308,22 @@ def build_parser() -> argparse.ArgumentParser:
                    help="comma-separated effect kinds to consider (default: all of joint_coupling, "
                         "joint_translation, undeclared_joint, support_flexibility, load_scale, "
                         "sensor_gain, member_stiffness)")
+
+    s = _study_command(sub, "design", "choose the load cases and sensors of a test before it is run", cmd_design)
+    s.add_argument("--candidates", type=Path, required=True,
+                   help="CSV kind,grid,component,value,sigma[,reference_grid[,case]] (docs/design.md)")
+    s.add_argument("--loads", type=_positive_int, default=6, help="number of load cases to design (default 6)")
+    s.add_argument("--sensors", type=_positive_int, default=None,
+                   help="number of sensors (default: every candidate sensor)")
+    s.add_argument("--criterion", default="max_relative_ci_width",
+                   choices=["max_relative_ci_width", "d_optimal", "a_optimal", "discrimination"])
+    s.add_argument("--prior", type=Path, default=None,
+                   help="result.json of an earlier identification (or a truth.toml); default: study.toml initial")
+    s.add_argument("--robust", action="store_true",
+                   help="average the criterion over draws from the prior's uncertainty (needs --prior result.json)")
+    s.add_argument("--draws", type=_positive_int, default=10, help="--robust: number of draws (default 10)")
+    s.add_argument("--model", choices=["simple", "complex"], default=None, help="override every joint's model")
+    s.add_argument("--seed", type=int, default=0, help="seed of the random plans, restarts and draws")
 
     s = sub.add_parser("conformance", help="run the shared adapter checks; exit 0 only if all pass")
     s.add_argument("adapter", help="adapter name: reference, mystran, legacy, command (needs --study), "

@@ -48,7 +48,12 @@ class DiagnosisError(BlackboxError, ValueError):
     diagnose (says which and what was given)."""
 
 
-__all__ = ["BlackboxError", "StudyError", "IdentificationError", "JointModelError", "ComparisonError",
+class DesignError(BlackboxError, ValueError):
+    """A test design that cannot be made as asked (bad budgets, unknown criterion, candidates
+    that carry no information); says what was given."""
+
+
+__all__ = ["DesignError", "BlackboxError", "StudyError", "IdentificationError", "JointModelError", "ComparisonError",
            "DiagnosisError", "SolverError", "DeckFormatError", "ModelError", "UnstableStructureError",
            "UnknownDofError", "SolverRunError", "SolverTimeoutError", "FactorizationError",
            "RegistryError", "UnknownPluginError", "PluginLoadError", "PluginConflictError", "OptionError"]
