@@ -149,8 +149,11 @@ def cmd_diagnose(args) -> int:
     print(f"added {added}; reduced chi2 {b['reduced_chi2']:.4g} -> {a['reduced_chi2']:.4g} "
           f"(99% band {a['band_99'][0]:.3g}..{a['band_99'][1]:.3g}), hold-out RMS "
           f"{b['holdout_rms'] if b['holdout_rms'] is not None else float('nan'):.4g} -> "
-          f"{a['holdout_rms'] if a['holdout_rms'] is not None else float('nan'):.4g}; "
+          f"{a['holdout_rms'] if a['holdout_rms'] is not None else float('nan'):.4g}; verdict {d['verdict']}; "
           f"{d['solver']['runs']} solver runs, {d['wall_s']:.1f} s -> {out}")
+    if d["verdict"] == "unexplained":
+        print(f"blackbox diagnose: unexplained (exit {EXIT_UNUSABLE}): {d['verdict_detail']}", file=sys.stderr)
+        return EXIT_UNUSABLE
     return EXIT_OK
 
 
@@ -307,7 +310,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--effects", default=None,
                    help="comma-separated effect kinds to consider (default: all of joint_coupling, "
                         "joint_translation, undeclared_joint, support_flexibility, load_scale, "
-                        "sensor_gain, member_stiffness)")
+                        "sensor_gain, sensor_offset, member_stiffness)")
 
     s = _study_command(sub, "design", "choose the load cases and sensors of a test before it is run", cmd_design)
     s.add_argument("--candidates", type=Path, required=True,

@@ -125,7 +125,7 @@ def test_unexplained_when_no_candidate_describes_the_effect(tmp_path, capsys):
     """The sensor offset at grid 24 / z with only load scales to choose from: no candidate
     describes it, the reduced chi2 stays above its band, the verdict is "unexplained" and the
     hotspots name the planted place: grid 24 first, component 3 first. The CLI exits 4 and says
-    so (the exit code is the CLI's, checked when it is wired)."""
+    so on the terminal."""
     run = diagnose_command.run(FIXTURES / "sensor_offset", effects=["load_scale"], plots=False)
     d = run.document
     assert d["verdict"] == "unexplained", d["verdict_detail"]
@@ -141,6 +141,11 @@ def test_unexplained_when_no_candidate_describes_the_effect(tmp_path, capsys):
     run.write(out)
     report = (out / "report.md").read_text()
     assert "**unexplained**" in report and "| 24 |" in report
+    capsys.readouterr()
+    assert cli_main(["diagnose", str(FIXTURES / "sensor_offset"), "--effects", "load_scale",
+                     "--out", str(tmp_path / "o"), "--no-cache"]) == 4
+    err = capsys.readouterr().err
+    assert "unexplained" in err and "grids 24" in err
 
 
 def test_hotspots_and_verdict_definitions():
