@@ -13,11 +13,13 @@ line starts with ``,``, ``+`` or ``*``). ``$`` starts a comment anywhere. ``BEGI
 are optional; a deck with executive/case control (a ``CEND`` line) is read from ``BEGIN BULK`` on.
 ``INCLUDE 'file'`` is resolved relative to the including file (nested, loops detected).
 
-Cards modelled: GRID, GRDSET (defaults for blank CP, CD, PS, SEID of GRID), CBAR (with pin flags
-and offsets in the basic system), BAROR (defaults for CBAR), PBAR (with K1/K2 shear factors and I12),
-CROD, PROD, CONROD, MAT1 (completed as NASTRAN does), SPC1, SPC (zero enforced value), SPCADD,
-RBE2, PELAS, CELAS1, CELAS2. Cards in :data:`NO_EFFECT` (solver parameters, masses,
-eigenvalue and dynamic-analysis controls) are accepted with no effect on a linear static solve and
+Cards modelled: GRID (CP and CD systems), GRDSET, CORD1R/C/S and CORD2R/C/S (resolved to basic,
+nested in any order), CBAR (pin flags, offsets; orientation and offsets turned into basic),
+BAROR, PBAR (K1/K2, I12), PBARL (ROD, TUBE, BAR, BOX, I, CHAN, T), CBEAM/PBEAM/PBEAML (prismatic,
+no warping), CROD, PROD, CONROD, MAT1 (completed as NASTRAN does), SPC1, SPC (zero enforced value),
+SPCADD, RBE2, RBE3, CBUSH/PBUSH, PELAS, CELAS1, CELAS2, PARAM,AUTOSPC and PARAM,EPZERO. Cards in
+:data:`NO_EFFECT` (solver parameters, masses, eigenvalue and dynamic-analysis controls) are
+accepted with no effect on a linear static solve and
 counted in ``Deck.no_effect`` (``Deck.summary()`` lists them once). Every other card is an error;
 the whole deck is read first, so one message names every unsupported card with its count and its
 first location.
@@ -37,12 +39,12 @@ from pathlib import Path
 import numpy as np
 
 from solver_adapters.errors import NumberFieldError as _NumberError
-from solver_adapters.deck import (CBar, Deck, Grid, Mat1, PBar, Pelas, Prod, Rbe2, Rod, Spc1, SpcAdd,
-                                  Spring)
+from solver_adapters.deck import (Bush, CBar, Coord, Deck, Grid, Mat1, PBar, PBush, Pelas, Prod,
+                                  Rbe2, Rbe3, Rod, Spc1, SpcAdd, Spring)
 from solver_adapters.protocol import DeckFormatError, ModelError
 
-__all__ = ["read_deck", "read_deck_text", "validate", "parse_int", "parse_real", "NO_EFFECT",
-           "SUPPORTED"]
+__all__ = ["read_deck", "read_deck_text", "bulk_cards", "deck_from_cards", "validate", "parse_int",
+           "parse_real", "NO_EFFECT", "SUPPORTED"]
 
 # --------------------------------------------------------------------------------------------
 # numbers
@@ -212,7 +214,7 @@ class _Reader:
         # ID -> "CARD at file:line"; elements (CBAR, RBE2, CELASi) share one ID space, as do
         # properties (PBAR, PELAS)
         self.ids: dict[str, dict[int, str]] = {"GRID": {}, "element": {}, "property": {}, "MAT1": {},
-                                               "SPCADD": {}}
+                                               "SPCADD": {}, "CORD": {}}
         self.spc1_pending: list[tuple[int, str, list[int | tuple[int, int]], str]] = []
         # card name -> [count, first card] of every card that is neither modelled nor NO_EFFECT
         self.unsupported: dict[str, list] = {}
@@ -220,6 +222,12 @@ class _Reader:
         self.grdset: _Card | None = None
         self.first_blank: dict[str, int | None] = {"CP": None, "CD": None, "SEID": None}
         self.blank_ps: list[int] = []
+        self.blank_sys: dict[str, list[int]] = {"CP": [], "CD": []}
+        self.grid_cards: dict[int, _Card] = {}     # GRIDs with a non-zero CP or CD (for errors)
+        # coordinate-system cards, resolved in finish(): CID -> (kind, card, definition)
+        self.cords: dict[int, tuple[str, _Card, tuple]] = {}
+        self.cbar_offt: dict[int, str] = {}       # OFFT as written (blank: BAROR's or GGG)
+        self.pending_cids: list[tuple[_Card, int]] = []   # CBUSH CIDs, checked in finish()
         # BAROR defaults, applied in finish(): CBARs with a blank PID, with no orientation
         self.baror: _Card | None = None
         self.pid_blank: list[int] = []
@@ -306,6 +314,8 @@ class _Reader:
 
     # ---- cards into the deck ------------------------------------------------------------
     def add(self, card: _Card) -> None:
+        if card.name == "PARAM":
+            _param(self, card)
         if card.name in NO_EFFECT:
             n, src = self.deck.no_effect.get(card.name, (0, card.src))
             self.deck.no_effect[card.name] = (n + 1, src)
@@ -355,25 +365,110 @@ class _Reader:
             raise card.error(i, f"duplicate {kind} ID {ident} (already defined by {table[ident]})")
         table[ident] = f"{card.name} at {card.src}"
 
+    def resolve_coordinates(self) -> None:
+        """Coordinate systems into :class:`Coord` (basic origin and axes), GRID positions from
+        their CP system into basic, CBAR orientation vectors and offsets from the grids' CD
+        systems into basic. Definitions may chain in any order (a CORD2 in another system, a
+        CORD1 on grids given in another system); a loop is an error."""
+        deck = self.deck
+        for gid, c in self.grid_cards.items():
+            g = deck.grids[gid]
+            for i, key, value in ((3, "CP", g.cp), (7, "CD", g.cd)):
+                if value and value not in self.cords:
+                    via = "" if c.name == "GRID" else f" (the GRDSET default of GRID {gid} at {g.src})"
+                    raise c.error(i, f"{key} {value}{via}: coordinate system {value} is not defined "
+                                     f"(no CORD1R/C/S or CORD2R/C/S with CID {value})")
+        for cid, (kind, c, d) in self.cords.items():
+            if c.name.startswith("CORD2"):
+                if d[0] and d[0] not in self.cords:
+                    raise c.error(3, f"RID {d[0]}: coordinate system {d[0]} is not defined")
+            else:
+                for k, g in enumerate(d[1]):
+                    if g not in deck.grids:
+                        raise c.error(d[0] + 1 + k, f"grid {g} does not exist (no GRID)")
+        pending_grids: dict[int, list[int]] = {}
+        for gid, g in deck.grids.items():
+            if g.cp:
+                pending_grids.setdefault(g.cp, []).append(gid)
+        waiting = {gid for ids in pending_grids.values() for gid in ids}
+        pending = dict(self.cords)
+        while pending or pending_grids:
+            progress = False
+            for cid in list(pending):
+                kind, c, d = pending[cid]
+                if c.name.startswith("CORD2"):
+                    rid, pts = d
+                    if rid and rid not in deck.coords:
+                        continue
+                    pts = np.array(pts, float)
+                    if rid:
+                        pts = deck.coords[rid].to_basic(pts)
+                else:
+                    if any(g in waiting for g in d[1]):
+                        continue
+                    pts = np.array([deck.grids[g].xyz for g in d[1]], float)
+                deck.coords[cid] = _coord_from_points(cid, kind, pts, c, d)
+                del pending[cid]
+                progress = True
+            for cp in [k for k in pending_grids if k in deck.coords]:
+                ids = pending_grids.pop(cp)
+                xyz = deck.coords[cp].to_basic(np.array([deck.grids[g].xyz for g in ids], float))
+                for gid, x in zip(ids, xyz.tolist()):
+                    deck.grids[gid] = replace(deck.grids[gid], xyz=tuple(x))
+                waiting.difference_update(ids)
+                progress = True
+            if not progress:
+                cid, (kind, c, d) = next(iter(pending.items()))
+                raise c.error(2, f"coordinate system {cid} cannot be resolved: its definition "
+                                 f"depends on itself (systems {', '.join(map(str, sorted(pending)))} "
+                                 f"refer to each other, directly or through grids)")
+        with_cd = [gid for gid, g in deck.grids.items() if g.cd]
+        try:
+            frames = dict(zip(with_cd, deck.displacement_frames(with_cd)))
+        except ValueError as exc:
+            message, gid = exc.args
+            raise self.grid_cards[gid].error(7, message) from None
+        if not frames:
+            return
+        offt_default = self.baror.text(9) if self.baror is not None else ""
+        for eid, b in deck.cbars.items():
+            fa, fb = frames.get(b.ga), frames.get(b.gb)
+            if fa is None and fb is None:
+                continue
+            offt = self.cbar_offt.get(eid) or offt_default or "GGG"
+            x, wa, wb = b.x, b.wa, b.wb
+            if fa is not None and x is not None and offt[0] == "G":
+                x = tuple((fa.T @ np.array(x)).tolist())       # GA's CD components -> basic
+            if fa is not None and wa is not None:
+                wa = tuple((fa.T @ np.array(wa)).tolist())
+            if fb is not None and wb is not None:
+                wb = tuple((fb.T @ np.array(wb)).tolist())
+            deck.cbars[eid] = replace(b, x=x, wa=wa, wb=wb)
+
     def finish(self) -> Deck:
         """GRDSET defaults into the GRIDs; SPC1 ``G1 THRU G2`` expanded (as in NASTRAN, grids of
         the range that do not exist are skipped)."""
         if self.grdset is not None:
             c = self.grdset
-            for i, key, what in ((3, "CP", "coordinate systems are not supported: CP"),
-                                 (7, "CD", "coordinate systems are not supported: CD"),
-                                 (9, "SEID", "superelements are not supported: SEID")):
-                gid = self.first_blank[key]
-                value = _int(c, i, 0, minimum=0)
-                if value != 0 and gid is not None:
-                    raise c.error(i, f"{what} {value} of GRDSET is the default of every GRID whose "
-                                     f"{key} is blank, e.g. GRID {gid} at {self.deck.grids[gid].src}; "
-                                     f"GRDSET {key} must be 0 or blank")
+            gid = self.first_blank["SEID"]
+            if _int(c, 9, 0, minimum=0) != 0 and gid is not None:
+                raise c.error(9, f"superelements are not supported: SEID {_int(c, 9)} of GRDSET is "
+                                 f"the default of every GRID whose SEID is blank, e.g. GRID {gid} at "
+                                 f"{self.deck.grids[gid].src}; GRDSET SEID must be 0 or blank")
             ps = _components(c, 8, required=False)
+            cp, cd = _int(c, 3, 0, minimum=0), _int(c, 7, 0, minimum=0)
+            for key, value in (("CP", cp), ("CD", cd)):
+                if value:
+                    for gid in self.blank_sys[key]:
+                        self.grid_cards.setdefault(gid, c)
+                        self.deck.grids[gid] = replace(self.deck.grids[gid], **{key.lower(): value})
             if ps:
                 for gid in self.blank_ps:
-                    g = self.deck.grids[gid]
-                    self.deck.grids[gid] = Grid(g.id, g.xyz, ps, g.src)
+                    self.deck.grids[gid] = replace(self.deck.grids[gid], ps=ps)
+        self.resolve_coordinates()
+        for c, cid in self.pending_cids:
+            if cid not in self.deck.coords:
+                raise c.error(9, f"CID {cid}: coordinate system {cid} is not defined")
         self.apply_baror()
         for sid, comps, items, src in self.spc1_pending:
             grids: list[int] = []
@@ -453,22 +548,26 @@ def _ignored_reals(card: _Card, fields) -> None:
 # card parsers
 # --------------------------------------------------------------------------------------------
 def _grid(r: _Reader, c: _Card) -> None:
-    """GRID; a blank CP, CD, PS or SEID takes the GRDSET value (applied in ``finish``)."""
+    """GRID ID CP X1 X2 X3 CD PS SEID; a blank CP, CD, PS or SEID takes the GRDSET value (applied
+    in ``finish``, which also converts X1-X3 from the CP system to basic)."""
     _max_fields(c, 9)
     gid = _int(c, 2)
-    if _int(c, 3, 0, minimum=0) != 0:
-        raise c.error(3, "coordinate systems are not supported: CP must be 0 or blank")
+    cp = _int(c, 3, 0, minimum=0)
     xyz = (_real(c, 4, 0.0), _real(c, 5, 0.0), _real(c, 6, 0.0))
-    if _int(c, 7, 0, minimum=0) != 0:
-        raise c.error(7, "coordinate systems are not supported: CD must be 0 or blank")
+    cd = _int(c, 7, 0, minimum=0)
     ps = _components(c, 8, required=False)
     if _int(c, 9, 0, minimum=0) != 0:
         raise c.error(9, "superelements are not supported: SEID must be blank")
     r.claim("GRID", gid, c, 2)
-    r.deck.grids[gid] = Grid(gid, xyz, ps, c.src)
+    r.deck.grids[gid] = Grid(gid, xyz, ps, c.src, cp, cd)
+    if cp or cd:
+        r.grid_cards[gid] = c
     for i, key in ((3, "CP"), (7, "CD"), (9, "SEID")):
-        if not c.text(i) and r.first_blank[key] is None:
-            r.first_blank[key] = gid
+        if not c.text(i):
+            if r.first_blank[key] is None:
+                r.first_blank[key] = gid
+            if key != "SEID":
+                r.blank_sys[key].append(gid)
     if not c.text(8):
         r.blank_ps.append(gid)
 
@@ -501,8 +600,9 @@ def _orientation(c: _Card) -> tuple[tuple[float, float, float] | None, int | Non
 
 
 def _offt(c: _Card) -> None:
-    """OFFT (field 9): with every CD = 0 the global and basic systems coincide, so GGG (the
-    default) and BGG are the same; offsets in the element system (an ``O``) are not supported."""
+    """OFFT (field 9): GGG (the default: orientation vector in GA's CD system, offsets in the CD
+    systems of GA and GB) or BGG (orientation vector in basic); the reader converts both to basic
+    (``resolve_coordinates``). Offsets in the element system (an ``O``) are not supported."""
     if c.text(9) not in ("", "GGG", "BGG"):
         raise c.error(9, "offset option OFFT not supported: only GGG (default) or BGG, offsets "
                          "in the basic system")
@@ -517,7 +617,8 @@ def _cbar(r: _Reader, c: _Card) -> None:
     """CBAR: EID PID GA GB X1/G0 X2 X3 OFFT / PA PB W1A W2A W3A W1B W2B W3B.
 
     A blank PID, orientation or OFFT takes the BAROR value (applied in ``finish``); a blank PID
-    without BAROR PID is the EID. Offsets are in the basic system (every CD is 0)."""
+    without BAROR PID is the EID. The orientation vector and offsets are converted to basic in
+    ``resolve_coordinates``."""
     _max_fields(c, 17)
     eid = _int(c, 2)
     pid = _int(c, 3, eid)
@@ -528,12 +629,159 @@ def _cbar(r: _Reader, c: _Card) -> None:
     wa = tuple(_real(c, i, 0.0) for i in (12, 13, 14))
     wb = tuple(_real(c, i, 0.0) for i in (15, 16, 17))
     r.claim("element", eid, c, 2)
+    if c.text(9):
+        r.cbar_offt[eid] = c.text(9)
     r.deck.cbars[eid] = CBar(eid, pid, ga, gb, x, g0, c.src, pa, pb,
                              wa if any(wa) else None, wb if any(wb) else None)
     if not c.text(3):
         r.pid_blank.append(eid)
     if x is None and g0 is None:
         r.orient_blank.append((eid, c))
+
+
+def _cbeam(r: _Reader, c: _Card) -> None:
+    """CBEAM: EID PID GA GB X1/G0 X2 X3 OFFT / PA PB W1A W2A W3A W1B W2B W3B / SA SB, modelled as
+    the CBAR element (a prismatic beam without warping). BIT (tapered beams), the warping scalar
+    points SA, SB and BEAMOR defaults are not supported: errors."""
+    _max_fields(c, 19)
+    for i, name in ((18, "SA"), (19, "SB")):
+        if c.text(i):
+            raise c.error(i, f"warping scalar point {name} not supported (no warping): must be blank")
+    eid = _int(c, 2)
+    pid = _int(c, 3, eid)
+    ga, gb = _int(c, 4), _int(c, 5)
+    x, g0 = _orientation(c)
+    if x is None and g0 is None:
+        raise c.error(6, "orientation vector X1 X2 X3 or grid G0 required (BEAMOR defaults are "
+                         "not supported)")
+    if c.text(9) and _real_or_none(c.text(9)) is not None:
+        raise c.error(9, "BIT (built-in twist of a tapered beam) not supported: field 9 must be "
+                         "blank, GGG or BGG")
+    _offt(c)
+    pa, pb = _pin(c, 10), _pin(c, 11)
+    wa = tuple(_real(c, i, 0.0) for i in (12, 13, 14))
+    wb = tuple(_real(c, i, 0.0) for i in (15, 16, 17))
+    r.claim("element", eid, c, 2)
+    r.cbar_offt[eid] = c.text(9) or "GGG"          # BAROR does not apply to CBEAM
+    r.deck.cbars[eid] = CBar(eid, pid, ga, gb, x, g0, c.src, pa, pb,
+                             wa if any(wa) else None, wb if any(wb) else None, card="CBEAM")
+
+
+_SO = ("YES", "YESA", "NO")
+
+
+def _pbeam(r: _Reader, c: _Card) -> None:
+    """PBEAM as a prismatic beam: PID MID A I1 I2 I12 J NSM / C1..F2 (end A stress points) /
+    [SO X/XB A I1 I2 I12 J NSM [/ C1..F2 when SO = YES]] ... / K1 K2 S1 S2 NSI(A) NSI(B) CW(A)
+    CW(B) / M1(A) M2(A) M1(B) M2(B) N1(A) N2(A) N1(B) N2(B) (MSC QRG).
+
+    Every station (end B included) must have end A's A, I1, I2, I12, J (blank: end A's value);
+    a different value is a tapered beam (error). K1, K2 default 1.0 (shear stiffness K A G, as
+    in NASTRAN; 0.0: rigid in shear). Shear relief S1, S2, warping CW and the offsets of the
+    centre of gravity and neutral axis M, N must be blank or 0 (errors otherwise). NSM, NSI
+    and the stress recovery points are read and have no effect."""
+    n_groups = (len(c.fields) - 1 + 7) // 8
+
+    def first(g: int) -> int:              # NASTRAN field number of group g's first field
+        return 8 * (g - 1) + 2
+
+    pid, mid = _int(c, 2), _int(c, 3)
+    end_a = tuple(_real(c, i, 0.0) for i in (4, 5, 6, 7, 8))     # A I1 I2 I12 J
+    _real(c, 9, 0.0)                                              # NSM
+    _ignored_reals(c, range(10, 18))                              # C1(A) .. F2(A)
+    g = 3
+    names = ("A", "I1", "I2", "I12", "J")
+    while g <= n_groups and c.text(first(g)) in _SO:
+        f0 = first(g)
+        so = c.text(f0)
+        xxb = _real(c, f0 + 1)
+        if not 0.0 < xxb <= 1.0:
+            raise c.error(f0 + 1, "X/XB must be in (0, 1]")
+        for k, name in enumerate(names):
+            value = _real(c, f0 + 2 + k, end_a[k])
+            if value != end_a[k]:
+                raise c.error(f0 + 2 + k, f"tapered beam not supported: {name} at X/XB = {xxb:g} "
+                                          f"is {value:g}, at end A {end_a[k]:g} (only prismatic "
+                                          f"beams, every station equal to end A)")
+        _real(c, f0 + 7, 0.0)
+        g += 1
+        if so == "YES":
+            _ignored_reals(c, range(first(g), first(g) + 8))
+            g += 1
+    if n_groups - g + 1 > 2:
+        raise c.error(first(g + 2), "PBEAM has fields after its M/N line (or a station without "
+                                    "SO = YES, YESA or NO)")
+    kf = first(g)
+    k = []
+    for i in (kf, kf + 1):
+        value = _real(c, i, 1.0)
+        if value < 0.0:
+            raise c.error(i, "shear stiffness factor must be >= 0 (0.0: rigid in shear)")
+        if value and end_a[0] == 0.0:
+            raise c.error(i, "shear stiffness factor needs a non-zero area A (0.0: rigid in shear)")
+        k.append(value or None)
+    for i, what in ((kf + 2, "shear relief S1"), (kf + 3, "shear relief S2"),
+                    (kf + 6, "warping coefficient CW(A)"), (kf + 7, "warping coefficient CW(B)")):
+        if _real(c, i, 0.0) != 0.0:
+            raise c.error(i, f"{what} not supported: must be blank or 0.0")
+    _ignored_reals(c, (kf + 4, kf + 5))                           # NSI(A), NSI(B)
+    for i in range(kf + 8, kf + 16):
+        if _real(c, i, 0.0) != 0.0:
+            raise c.error(i, "offsets of the centre of gravity / neutral axis (M1..N2) not "
+                             "supported: must be blank or 0.0")
+    a, i1, i2, i12, j = end_a
+    if i12 != 0.0:
+        if not i1 * i2 > i12 * i12:
+            raise c.error(7, "product of inertia I12 needs I1 * I2 > I12^2")
+        if k[0] or k[1]:
+            raise c.error(kf, "shear flexibility (K1/K2, default 1.0) together with a non-zero "
+                              "I12 is not supported: set K1 = K2 = 0.0 or I12 = 0.0")
+    r.claim("property", pid, c, 2)
+    r.deck.pbars[pid] = PBar(pid, mid, a, i1, i2, j, c.src, k[0], k[1], i12, card="PBEAM")
+
+
+def _pbeaml(r: _Reader, c: _Card) -> None:
+    """PBEAML: PID MID GROUP TYPE / DIM1(A) .. DIMn(A) NSM(A) [SO X/XB DIM1 .. DIMn NSM] ... as
+    a prismatic beam: every station's dimensions (blank: end A's) must equal end A's (a
+    different one is a tapered beam: error). Section constants as for PBARL."""
+    pid, mid = _int(c, 2), _int(c, 3)
+    group = c.text(4)
+    if group not in ("", "MSCBML0"):
+        raise c.error(4, f"GROUP {group} not supported: only the standard library MSCBML0 (blank)")
+    kind = c.text(5)
+    if kind not in _PBARL_DIMS:
+        raise c.error(5, f"section TYPE {kind or '(blank)'} not supported; supported: "
+                         f"{', '.join(_PBARL_DIMS)}")
+    for i in (6, 7, 8, 9):
+        _blank(c, i, f"field {i}")
+    n = _PBARL_DIMS[kind]
+    dims = tuple(_real(c, 10 + k) for k in range(n))
+    for k, v in enumerate(dims):
+        if v <= 0.0:
+            raise c.error(10 + k, f"dimension DIM{k + 1} must be > 0")
+    _real(c, 10 + n, 0.0)                                          # NSM(A)
+    f = 11 + n
+    while f <= len(c.fields):
+        if not any(c.text(i) for i in range(f, len(c.fields) + 1)):
+            break
+        if c.text(f) not in _SO:
+            raise c.error(f, "expected SO (YES, YESA or NO) of the next station")
+        xxb = _real(c, f + 1)
+        if not 0.0 < xxb <= 1.0:
+            raise c.error(f + 1, "X/XB must be in (0, 1]")
+        for k in range(n):
+            value = _real(c, f + 2 + k, dims[k])
+            if value != dims[k]:
+                raise c.error(f + 2 + k, f"tapered beam not supported: DIM{k + 1} at X/XB = "
+                                         f"{xxb:g} is {value:g}, at end A {dims[k]:g}")
+        _real(c, f + 2 + n, 0.0)                                   # NSM
+        f += n + 3
+    try:
+        a, i1, i2, j, k1, k2 = pbarl_section(kind, dims)
+    except ValueError as exc:
+        raise c.error(10 + exc.args[0], f"{kind} section: {exc.args[1]}") from None
+    r.claim("property", pid, c, 2)
+    r.deck.pbars[pid] = PBar(pid, mid, a, i1, i2, j, c.src, k1, k2, 0.0, card="PBEAML")
 
 
 def _baror(r: _Reader, c: _Card) -> None:
@@ -580,6 +828,130 @@ def _pbar(r: _Reader, c: _Card) -> None:
                               "remove K1/K2 (or I12)")
     r.claim("property", pid, c, 2)
     r.deck.pbars[pid] = PBar(pid, mid, a, i1, i2, j, c.src, k[0], k[1], i12)
+
+
+# PBARL section types: number of dimensions DIM1..DIMn (MSC QRG, PBARL)
+_PBARL_DIMS = {"ROD": 1, "TUBE": 2, "BAR": 2, "BOX": 4, "I": 6, "CHAN": 4, "T": 4}
+
+
+def pbarl_section(kind: str, d: tuple[float, ...]) -> tuple[float, float, float, float, float, float]:
+    """``(A, I1, I2, J, K1, K2)`` of a PBARL section from its dimensions ``d`` (DIM1...), in
+    NASTRAN's element axes: y is the section's height direction (plane 1, I1 about z), z its
+    width direction (plane 2, I2 about y). ``ValueError(field offset, message)`` for dimensions
+    that give no section (a wall thicker than the section).
+
+    A, I1, I2 are exact for the idealized shape (rectangles, circles), about the centroid.
+    J: ROD, TUBE exact (polar moment); BAR Roark's series for a solid rectangle
+    (a b^3 (1/3 - 0.21 b/a (1 - b^4 / (12 a^4))), a >= b, within 0.5 % of St Venant's value);
+    BOX Bredt's thin-walled closed section on the wall mid-line, 4 A_m^2 / sum(s_i / t_i);
+    I, CHAN, T the open thin-walled sum of (1/3) b t^3 over the walls. K1, K2 (shear area
+    factors, plane 1 and 2): the values MYSTRAN 18 computes for PBARL (BD_PBARL.f90): 5/6 for
+    BAR, 6/7 for ROD, Cowper's tube factor with NU = 0, the web (or wall) area fraction for
+    BOX, I, CHAN and T (5/6 of the flange fraction across the flanges; Cowper's T-section factor
+    in the web plane of T). NASTRAN's own K1/K2 for PBARL are not documented in the QRG.
+    """
+    pi = np.pi
+    if kind == "ROD":
+        (r,) = d
+        i = pi * r**4 / 4
+        return pi * r * r, i, i, 2 * i, 6 / 7, 6 / 7
+    if kind == "TUBE":
+        r1, r2 = d
+        if not r2 < r1:
+            raise ValueError(1, "inner radius DIM2 must be smaller than the outer radius DIM1")
+        i = pi * (r1**4 - r2**4) / 4
+        m2 = (r2 / r1) ** 2
+        k = 6 * (1 + m2) ** 2 / (7 * (1 + m2) ** 2 + 20 * m2)
+        return pi * (r1 * r1 - r2 * r2), i, i, 2 * i, k, k
+    if kind == "BAR":
+        b, h = d                                  # DIM1 width (z), DIM2 height (y)
+        a, t = max(b, h), min(b, h)
+        j = a * t**3 * (1 / 3 - 0.21 * t / a * (1 - t**4 / (12 * a**4)))
+        return b * h, b * h**3 / 12, h * b**3 / 12, j, 5 / 6, 5 / 6
+    if kind == "BOX":
+        b, h, th, tv = d                          # width, height, horizontal / vertical walls
+        bi, hi = b - 2 * tv, h - 2 * th
+        if bi <= 0:
+            raise ValueError(3, "vertical walls DIM4 fill the width DIM1 (2 DIM4 >= DIM1)")
+        if hi <= 0:
+            raise ValueError(2, "horizontal walls DIM3 fill the height DIM2 (2 DIM3 >= DIM2)")
+        am = (b - tv) * (h - th)
+        j = 4 * am * am / (2 * (b - tv) / th + 2 * (h - th) / tv)
+        return (b * h - bi * hi, (b * h**3 - bi * hi**3) / 12, (h * b**3 - hi * bi**3) / 12, j,
+                hi / h, bi / b)
+    if kind == "I":
+        h, wb, wt, tw, tb, tt = d                 # depth, bottom/top flange widths, thicknesses
+        hw = h - tb - tt
+        if hw <= 0:
+            raise ValueError(4, "flange thicknesses DIM5 + DIM6 fill the depth DIM1")
+        if tw > min(wb, wt):
+            raise ValueError(3, "web thickness DIM4 exceeds a flange width")
+        parts = [(wb, tb, tb / 2), (tw, hw, tb + hw / 2), (wt, tt, h - tt / 2)]  # (z, y size, y_c)
+        a = sum(w * t for w, t, _ in parts)
+        yc = sum(w * t * y for w, t, y in parts) / a
+        i1 = sum(w * t**3 / 12 + w * t * (y - yc) ** 2 for w, t, y in parts)
+        i2 = sum(t * w**3 / 12 for w, t, _ in parts)
+        j = (wb * tb**3 + wt * tt**3 + (h - (tb + tt) / 2) * tw**3) / 3
+        return a, i1, i2, j, hw * tw / a, 5 / 6 * (wb * tb + wt * tt) / a
+    if kind == "CHAN":
+        b, h, tw, tf = d                          # width (z), height (y), web, flange thickness
+        if h - 2 * tf <= 0:
+            raise ValueError(3, "flange thickness DIM4 fills the height DIM2 (2 DIM4 >= DIM2)")
+        if tw >= b:
+            raise ValueError(2, "web thickness DIM3 fills the width DIM1")
+        hw, bf = h - 2 * tf, b - tw
+        a = hw * tw + 2 * b * tf
+        i1 = (b * h**3 - bf * hw**3) / 12
+        parts = [(h, tw, tw / 2), (2 * tf, bf, tw + bf / 2)]    # (y size, z size, z_c)
+        zc = sum(hh * w * z for hh, w, z in parts) / a
+        i2 = sum(hh * w**3 / 12 + hh * w * (z - zc) ** 2 for hh, w, z in parts)
+        j = (2 * b * tf**3 + hw * tw**3) / 3
+        return a, i1, i2, j, hw / h, bf / b
+    if kind == "T":
+        b, h, tf, tw = d                          # flange width (z), height (y), thicknesses
+        hw = h - tf
+        if hw <= 0:
+            raise ValueError(2, "flange thickness DIM3 fills the height DIM2")
+        if tw > b:
+            raise ValueError(3, "web thickness DIM4 exceeds the flange width DIM1")
+        a = b * tf + hw * tw
+        yc = (b * tf * (hw + tf / 2) + hw * tw * hw / 2) / a
+        i1 = b * tf**3 / 12 + b * tf * (hw + tf / 2 - yc) ** 2 + tw * hw**3 / 12 + hw * tw * (yc - hw / 2) ** 2
+        i2 = (tf * b**3 + hw * tw**3) / 12
+        j = (b * tf**3 + hw * tw**3) / 3
+        m = b * tf / ((hw + tf / 2) * tw)
+        n = b / (hw + tf / 2)
+        k1 = 10 * (1 + 4 * m) ** 2 / (12 + 96 * m + 276 * m * m + 192 * m**3 + 30 * n * n * m * (1 + m))
+        return a, i1, i2, j, k1, 5 / 6 * b * tf / a
+    raise KeyError(kind)
+
+
+def _pbarl(r: _Reader, c: _Card) -> None:
+    """PBARL: PID MID GROUP TYPE / DIM1 ... DIMn NSM (MSC QRG). The section's A, I1, I2, J, K1,
+    K2 (:func:`pbarl_section`) make an equivalent PBAR; NSM has no effect on the stiffness."""
+    pid, mid = _int(c, 2), _int(c, 3)
+    group = c.text(4)
+    if group not in ("", "MSCBML0"):
+        raise c.error(4, f"GROUP {group} not supported: only the standard library MSCBML0 (blank)")
+    kind = c.text(5)
+    if kind not in _PBARL_DIMS:
+        raise c.error(5, f"section TYPE {kind or '(blank)'} not supported; supported: "
+                         f"{', '.join(_PBARL_DIMS)}")
+    for i in (6, 7, 8, 9):
+        _blank(c, i, f"field {i}")
+    n = _PBARL_DIMS[kind]
+    _max_fields(c, 10 + n)
+    dims = tuple(_real(c, 10 + k) for k in range(n))
+    for k, v in enumerate(dims):
+        if v <= 0.0:
+            raise c.error(10 + k, f"dimension DIM{k + 1} must be > 0")
+    _real(c, 10 + n, 0.0)                   # NSM
+    try:
+        a, i1, i2, j, k1, k2 = pbarl_section(kind, dims)
+    except ValueError as exc:
+        raise c.error(10 + exc.args[0], f"{kind} section: {exc.args[1]}") from None
+    r.claim("property", pid, c, 2)
+    r.deck.pbars[pid] = PBar(pid, mid, a, i1, i2, j, c.src, k1, k2, 0.0, card="PBARL")
 
 
 def _mat1(r: _Reader, c: _Card) -> None:
@@ -750,6 +1122,113 @@ def _rbe2(r: _Reader, c: _Card) -> None:
     r.deck.rbe2s[eid] = Rbe2(eid, gn, cm, tuple(gm), c.src)
 
 
+def _rbe3(r: _Reader, c: _Card) -> None:
+    """RBE3: EID (blank) REFGRID REFC WT1 C1 G1,1 G1,2 ... WT2 C2 G2,1 ... [ALPHA a [TREF t]].
+
+    Each weight group is a real WT, component digits C and one or more grids (blank fields
+    between them are skipped). UM (dependent components moved to independent grids) is not
+    supported (error); ALPHA and TREF are read and have no effect."""
+    eid = _int(c, 2)
+    _blank(c, 3, "field 3")
+    ref = _int(c, 4)
+    refc = _components(c, 5, required=True)
+    last = len(c.fields)
+    groups: list[tuple[float, str, tuple[int, ...]]] = []
+    i = 6
+    while i <= last:
+        text = c.text(i)
+        if not text:
+            i += 1
+            continue
+        if text == "UM":
+            raise c.error(i, "UM (dependent components on the independent grids) not supported")
+        if text in ("ALPHA", "TREF"):
+            j = next((k for k in range(i + 1, last + 1) if c.text(k)), None)
+            if j is None:
+                raise c.error(i, f"{text} must be followed by a real value")
+            _real(c, j)
+            i = j + 1
+            continue
+        if _INT.fullmatch(text):
+            raise c.error(i, "weight WT must be a real (e.g. 1.0); an integer here would be a "
+                             "grid without its weight and components")
+        w = _real(c, i)
+        if not w > 0.0:
+            raise c.error(i, "weight WT must be > 0")
+        comps = _components(c, i + 1, required=True)
+        grids: list[int] = []
+        j = i + 2
+        while j <= last and (not c.text(j) or _INT.fullmatch(c.text(j))):
+            if c.text(j):
+                grids.append(_int(c, j))
+            j += 1
+        if not grids:
+            raise c.error(i + 2, "weight group needs at least one grid")
+        groups.append((w, comps, tuple(grids)))
+        i = j
+    if not groups:
+        raise c.error(6, "RBE3 needs at least one weight group WT C G...")
+    r.claim("element", eid, c, 2)
+    r.deck.rbe3s[eid] = Rbe3(eid, ref, refc, tuple(groups), c.src)
+
+
+def _cbush(r: _Reader, c: _Card) -> None:
+    """CBUSH: EID PID GA GB GO/X1 X2 X3 CID / S OCID S1 S2 S3 (MSC QRG). The element axes are
+    CID's (CID >= 0) or, with CID blank, x from GA to GB and the orientation vector (GO, or X
+    in GA's CD system) in the x-y plane. S (default 0.5) places the springs on the line GA-GB.
+    OCID and S1-S3 (a spring location off that line) are not supported: errors."""
+    _max_fields(c, 14)
+    eid = _int(c, 2)
+    pid = _int(c, 3, eid)
+    ga, gb = _int(c, 4), _int(c, 5, 0, minimum=0)
+    x, g0 = _orientation(c)
+    cid = _int(c, 9, None, minimum=0) if c.text(9) else None
+    s = _real(c, 10, 0.5)
+    if not 0.0 <= s <= 1.0:
+        raise c.error(10, "spring location S must be in [0, 1]")
+    if _int(c, 11, -1, minimum=-1) != -1:
+        raise c.error(11, "OCID (spring location off the line GA-GB) not supported: blank or -1")
+    for i in (12, 13, 14):
+        if _real(c, i, 0.0) != 0.0:
+            raise c.error(i, "offset S1-S3 of the spring location not supported: blank or 0.0")
+    if cid is None and x is None and g0 is None and gb == 0:
+        raise c.error(9, "a grounded CBUSH needs CID (or an orientation) for its element axes")
+    if cid is not None and cid not in r.cords and cid != 0:
+        r.pending_cids.append((c, cid))
+    r.claim("element", eid, c, 2)
+    r.deck.bushes[eid] = Bush(eid, pid, ga, gb, x, g0, cid, s, c.src)
+
+
+def _pbush(r: _Reader, c: _Card) -> None:
+    """PBUSH: PID "K" K1..K6 / blank "B" B1..B6 / blank "GE" GE1..GE6 / blank "RCV" SA ST EA ET
+    (one line each, any order, the keywords in field 3 of each line). The K line is the stiffness (blank: 0); damping B, GE and the stress recovery
+    coefficients RCV are read and have no effect on a static solve. Other keywords (M, the
+    frequency-dependent FREQ lines) are errors."""
+    pid = _int(c, 2)
+    k = (0.0,) * 6
+    seen = set()
+    # keyword fields: 3 on the first line, then the second field of each continuation line
+    # (the first one blank), so that the keywords line up in field 3 of every line
+    for i in range(3, len(c.fields) + 1, 8):
+        key = c.text(i)
+        if i > 3 and c.text(i - 1):
+            raise c.error(i - 1, "field must be blank (a PBUSH continuation line starts with a "
+                                 "blank field, then the keyword K, B, GE or RCV)")
+        if not any(c.text(j) for j in range(i, i + 7)):
+            continue
+        if key not in ("K", "B", "GE", "RCV") or key in seen:
+            raise c.error(i, f"PBUSH line keyword {key or '(blank)'} not supported: one each of "
+                             f"K, B, GE, RCV")
+        seen.add(key)
+        values = tuple(_real(c, j, 0.0) for j in range(i + 1, i + 7))
+        if key == "K":
+            k = values
+    if "K" not in seen:
+        raise c.error(3, "PBUSH needs a K line (stiffnesses K1..K6)")
+    r.claim("property", pid, c, 2)
+    r.deck.pbushes[pid] = PBush(pid, k, c.src)
+
+
 def _pelas(r: _Reader, c: _Card) -> None:
     _max_fields(c, 9)
     for base in (2, 6):
@@ -790,9 +1269,78 @@ def _celas(r: _Reader, c: _Card) -> None:
     r.deck.springs[eid] = Spring(eid, g1, c1, g2, c2, k, pid, c.name, c.src)
 
 
+def _param(r: _Reader, c: _Card) -> None:
+    """PARAM,AUTOSPC (YES/NO; the last one of the deck wins) and PARAM,EPZERO (its singularity
+    ratio) are read; every other PARAM has no effect on the reference solver."""
+    name = c.text(2)
+    if name == "AUTOSPC":
+        value = c.text(3)
+        if value not in ("YES", "Y", "NO", "N"):
+            raise c.error(3, "PARAM,AUTOSPC must be YES or NO")
+        r.deck.autospc = value.startswith("Y")
+        r.deck.autospc_src = c.src
+    elif name == "EPZERO":
+        value = _real(c, 3)
+        if not 0.0 < value < 1.0:
+            raise c.error(3, "PARAM,EPZERO must be in (0, 1)")
+        r.deck.epzero = value
+
+
+def _cord2(r: _Reader, c: _Card) -> None:
+    """CORD2R/C/S: CID RID A1 A2 A3 B1 B2 B3 / C1 C2 C3 (MSC QRG): A the origin, B on the z axis,
+    C in the x-z plane, all three in system RID (0 or blank: basic)."""
+    _max_fields(c, 12)
+    cid = _int(c, 2)
+    rid = _int(c, 3, 0, minimum=0)
+    if rid == cid:
+        raise c.error(3, f"RID {rid} is the system itself")
+    pts = tuple(tuple(_real(c, i + k, 0.0) for k in range(3)) for i in (4, 7, 10))
+    r.claim("CORD", cid, c, 2)
+    r.cords[cid] = (c.name[-1], c, (rid, pts))
+
+
+def _cord1(r: _Reader, c: _Card) -> None:
+    """CORD1R/C/S: CIDA G1A G2A G3A [CIDB G1B G2B G3B]: the system through three grids (G1 the
+    origin, G2 on the z axis, G3 in the x-z plane), one or two systems per card."""
+    _max_fields(c, 9)
+    for base in (2, 6):
+        if base == 6 and not any(c.text(i) for i in range(6, 10)):
+            break
+        cid = _int(c, base)
+        grids = tuple(_int(c, base + k) for k in (1, 2, 3))
+        if len(set(grids)) < 3:
+            raise c.error(base + 1, "G1, G2 and G3 must be three different grids")
+        r.claim("CORD", cid, c, base)
+        r.cords[cid] = (c.name[-1], c, (base, grids))
+
+
+def _coord_from_points(cid: int, kind: str, pts: np.ndarray, c: _Card, d: tuple) -> Coord:
+    """The system with origin ``pts[0]``, z axis towards ``pts[1]``, x-z plane through ``pts[2]``
+    (basic positions): z = (B - A)/|B - A|, y = z x (C - A) normalized, x = y x z (MSC QRG, CORD2R)."""
+    a, b, cc = pts
+    scale = max(np.abs(pts).max(), 1e-300)
+    ez = b - a
+    first = 4 if c.name.startswith("CORD2") else d[0] + 1    # field of A (CORD2) or G1 (CORD1)
+    step = 3 if c.name.startswith("CORD2") else 1
+    if np.linalg.norm(ez) <= _ZERO_LENGTH * scale:
+        raise c.error(first + step, f"coordinate system {cid}: the z-axis point coincides with "
+                                    f"the origin")
+    ez = ez / np.linalg.norm(ez)
+    ey = np.cross(ez, cc - a)
+    if np.linalg.norm(ey) <= _PARALLEL_SINE * max(np.linalg.norm(cc - a), 1e-300):
+        raise c.error(first + 2 * step, f"coordinate system {cid}: the x-z plane point lies on "
+                                        f"the z axis")
+    ey = ey / np.linalg.norm(ey)
+    ex = np.cross(ey, ez)
+    return Coord(cid, kind, tuple(a.tolist()), (tuple(ex.tolist()), tuple(ey.tolist()),
+                                               tuple(ez.tolist())), c.name, c.src)
+
+
 _PARSERS = {"GRID": _grid, "GRDSET": _grdset, "CBAR": _cbar, "BAROR": _baror, "PBAR": _pbar, "CROD": _crod,
             "PROD": _prod, "CONROD": _conrod, "MAT1": _mat1, "SPC1": _spc1, "SPC": _spc,
-            "SPCADD": _spcadd, "RBE2": _rbe2, "PELAS": _pelas, "CELAS1": _celas, "CELAS2": _celas}
+            "SPCADD": _spcadd, "RBE2": _rbe2, "RBE3": _rbe3, "CBUSH": _cbush, "PBUSH": _pbush, "PELAS": _pelas, "CELAS1": _celas, "CELAS2": _celas, "PBARL": _pbarl,
+            "CBEAM": _cbeam, "PBEAM": _pbeam, "PBEAML": _pbeaml,
+            **{f"CORD2{k}": _cord2 for k in "RCS"}, **{f"CORD1{k}": _cord1 for k in "RCS"}}
 SUPPORTED = tuple(sorted(_PARSERS))
 """Cards read into the :class:`Deck` and modelled by the reference solver."""
 
@@ -806,11 +1354,9 @@ NO_EFFECT = frozenset({
 
 # what to do instead, for unsupported cards often found in decks written by other programs
 _LOADS = "loads are not part of the model: they come from the study's loads.csv"
-_CORD = "coordinate systems are not supported"
 _UNSUPPORTED_HINTS = {
     **{k: _LOADS for k in ("FORCE", "FORCE1", "FORCE2", "MOMENT", "MOMENT1", "MOMENT2", "LOAD",
                            "GRAV", "PLOAD", "PLOAD1", "PLOAD2", "PLOAD4", "TEMP", "TEMPD", "SPCD")},
-    **{k: _CORD for k in ("CORD1R", "CORD2R", "CORD1C", "CORD2C", "CORD1S", "CORD2S")},
 }
 
 
@@ -846,6 +1392,36 @@ def read_deck_text(text: str, name: str = "<string>", base_dir: Path | None = No
     return deck
 
 
+def bulk_cards(path: str | Path, text: str | None = None):
+    """``(cards, files)``: every bulk-data card of the input file ``path`` as read, not interpreted
+    (INCLUDEs resolved, executive and case control skipped), and the files read. For readers of
+    cards this module does not model, such as the load cards of :mod:`solver_adapters.loadcards`
+    read by ``blackbox import``. Each card has ``name``, ``file``, ``line``, ``src``, ``fields``
+    (with their physical lines) and ``error(i, msg)``. ``text``: the file's text, if already read."""
+    p = Path(path)
+    if text is None:
+        try:
+            text = p.read_text(encoding="utf-8", errors="replace")
+        except OSError as exc:
+            raise DeckFormatError(f"cannot read the deck: {exc.strerror or exc}", file=str(p)) from None
+    reader = _Reader()
+    reader.deck.files.append(str(p))
+    reader.stack.append(p.resolve())
+    return list(reader.cards(reader.lines(text, str(p), p.parent))), reader.deck.files
+
+
+def deck_from_cards(cards) -> Deck:
+    """The validated :class:`Deck` of cards from :func:`bulk_cards` (a chosen subset of them);
+    errors name the cards' own files and lines."""
+    reader = _Reader()
+    for card in cards:
+        reader.add(card)
+    reader.check_unsupported()
+    deck = reader.finish()
+    validate(deck)
+    return deck
+
+
 # Two directions closer than this (sine of the angle) give no usable element plane: the bar's
 # y axis would be decided by the rounding of the input coordinates (about 1e-16 relative).
 _PARALLEL_SINE = 1e-9
@@ -871,6 +1447,10 @@ def validate(deck: Deck) -> None:
             bad(entity, card, ident, f"{what} {', '.join(map(str, missing[:10]))} "
                                      f"{'does' if len(missing) == 1 else 'do'} not exist (no GRID)")
 
+    for g in deck.grids.values():
+        for key, value in (("CP", g.cp), ("CD", g.cd)):
+            if value and value not in deck.coords:
+                bad(g, "GRID", g.id, f"{key} {value}: coordinate system not defined")
     for p in deck.pbars.values():
         if p.mid not in deck.mat1s:
             bad(p, "PBAR", p.pid, f"material MID {p.mid} not found (no MAT1)")
@@ -895,13 +1475,17 @@ def validate(deck: Deck) -> None:
             if np.linalg.norm(xb - xa) <= _ZERO_LENGTH * max(np.abs(xa).max(), np.abs(xb).max()):
                 bad(r, r.card, r.eid, f"zero length: grids {r.ga} and {r.gb} coincide")
     for b in deck.cbars.values():
+        wanted = ("PBEAM", "PBEAML") if b.card == "CBEAM" else ("PBAR", "PBARL")
         if b.pid not in deck.pbars:
             other = (" (it is a PELAS)" if b.pid in deck.pelas
                      else " (it is a PROD)" if b.pid in deck.prods else "")
-            bad(b, "CBAR", b.eid, f"property PID {b.pid} not found (no PBAR){other}")
-        need_grids(b, "CBAR", b.eid, [b.ga, b.gb] + ([b.g0] if b.g0 is not None else []), "grid")
+            bad(b, b.card, b.eid, f"property PID {b.pid} not found (no {' or '.join(wanted)}){other}")
+        elif deck.pbars[b.pid].card not in wanted:
+            bad(b, b.card, b.eid, f"property PID {b.pid} is a {deck.pbars[b.pid].card}; a "
+                                  f"{b.card} needs a {' or '.join(wanted)}")
+        need_grids(b, b.card, b.eid, [b.ga, b.gb] + ([b.g0] if b.g0 is not None else []), "grid")
         if b.ga == b.gb:
-            bad(b, "CBAR", b.eid, f"GA and GB are the same grid {b.ga}")
+            bad(b, b.card, b.eid, f"GA and GB are the same grid {b.ga}")
             continue
         if b.ga not in deck.grids or b.gb not in deck.grids:
             continue
@@ -911,11 +1495,11 @@ def validate(deck: Deck) -> None:
             axis = axis + np.array(b.wb or (0.0, 0.0, 0.0)) - np.array(b.wa or (0.0, 0.0, 0.0))
         if np.linalg.norm(axis) <= _ZERO_LENGTH * max(np.abs(xa).max(), np.abs(xb).max()):
             what = "the bar ends (offsets included)" if b.wa or b.wb else f"grids {b.ga} and {b.gb}"
-            bad(b, "CBAR", b.eid, f"zero length: {what} coincide")
+            bad(b, b.card, b.eid, f"zero length: {what} coincide")
             continue
         if b.g0 is not None:
             if b.g0 in (b.ga, b.gb):
-                bad(b, "CBAR", b.eid, f"G0 {b.g0} is one of the bar's own grids")
+                bad(b, b.card, b.eid, f"G0 {b.g0} is one of the bar's own grids")
                 continue
             if b.g0 not in deck.grids:
                 continue
@@ -924,14 +1508,32 @@ def validate(deck: Deck) -> None:
             v = np.array(b.x)
         nv, na = np.linalg.norm(v), np.linalg.norm(axis)
         if nv == 0.0:
-            bad(b, "CBAR", b.eid, "orientation vector is zero")
+            bad(b, b.card, b.eid, "orientation vector is zero")
         elif np.linalg.norm(np.cross(v, axis)) <= _PARALLEL_SINE * nv * na:
-            bad(b, "CBAR", b.eid, "orientation vector is parallel to the bar axis")
+            bad(b, b.card, b.eid, "orientation vector is parallel to the bar axis")
     for e in deck.rbe2s.values():
         need_grids(e, "RBE2", e.eid, [e.gn], "independent grid GN")
         need_grids(e, "RBE2", e.eid, e.gm, "dependent grid(s)")
         if e.gn in e.gm:
             bad(e, "RBE2", e.eid, f"GN {e.gn} is also a dependent grid")
+    for e in deck.rbe3s.values():
+        need_grids(e, "RBE3", e.eid, [e.refgrid], "reference grid REFGRID")
+        indep = [g for _, _, gs in e.groups for g in gs]
+        need_grids(e, "RBE3", e.eid, indep, "independent grid(s)")
+        if e.refgrid in indep:
+            bad(e, "RBE3", e.eid, f"REFGRID {e.refgrid} is also an independent grid")
+    for b in deck.bushes.values():
+        if b.pid not in deck.pbushes:
+            bad(b, "CBUSH", b.eid, f"property PID {b.pid} not found (no PBUSH)")
+        need_grids(b, "CBUSH", b.eid, [g for g in (b.ga, b.gb, b.g0) if g], "grid(s)")
+        if b.ga == b.gb:
+            bad(b, "CBUSH", b.eid, f"GA and GB are the same grid {b.ga}")
+        elif b.cid is None and b.gb in deck.grids and b.ga in deck.grids:
+            xa, xb = np.array(deck.grids[b.ga].xyz), np.array(deck.grids[b.gb].xyz)
+            if np.linalg.norm(xb - xa) <= _ZERO_LENGTH * max(np.abs(xa).max(), np.abs(xb).max(), 1e-300):
+                bad(b, "CBUSH", b.eid, "GA and GB coincide: the element axes need CID")
+        if b.cid is not None and b.cid != 0 and b.cid not in deck.coords:
+            bad(b, "CBUSH", b.eid, f"CID {b.cid}: coordinate system not defined")
     for s in deck.spc1s:
         need_grids(s, "SPC1", s.sid, s.grids, "grid(s)")
     spc_sets = {s.sid for s in deck.spc1s}

@@ -8,21 +8,91 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 
 @dataclass(frozen=True)
 class Grid:
-    """GRID: ID, CP (0 only), X1 X2 X3, CD (0 only), PS (permanent single-point constraints)."""
+    """GRID: ID, X1 X2 X3, PS (permanent single-point constraints), CP, CD.
+
+    ``xyz`` is the position in the basic system (the reader converts the coordinates given in
+    the CP system); ``cp`` and ``cd`` are the system numbers as given (GRDSET applied). The
+    grid's six components (SPC, springs, loads, results) are in its CD system.
+    """
     id: int
     xyz: tuple[float, float, float]
     ps: str = ""
     src: str = ""
+    cp: int = 0
+    cd: int = 0
+
+
+@dataclass(frozen=True)
+class Coord:
+    """A resolved coordinate system (CORD1R/C/S, CORD2R/C/S): ``kind`` ``"R"`` (rectangular),
+    ``"C"`` (cylindrical R, THETA, Z) or ``"S"`` (spherical R, THETA, PHI), angles in degrees as
+    in NASTRAN. ``origin`` is in basic, ``axes`` holds the system's x, y, z unit vectors in
+    basic as rows. ``card`` and ``src`` name the defining card."""
+    cid: int
+    kind: str
+    origin: tuple[float, float, float]
+    axes: tuple[tuple[float, float, float], ...]
+    card: str = "CORD2R"
+    src: str = ""
+
+    def to_basic(self, x: np.ndarray) -> np.ndarray:
+        """Points ``(n, 3)`` given in this system's coordinates -> basic positions ``(n, 3)``."""
+        x = np.asarray(x, float).reshape(-1, 3)
+        return np.asarray(self.origin) + self.local_rect(x) @ np.asarray(self.axes)
+
+    def local_rect(self, x: np.ndarray) -> np.ndarray:
+        """This system's coordinates -> rectangular coordinates along its axes (MSC QRG, CORD2C
+        and CORD2S: x = R cos(theta), y = R sin(theta); x = R sin(theta) cos(phi), ...)."""
+        x = np.asarray(x, float).reshape(-1, 3)
+        if self.kind == "R":
+            return x.copy()
+        t = np.radians(x[:, 1])
+        if self.kind == "C":
+            return np.column_stack([x[:, 0] * np.cos(t), x[:, 0] * np.sin(t), x[:, 2]])
+        p = np.radians(x[:, 2])
+        return x[:, :1] * np.column_stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)])
+
+    def frames_at(self, xyz: np.ndarray) -> np.ndarray:
+        """The displacement axes at basic points ``(n, 3)``: ``(n, 3, 3)``, rows the unit vectors
+        of components 1, 2, 3 in basic (rectangular: the axes; cylindrical: radial, tangential, z;
+        spherical: radial, theta, phi at the point). Raises ``ValueError`` with the positions of
+        points on the axis (or at the origin) of a cylindrical or spherical system, where the
+        directions are undefined."""
+        xyz = np.asarray(xyz, float).reshape(-1, 3)
+        ax = np.asarray(self.axes)
+        n = xyz.shape[0]
+        if self.kind == "R":
+            return np.broadcast_to(ax, (n, 3, 3)).copy()
+        p = (xyz - np.asarray(self.origin)) @ ax.T          # rectangular along the system's axes
+        rho = np.hypot(p[:, 0], p[:, 1])
+        scale = np.maximum(np.abs(p).max(axis=1), np.abs(np.asarray(self.origin)).max(initial=0.0))
+        bad = np.flatnonzero(rho <= 1e-12 * np.maximum(scale, 1e-300))
+        if bad.size:
+            raise ValueError(bad)
+        c, s = p[:, 0] / rho, p[:, 1] / rho
+        zero, one = np.zeros(n), np.ones(n)
+        if self.kind == "C":
+            loc = np.stack([np.column_stack([c, s, zero]), np.column_stack([-s, c, zero]),
+                            np.column_stack([zero, zero, one])], axis=1)
+        else:
+            r = np.linalg.norm(p, axis=1)
+            st, ct = rho / r, p[:, 2] / r
+            loc = np.stack([np.column_stack([st * c, st * s, ct]),
+                            np.column_stack([ct * c, ct * s, -st]),
+                            np.column_stack([-s, c, zero])], axis=1)
+        return loc @ ax
 
 
 @dataclass(frozen=True)
 class CBar:
-    """CBAR: EID, PID, GA, GB, orientation vector X1 X2 X3 (basic system) or G0 (BAROR defaults
-    already applied), pin flags PA, PB (element components released at end A, B) and offsets
-    WA, WB (basic system, from the grid to the bar end; ``None``: no offset)."""
+    """CBAR (or CBEAM): EID, PID, GA, GB, orientation vector X1 X2 X3 (basic system) or G0 (BAROR
+    defaults already applied), pin flags PA, PB (element components released at end A, B) and
+    offsets WA, WB (basic system, from the grid to the bar end; ``None``: no offset)."""
     eid: int
     pid: int
     ga: int
@@ -34,6 +104,7 @@ class CBar:
     pb: str = ""
     wa: tuple[float, float, float] | None = None
     wb: tuple[float, float, float] | None = None
+    card: str = "CBAR"          # "CBEAM": a prismatic beam read from CBEAM (same element)
 
 
 @dataclass(frozen=True)
@@ -55,6 +126,7 @@ class PBar:
     k1: float | None = None
     k2: float | None = None
     i12: float = 0.0
+    card: str = "PBAR"          # the card it was read from: PBAR, PBARL, PBEAM or PBEAML
 
 
 @dataclass(frozen=True)
@@ -120,6 +192,43 @@ class Rbe2:
 
 
 @dataclass(frozen=True)
+class Rbe3:
+    """RBE3: EID, REFGRID, REFC (dependent components of the reference grid) and the weight
+    groups ``(WT, C, grids)``: the reference grid's motion is the weighted least-squares
+    average of the independent grids' components C (MSC QRG, RBE3)."""
+    eid: int
+    refgrid: int
+    refc: str
+    groups: tuple[tuple[float, str, tuple[int, ...]], ...]
+    src: str = ""
+    card: str = "RBE3"
+
+
+@dataclass(frozen=True)
+class Bush:
+    """CBUSH: EID, PID, GA, GB (0: grounded), the element axes from CID (``cid`` >= 0: that
+    system's axes) or else from the axis GA -> GB with the orientation vector ``x`` (as given,
+    in GA's CD system) or grid ``g0``, and the spring location ``s`` (fraction of GA -> GB)."""
+    eid: int
+    pid: int
+    ga: int
+    gb: int
+    x: tuple[float, float, float] | None = None
+    g0: int | None = None
+    cid: int | None = None
+    s: float = 0.5
+    src: str = ""
+
+
+@dataclass(frozen=True)
+class PBush:
+    """PBUSH: PID and the stiffnesses K1..K6 of the element axes (blank: 0)."""
+    pid: int
+    k: tuple[float, float, float, float, float, float]
+    src: str = ""
+
+
+@dataclass(frozen=True)
 class Pelas:
     """PELAS: PID, K (GE and S ignored)."""
     pid: int
@@ -153,12 +262,20 @@ class Deck:
     mat1s: dict[int, Mat1] = field(default_factory=dict)
     spc1s: list[Spc1] = field(default_factory=list)
     rbe2s: dict[int, Rbe2] = field(default_factory=dict)
+    rbe3s: dict[int, Rbe3] = field(default_factory=dict)
+    bushes: dict[int, Bush] = field(default_factory=dict)
+    pbushes: dict[int, PBush] = field(default_factory=dict)
     pelas: dict[int, Pelas] = field(default_factory=dict)
     springs: dict[int, Spring] = field(default_factory=dict)
     spcadds: dict[int, SpcAdd] = field(default_factory=dict)
     prods: dict[int, Prod] = field(default_factory=dict)
     rods: dict[int, Rod] = field(default_factory=dict)
+    coords: dict[int, Coord] = field(default_factory=dict)
     files: list[str] = field(default_factory=list)
+    # PARAM,AUTOSPC (the last one wins, as in NASTRAN): True only when the deck says YES
+    autospc: bool = False
+    autospc_src: str = ""
+    epzero: float = 1e-8        # PARAM,EPZERO: AUTOSPC's singularity ratio (NASTRAN's default)
     # cards accepted with no effect on a linear static solve: name -> (count, first "file:line")
     no_effect: dict[str, tuple[int, str]] = field(default_factory=dict)
 
@@ -174,12 +291,37 @@ class Deck:
         counts = {"GRID": len(self.grids), "CBAR": len(self.cbars), "PBAR": len(self.pbars),
                   "CROD/CONROD": len(self.rods), "PROD": len(self.prods), "MAT1": len(self.mat1s),
                   "SPC/SPC1 entries": len(self.spc1s), "SPCADD": len(self.spcadds),
-                  "RBE2": len(self.rbe2s), "PELAS": len(self.pelas), "CELAS1/2": len(self.springs)}
+                  "RBE2": len(self.rbe2s), "RBE3": len(self.rbe3s), "CBUSH": len(self.bushes),
+                  "PBUSH": len(self.pbushes), "PELAS": len(self.pelas), "CELAS1/2": len(self.springs),
+                  "CORD1/2": len(self.coords)}
         text = ", ".join(f"{n} {k}" for k, n in counts.items() if n)
+        if self.autospc:
+            text += (f"; PARAM,AUTOSPC,YES ({self.autospc_src}): components without stiffness "
+                     f"(ratio below EPZERO = {self.epzero:g} at their grid) are constrained and "
+                     f"listed by the reference solver")
         if self.no_effect:
             text += "; accepted with no effect on a linear static solve: " + ", ".join(
                 f"{name} x{n} (first at {src})" for name, (n, src) in sorted(self.no_effect.items()))
         return text
+
+    def displacement_frames(self, grid_ids) -> np.ndarray:
+        """``(n, 3, 3)``: for each grid of ``grid_ids`` the unit vectors of its displacement
+        components 1-3 (and 4-6) in basic, as rows (identity for CD = 0). ``ValueError(message,
+        grid id)`` for a grid on the axis of its cylindrical or spherical CD system."""
+        out = np.broadcast_to(np.eye(3), (len(grid_ids), 3, 3)).copy()
+        cds = np.array([self.grids[g].cd for g in grid_ids], dtype=np.int64)
+        for cd in np.unique(cds[cds != 0]).tolist():
+            idx = np.flatnonzero(cds == cd)
+            xyz = np.array([self.grids[grid_ids[i]].xyz for i in idx.tolist()], float)
+            try:
+                out[idx] = self.coords[cd].frames_at(xyz)
+            except ValueError as exc:
+                g = self.grids[grid_ids[int(idx[int(exc.args[0][0])])]]
+                raise ValueError(f"CD {cd} is a "
+                                 f"{'cylindrical' if self.coords[cd].kind == 'C' else 'spherical'} "
+                                 f"system and GRID {g.id} lies on its axis, where the displacement "
+                                 f"directions are undefined", g.id) from None
+        return out
 
     def spring_stiffness(self, s: Spring) -> float:
         """The spring's K: its own (CELAS2) or its PELAS's (CELAS1)."""

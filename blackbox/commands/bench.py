@@ -245,8 +245,9 @@ class BenchResult:
 
 
 def run(fixtures: Path, adapters: list[str], cases: list[str], repeat: int = 1, *, command: str = "blackbox bench",
-        progress=print) -> BenchResult:
-    """Every method on every case and adapter; ``repeat``: best of that many timings (in-process)."""
+        progress=print, executor=None) -> BenchResult:
+    """Every method on every case and adapter; ``repeat``: best of that many timings (in-process).
+    ``executor`` (:mod:`blackbox.parallel`) with several workers runs one task per case and adapter."""
     import os
 
     if repeat < 1:
@@ -254,7 +255,11 @@ def run(fixtures: Path, adapters: list[str], cases: list[str], repeat: int = 1, 
     unknown = [c for c in cases if c not in CASES]
     if unknown:
         raise ValueError(f"unknown bench case(s) {unknown}; known: {', '.join(CASES)}")
-    rows = run_bench(Path(fixtures), adapters, cases, repeat, progress=progress)
+    if executor is not None and executor.workers > 1:      # one task per (case, adapter) on the cluster
+        from blackbox.parallel import bench_rows
+        rows = bench_rows(Path(fixtures), adapters, cases, repeat, executor=executor)
+    else:
+        rows = run_bench(Path(fixtures), adapters, cases, repeat, progress=progress)
     meta = {"machine": platform.platform(), "cpus": os.cpu_count(), "python": platform.python_version(),
             "date": time.strftime("%Y-%m-%d %H:%M:%S"), "repeat": repeat, "command": command}
     return BenchResult(rows, meta)

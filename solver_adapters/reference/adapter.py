@@ -72,6 +72,15 @@ class ReferenceAdapter:
         t0 = time.perf_counter()
         fact = self.factorization()
         m = self.model
+        if m.autospc and loads.dofs:
+            gone = set(m.autospc)
+            vals = loads.values.tocoo()
+            loaded = np.unique(vals.row[vals.data != 0.0])
+            hit = [loads.dofs[i] for i in loaded.tolist() if tuple(loads.dofs[i]) in gone]
+            if hit:
+                raise ModelError(f"load on component(s) {hit[:10]} that PARAM,AUTOSPC,YES "
+                                 f"constrained (no stiffness there): NASTRAN drops such a load "
+                                 f"silently; the reference solver refuses it")
         F_g = sp.csr_matrix((m.T.shape[0], loads.n_cases))
         if loads.dofs:
             gi = m.g_index(loads.dofs)
@@ -112,6 +121,13 @@ class ReferenceAdapter:
             self.stats.wall_s += time.perf_counter() - t0
             self.timings["factor_s"] = self._fact.factor_s
         return self._fact
+
+    @property
+    def autospc_dofs(self) -> list[DofLabel]:
+        """The components PARAM,AUTOSPC,YES constrained (grid, component), after assembly; empty
+        when the deck does not say PARAM,AUTOSPC,YES (then nothing is constrained silently: a
+        component without stiffness is a mechanism error naming it)."""
+        return list(self.model.autospc)
 
     @property
     def backend_used(self) -> str | None:

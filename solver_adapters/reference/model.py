@@ -1,7 +1,11 @@
 """Assembly, constraints and factorization of the reference frame model.
 
-Elements: CBAR (Euler-Bernoulli or, with PBAR K1/K2, Timoshenko bending; pin flags; offsets) and
-CROD/CONROD (axial + torsion), element matrices in ``frame.py``; CELAS springs.
+Elements: CBAR/CBEAM (Euler-Bernoulli or, with K1/K2, Timoshenko bending; pin flags; offsets) and
+CROD/CONROD (axial + torsion), element matrices in ``frame.py``; CBUSH springs; CELAS springs.
+Elements are assembled in basic; the g-set is in each grid's CD system (``u_basic = D u_cd``,
+``K_gg = D^T K_basic D``), so SPCs, springs, loads and results are in CD components.
+RBE3 rows (weighted least squares) are eliminated like RBE2 rows; PARAM,AUTOSPC,YES removes
+free components without stiffness (:func:`autospc`) and lists them.
 
 ``u_g = T u_f``: every grid component (g-set, 6 per grid) is a combination of the independent
 free components (f-set). SPC1 and GRID PS components get a zero row; RBE2 dependent components
@@ -24,6 +28,7 @@ from __future__ import annotations
 import ctypes
 import threading
 import time
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -75,6 +80,7 @@ class Assembled:
     K_gg: sp.csr_matrix
     K_ff: sp.csc_matrix
     f_labels: list[DofLabel]
+    autospc: list[DofLabel] = dataclasses.field(default_factory=list)   # constrained by AUTOSPC
 
     def g_index(self, dofs) -> np.ndarray:
         pos = np.searchsorted(self.grid_ids, [d[0] for d in dofs])
@@ -250,6 +256,11 @@ def assemble(deck: Deck, extra_springs: tuple[ScalarSpring, ...] = (),
             raise ModelError(f"{b.src}: {getattr(b, 'card', 'CBAR')} {b.eid}: zero length "
                              f"(GA={b.ga}, GB={b.gb} coincide)")
         K_gg = _assemble_bars(ia, ib, R, L, props, len(grid_ids), pins, offs, bars)
+    if deck.bushes:
+        K_gg = (K_gg + bush_stiffness(deck, grid_ids, xyz)).tocsr()
+    D = displacement_transform(deck, grid_ids)
+    if D is not None:                 # elements are in basic, the g-set in each grid's CD
+        K_gg = (D.T @ K_gg @ D).tocsr()
     tm["elements_s"] = time.perf_counter() - t1
 
     t1 = time.perf_counter()
@@ -271,7 +282,7 @@ def assemble(deck: Deck, extra_springs: tuple[ScalarSpring, ...] = (),
     tm["springs_s"] = time.perf_counter() - t1
 
     t1 = time.perf_counter()
-    T, f_index = constraint_map(deck, grid_ids)
+    T, f_index = constraint_map(deck, grid_ids, D=D)
     tm["constraint_map_s"] = time.perf_counter() - t1
 
     t1 = time.perf_counter()
@@ -280,17 +291,148 @@ def assemble(deck: Deck, extra_springs: tuple[ScalarSpring, ...] = (),
     K_ff.sort_indices()
     tm["reduce_s"] = time.perf_counter() - t1
 
+    removed: np.ndarray = np.zeros(0, np.int64)
+    if deck.autospc:
+        t1 = time.perf_counter()
+        keep, removed = autospc(K_ff, f_index, deck.epzero)
+        if removed.size:
+            T = T[:, keep].tocsr()
+            K_ff = K_ff[keep][:, keep].tocsc()
+            K_ff.sort_indices()
+            f_index = f_index[keep]
+        tm["autospc_s"] = time.perf_counter() - t1
+
     t1 = time.perf_counter()
     g_labels = list(zip(np.repeat(grid_ids, 6).tolist(),
                         np.tile(np.arange(1, 7), len(grid_ids)).tolist()))
     f_labels = [g_labels[i] for i in f_index.tolist()]
+    auto_labels = [g_labels[i] for i in removed.tolist()]
     tm["labels_s"] = time.perf_counter() - t1
     tm["assemble_s"] = time.perf_counter() - t0
-    return Assembled(grid_ids, g_labels, T, K_gg, K_ff, f_labels)
+    return Assembled(grid_ids, g_labels, T, K_gg, K_ff, f_labels, auto_labels)
 
 
-def constraint_map(deck: Deck, grid_ids: np.ndarray, pos: dict[int, int] | None = None):
+def autospc(K_ff: sp.spmatrix, f_index: np.ndarray, ratio: float) -> tuple[np.ndarray, np.ndarray]:
+    """NASTRAN's grid-point singularity processing (PARAM,AUTOSPC,YES): ``(keep, removed)``,
+    positions in the f-set to keep and the g-indices of the components it constrains.
+
+    For every grid, the 3x3 blocks of K_ff of its free translations and of its free rotations
+    (after SPCs and rigid elements) are decomposed; an eigenvalue below ``ratio`` (PARAM,EPZERO,
+    1e-8 by default) times the block's largest is a direction without stiffness, and the free
+    component most aligned with it is constrained (all free components of a block without any
+    stiffness). Components that are not free do not take part (their rows are decoupled)."""
+    gi = np.asarray(f_index)
+    group = (gi // 6) * 2 + (gi % 6 >= 3)              # (grid, translation/rotation)
+    ugroup, ginv = np.unique(group, return_inverse=True)
+    ginv = ginv.ravel()
+    local = gi % 3
+    K = sp.coo_matrix(K_ff)
+    same = ginv[K.row] == ginv[K.col]
+    B = np.zeros((ugroup.size, 3, 3))
+    np.add.at(B, (ginv[K.row[same]], local[K.row[same]], local[K.col[same]]), K.data[same])
+    free = np.zeros((ugroup.size, 3), bool)
+    free[ginv, local] = True
+    # a component that is not free gets the block's largest free diagonal: decoupled, and
+    # neither the largest eigenvalue nor a singular direction
+    dmax = np.where(free, np.einsum("gii->gi", B), 0.0).max(axis=1)
+    for i in range(3):
+        B[:, i, i] += np.where(free[:, i], 0.0, dmax)
+    B = 0.5 * (B + B.transpose(0, 2, 1))
+    lam, vec = np.linalg.eigh(B)
+    lmax = lam.max(axis=1)
+    drop = np.zeros((ugroup.size, 3), bool)
+    for g in np.flatnonzero(lam.min(axis=1) <= ratio * np.maximum(lmax, 0.0)).tolist():
+        if lmax[g] <= 0.0:
+            drop[g] = free[g]
+            continue
+        for j in np.flatnonzero(lam[g] <= ratio * lmax[g]).tolist():
+            w = np.abs(vec[g][:, j]) * free[g] * ~drop[g]
+            if w.max() > 0.0:
+                drop[g, int(np.argmax(w))] = True
+    removed_pos = np.flatnonzero(drop[ginv, local])
+    keep = np.setdiff1d(np.arange(gi.size), removed_pos)
+    return keep, gi[removed_pos]
+
+
+def _skew(r: np.ndarray) -> np.ndarray:
+    """``S(r)`` with ``S(r) a = r x a``."""
+    return np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+
+
+def bush_stiffness(deck: Deck, grid_ids: np.ndarray, xyz: np.ndarray) -> sp.csr_matrix:
+    """Sum of the CBUSH stiffnesses in basic (MSC QRG CBUSH/PBUSH): six uncoupled springs
+    K1..K6 along the element axes at the spring point p = x_A + S (x_B - x_A), reached from
+    each grid by a rigid link (u_p = u_g + theta_g x (p - x_g)), so that a bush of non-zero
+    length carries moments consistently: K = C^T diag(K) C, C = [-E T_A, E T_B] with E the
+    element axes (twice: translations and rotations) and T_g the rigid links. GB = 0: the
+    springs go to ground at p = x_A. Element axes: CID's (a cylindrical or spherical CID's
+    axes at GA), else x along GA -> GB and the orientation vector in the x-y plane."""
+    n_g = 6 * len(grid_ids)
+    rows, cols, vals = [], [], []
+    for b in sorted(deck.bushes.values(), key=lambda e: e.eid):
+        where = f"{b.src}: CBUSH {b.eid}"
+        ia = int(_grid_pos(grid_ids, [b.ga], where)[0])
+        xa = xyz[ia]
+        ib = int(_grid_pos(grid_ids, [b.gb], where)[0]) if b.gb else None
+        xb = xyz[ib] if ib is not None else xa
+        if b.cid is not None:
+            E = np.eye(3) if b.cid == 0 else deck.coords[b.cid].frames_at(xa[None, :])[0]
+        else:
+            ex = xb - xa
+            if b.g0 is not None:
+                v = xyz[int(_grid_pos(grid_ids, [b.g0], where)[0])] - xa
+            else:
+                v = deck.displacement_frames([b.ga])[0].T @ np.array(b.x)
+            ez = np.cross(ex, v)
+            if not np.linalg.norm(ez) > 1e-9 * np.linalg.norm(ex) * np.linalg.norm(v):
+                raise ModelError(f"{where}: orientation vector is parallel to GA -> GB (or zero)")
+            ex = ex / np.linalg.norm(ex)
+            ez = ez / np.linalg.norm(ez)
+            E = np.array([ex, np.cross(ez, ex), ez])
+        p = xa + b.s * (xb - xa)
+        R = np.kron(np.eye(2), E)
+        ends = [(ia, xa, -1.0)] + ([(ib, xb, 1.0)] if ib is not None else [])
+        C = np.zeros((6, 6 * len(ends)))
+        for k, (_, x, sign) in enumerate(ends):
+            T = np.eye(6)
+            T[:3, 3:] = -_skew(p - x)
+            C[:, 6 * k:6 * k + 6] = sign * R @ T
+        K = C.T @ (np.array(deck.pbushes[b.pid].k)[:, None] * C)
+        idx = np.concatenate([6 * g + np.arange(6) for g, _, _ in ends])
+        rows.append(np.repeat(idx, idx.size))
+        cols.append(np.tile(idx, idx.size))
+        vals.append(0.5 * (K + K.T).ravel())
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(n_g, n_g))
+
+
+def displacement_transform(deck: Deck, grid_ids: np.ndarray) -> sp.csr_matrix | None:
+    """``D`` (n_g x n_g) with ``u_basic = D u_cd``: per grid ``blockdiag(F^T, F^T)``, F the
+    rows of the grid's CD axes in basic (``Deck.displacement_frames``). ``None`` when every CD
+    is 0 (the identity, left out so that such models stay bit for bit as they were)."""
+    if not any(g.cd for g in deck.grids.values()):
+        return None
+    try:
+        F = deck.displacement_frames(grid_ids.tolist())
+    except ValueError as exc:
+        raise ModelError(f"{deck.grids[exc.args[1]].src}: GRID {exc.args[1]}: {exc.args[0]}") from None
+    n = len(grid_ids)
+    blocks = np.zeros((n, 6, 6))
+    blocks[:, :3, :3] = F.transpose(0, 2, 1)
+    blocks[:, 3:, 3:] = F.transpose(0, 2, 1)
+    D = sp.bsr_matrix((blocks, np.arange(n), np.arange(n + 1)), shape=(6 * n, 6 * n)).tocsr()
+    D.eliminate_zeros()
+    return D
+
+
+def constraint_map(deck: Deck, grid_ids: np.ndarray, pos: dict[int, int] | None = None,
+                   D: sp.csr_matrix | None = None):
     """``T`` (n_g x n_f) and the g-index of each f column. See the module docstring.
+
+    ``D`` (``u_basic = D u_cd``, from :func:`displacement_transform`): the g-set components are
+    in each grid's CD system; SPC components are too, and an RBE2's CM components are those of
+    the dependent grid's CD (as in NASTRAN). The rigid link holds in basic, so its rows become
+    rows of ``D_m^T A D_n`` (A the basic rigid-link matrix).
 
     Array work throughout: SPC/PS and RBE2 dependent components are marked by index arrays; the
     RBE2 rows form a sparse ``W`` (dependent g-component -> independent g-components), and
@@ -321,11 +463,16 @@ def constraint_map(deck: Deck, grid_ids: np.ndarray, pos: dict[int, int] | None 
         d_idx.append(i)
         d_gn.append(np.full(i.size, gn, dtype=np.int64))
         d_rbe.append(np.full(i.size, k, dtype=np.int64))
-    dep = np.concatenate(d_idx) if d_idx else np.zeros(0, np.int64)
+    dep2 = np.concatenate(d_idx) if d_idx else np.zeros(0, np.int64)
     dep_gn = np.concatenate(d_gn) if d_gn else np.zeros(0, np.int64)
-    dep_rbe = np.concatenate(d_rbe) if d_rbe else np.zeros(0, np.int64)
+    dep_rbe2 = np.concatenate(d_rbe) if d_rbe else np.zeros(0, np.int64)
+    rbe3s = sorted(deck.rbe3s.values(), key=lambda r: r.eid)
+    dep3, dep_rbe3, W3 = _rbe3_rows(deck, grid_ids, rbe3s, len(rbe2s))
+    rigid = rbe2s + rbe3s
+    dep = np.concatenate([dep2, dep3])
+    dep_rbe = np.concatenate([dep_rbe2, dep_rbe3])
     if dep.size:
-        _check_dependents(dep, dep_rbe, fixed, rbe2s, grid_ids)
+        _check_dependents(dep, dep_rbe, fixed, rigid, grid_ids)
 
     is_dep = np.zeros(n_g, bool)
     is_dep[dep] = True
@@ -335,25 +482,9 @@ def constraint_map(deck: Deck, grid_ids: np.ndarray, pos: dict[int, int] | None 
     if not dep.size:
         return S, f_index
 
-    # W: u[dep] = sum W[dep, j] u[j] over the independent grid's components j
-    c = dep % 6
-    n0 = 6 * dep_gn
-    r = _xyz(deck, grid_ids, dep // 6) - _xyz(deck, grid_ids, dep_gn)     # x_m - x_n
-    w_rows, w_cols, w_vals = [dep], [n0 + c], [np.ones(dep.size)]
-    # translations: u_m = u_n + theta_n x r  (x: +th_y r_z - th_z r_y; y: +th_z r_x - th_x r_z;
-    # z: +th_x r_y - th_y r_x)
-    cross = {0: ((4, 2, 1.0), (5, 1, -1.0)),
-             1: ((5, 0, 1.0), (3, 2, -1.0)),
-             2: ((3, 1, 1.0), (4, 0, -1.0))}
-    for comp, terms in cross.items():
-        sel = np.flatnonzero(c == comp)
-        for rot, axis, sign in terms:
-            w = sign * r[sel, axis]
-            keep = w != 0.0
-            w_rows.append(dep[sel][keep]); w_cols.append(n0[sel][keep] + rot); w_vals.append(w[keep])
-    W = sp.csr_matrix((np.concatenate(w_vals), (np.concatenate(w_rows), np.concatenate(w_cols))),
-                      shape=(n_g, n_g))
-
+    W = W3
+    if dep2.size:
+        W = (_rigid_links(deck, grid_ids, dep2, dep_gn, dep_rbe2, D) + W3).tocsr()
     # chains: dependent -> dependent edges must not loop
     Wdd = W[:, dep].tocsr()[dep]
     if Wdd.nnz:
@@ -361,9 +492,10 @@ def constraint_map(deck: Deck, grid_ids: np.ndarray, pos: dict[int, int] | None 
         sizes = np.bincount(label, minlength=n_comp)
         looped = np.flatnonzero(sizes[label] > 1)
         if looped.size:
-            eids = sorted({rbe2s[int(k)].eid for k in dep_rbe[looped]})
-            raise ModelError(f"RBE2 {eids[0]}: circular dependency between RBE2 elements "
-                             f"{', '.join(map(str, eids[:20]))}")
+            els = sorted({(rigid[int(k)].eid, getattr(rigid[int(k)], "card", "RBE2"))
+                          for k in dep_rbe[looped]})
+            raise ModelError(f"{els[0][1]} {els[0][0]}: circular dependency between rigid "
+                             f"elements {', '.join(f'{c} {e}' for e, c in els[:20])}")
     T = S.copy()
     term = S
     for _ in range(dep.size + 1):
@@ -378,6 +510,58 @@ def constraint_map(deck: Deck, grid_ids: np.ndarray, pos: dict[int, int] | None 
     return T, f_index
 
 
+def _rigid_links(deck: Deck, grid_ids: np.ndarray, dep: np.ndarray, dep_gn: np.ndarray,
+                 dep_rbe: np.ndarray, D: sp.csr_matrix | None) -> sp.csr_matrix:
+    """``W`` (n_g x n_g): ``u[dep] = sum W[dep, j] u[j]`` over the independent grid's components.
+
+    Without coordinate systems the rows are those of the rigid link in basic. With them, every
+    (RBE2, dependent grid) gets its six basic rows ``A``, transformed to ``D_m^T A D_n``, and the
+    rows of the CM components are kept."""
+    n_g = 6 * len(grid_ids)
+    if D is None:
+        rows, gn, comp = dep, dep_gn, dep % 6
+        out_rows = dep
+    else:
+        key = dep_rbe * len(grid_ids) + dep // 6
+        ukey, inst = np.unique(key, return_inverse=True)
+        inst = inst.ravel()
+        first = np.zeros(ukey.size, np.int64)
+        first[inst[::-1]] = np.arange(dep.size)[::-1]      # one dependent entry per instance
+        m_pos, n_pos = dep[first] // 6, dep_gn[first]
+        rows = (6 * np.arange(ukey.size)[:, None] + np.arange(6)).ravel()
+        gn = np.repeat(n_pos, 6)
+        comp = np.tile(np.arange(6), ukey.size)
+        rows_m = np.repeat(m_pos, 6)
+    c = comp
+    n0 = 6 * gn
+    grid_of_row = dep // 6 if D is None else rows_m
+    r = _xyz(deck, grid_ids, grid_of_row) - _xyz(deck, grid_ids, gn)     # x_m - x_n
+    w_rows, w_cols, w_vals = [rows], [n0 + c], [np.ones(rows.size)]
+    # translations: u_m = u_n + theta_n x r  (x: +th_y r_z - th_z r_y; y: +th_z r_x - th_x r_z;
+    # z: +th_x r_y - th_y r_x)
+    cross = {0: ((4, 2, 1.0), (5, 1, -1.0)),
+             1: ((5, 0, 1.0), (3, 2, -1.0)),
+             2: ((3, 1, 1.0), (4, 0, -1.0))}
+    for cc, terms in cross.items():
+        sel = np.flatnonzero(c == cc)
+        for rot, axis, sign in terms:
+            w = sign * r[sel, axis]
+            keep = w != 0.0
+            w_rows.append(rows[sel][keep]); w_cols.append(n0[sel][keep] + rot); w_vals.append(w[keep])
+    n_rows = n_g if D is None else rows.size
+    W = sp.csr_matrix((np.concatenate(w_vals), (np.concatenate(w_rows), np.concatenate(w_cols))),
+                      shape=(n_rows, n_g))
+    if D is None:
+        return W
+    P = sp.csr_matrix((np.ones(rows.size), (rows, 6 * rows_m + comp)), shape=(rows.size, n_g))
+    Dm = (P @ D @ P.T).tocsr()                       # blockdiag of each instance's D_m
+    Wc = (Dm.T @ W @ D).tocsr()
+    pick = sp.csr_matrix((np.ones(dep.size), (dep, 6 * inst + dep % 6)), shape=(n_g, rows.size))
+    W = (pick @ Wc).tocsr()
+    W.eliminate_zeros()
+    return W
+
+
 def _xyz(deck: Deck, grid_ids: np.ndarray, positions: np.ndarray) -> np.ndarray:
     """Coordinates ``(len(positions), 3)`` of the grids at ``positions`` in ``grid_ids``."""
     uniq, inv = np.unique(positions, return_inverse=True)
@@ -385,9 +569,9 @@ def _xyz(deck: Deck, grid_ids: np.ndarray, positions: np.ndarray) -> np.ndarray:
     return xyz[inv.ravel()]
 
 
-def _check_dependents(dep, dep_rbe, fixed, rbe2s, grid_ids) -> None:
-    """ModelError for the first (in RBE2 EID order) component that is dependent twice or also
-    constrained by an SPC, as the original one-by-one loop reported it."""
+def _check_dependents(dep, dep_rbe, fixed, rigid, grid_ids) -> None:
+    """ModelError for the first (RBE2s in EID order, then RBE3s) component that is dependent
+    twice or also constrained by an SPC. ``rigid``: the elements indexed by ``dep_rbe``."""
     order = np.argsort(dep, kind="stable")
     s = dep[order]
     again = np.zeros(dep.size, bool)
@@ -397,14 +581,82 @@ def _check_dependents(dep, dep_rbe, fixed, rbe2s, grid_ids) -> None:
     if not bad.size:
         return
     k = int(bad[0])
-    r = rbe2s[int(dep_rbe[k])]
+    r = rigid[int(dep_rbe[k])]
+    name = getattr(r, "card", "RBE2")
     gm, comp = int(grid_ids[dep[k] // 6]), int(dep[k] % 6) + 1
     if again[k]:
-        first = int(np.flatnonzero(dep == dep[k])[0])
-        raise ModelError(f"{r.src}: RBE2 {r.eid}: grid {gm} component {comp} is already "
-                         f"dependent on RBE2 {rbe2s[int(dep_rbe[first])].eid}")
-    raise ModelError(f"{r.src}: RBE2 {r.eid}: dependent grid {gm} component {comp} "
+        first = rigid[int(dep_rbe[int(np.flatnonzero(dep == dep[k])[0])])]
+        raise ModelError(f"{r.src}: {name} {r.eid}: grid {gm} component {comp} is already "
+                         f"dependent on {getattr(first, 'card', 'RBE2')} {first.eid}")
+    raise ModelError(f"{r.src}: {name} {r.eid}: dependent grid {gm} component {comp} "
                      f"is also constrained by an SPC; constrain the independent grid instead")
+
+
+RBE3_COND = 1e12
+"""An RBE3 whose weighted normal matrix S^T W S (6x6) has a condition number above this leaves
+a motion of its reference grid undetermined by its independent components: an error."""
+
+
+def _rbe3_rows(deck: Deck, grid_ids: np.ndarray, rbe3s, first_index: int):
+    """Dependent rows of the RBE3s: ``(dep, element index, W3)`` with ``u[dep] = W3[dep] u``.
+
+    NASTRAN's interpolation element (MSC QRG RBE3; the weighted least-squares average of the
+    independent motions): each independent component (grid i, component c of its CD system,
+    weight w) is a row ``s = (F_i A_i)[c]`` of the rigid-body map from the reference grid's basic
+    motion to grid i (``A_i = [[I, -S(x_i - x_ref)], [0, I]]``, ``F_i`` the grid's CD axes), so
+    that the reference motion is ``(S^T W S)^-1 S^T W u_ind``, turned into the reference grid's
+    CD; the REFC rows are kept. Rotational components are weighted by w L^2, L the mean distance
+    of the independent grids from the reference grid (MSC Nastran's scaling, so that rotations
+    and translations are weighed alike; MYSTRAN 18 weighs them by w alone and couples them
+    differently, so the two differ when independent rotations are given)."""
+    n_g = 6 * len(grid_ids)
+    if not rbe3s:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), sp.csr_matrix((n_g, n_g))
+    rows, cols, vals, deps, owners = [], [], [], [], []
+    for k, e in enumerate(rbe3s):
+        where = f"{e.src}: RBE3 {e.eid}"
+        ref = int(_grid_pos(grid_ids, [e.refgrid], where)[0])
+        members = [(w, c, int(p)) for w, comps, gs in e.groups
+                   for p in _grid_pos(grid_ids, list(gs), where) for c in comps]
+        pos = sorted({p for _, _, p in members} | {ref})
+        xyz = _xyz(deck, grid_ids, np.array(pos))
+        frames = dict(zip(pos, deck.displacement_frames(grid_ids[pos].tolist())))
+        at = dict(zip(pos, xyz))
+        dist = [np.linalg.norm(at[p] - at[ref]) for p in {p for _, _, p in members}]
+        lc2 = float(np.mean(dist)) ** 2
+        S = np.zeros((len(members), 6))
+        wts = np.zeros(len(members))
+        for m, (w, c, p) in enumerate(members):
+            r = at[p] - at[ref]
+            A = np.eye(6)
+            A[:3, 3:] = -np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+            F = np.zeros((6, 6))
+            F[:3, :3] = F[3:, 3:] = frames[p]
+            ci = int(c) - 1
+            S[m] = (F @ A)[ci]
+            wts[m] = w * (lc2 if ci >= 3 else 1.0)
+        N = S.T @ (wts[:, None] * S)
+        if not np.linalg.cond(N) < RBE3_COND:
+            raise ModelError(f"{where}: the independent grids and components do not determine "
+                             f"all six motions of the reference grid {e.refgrid} (e.g. too few "
+                             f"grids, or all on one line with translations only)")
+        G = np.linalg.solve(N, S.T * wts)                      # basic reference motion
+        Fr = np.zeros((6, 6))
+        Fr[:3, :3] = Fr[3:, 3:] = frames[ref]
+        G = Fr @ G                                             # in the reference grid's CD
+        col = np.array([6 * p + int(c) - 1 for _, c, p in members], dtype=np.int64)
+        for c in e.refc:
+            ci = int(c) - 1
+            rows.append(np.full(col.size, 6 * ref + ci))
+            cols.append(col)
+            vals.append(G[ci])
+            deps.append(6 * ref + ci)
+            owners.append(first_index + k)
+    W3 = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                       shape=(n_g, n_g))
+    W3.sum_duplicates()
+    W3.eliminate_zeros()
+    return np.array(deps, np.int64), np.array(owners, np.int64), W3
 
 
 # --------------------------------------------------------------------------------------------
@@ -631,7 +883,9 @@ class Factorization:
             raise UnstableStructureError(
                 "the stiffness has no diagonal term at these free components: nothing connects "
                 "them (a grid without elements, or a rotation no element reaches); add an SPC1 or "
-                "an element", [model.f_labels[i] for i in dead])
+                "an element, or PARAM,AUTOSPC,YES to the deck (NASTRAN's SOL 101 default, applied "
+                "by the reference solver only when the deck says so)",
+                [model.f_labels[i] for i in dead])
         negative = np.flatnonzero(diag < 0.0)
         if negative.size:
             raise UnstableStructureError(

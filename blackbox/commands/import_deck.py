@@ -1,0 +1,377 @@
+"""``blackbox import DECK --out STUDY``: a whole NASTRAN input file becomes a study folder.
+
+* ``model.bdf``: the deck's bulk data as written (comments and formats kept, INCLUDEs inlined),
+  without its load cards and with only the constraint sets the case control selects;
+* ``loads.csv``: one case per SUBCASE (labelled by its ID; ``1`` for a deck without SUBCASE),
+  the subcase's ``LOAD =`` set resolved into nodal forces and moments (:mod:`solver_adapters.loadcards`);
+* ``study.toml``: the study to complete: the joints named with ``--joint NAME:G1,G2,...`` (checked
+  against the deck), else a commented template listing the candidate joints of the deck.
+
+The executive and case control are read by :mod:`solver_adapters.casecontrol`; what is skipped
+(output requests, titles, plot packets ...) is reported once per kind in :attr:`ImportResult.notes`.
+docs/import.md describes the rules.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import time
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from blackbox.errors import StudyError
+from solver_adapters.bdf import deck_from_cards
+from solver_adapters.casecontrol import CaseControl, bulk_start
+from solver_adapters.deck import Deck
+from solver_adapters.loadcards import LOAD_CARDS, OTHER_LOAD_CARDS, read_input_file
+from solver_adapters.protocol import DeckFormatError
+
+__all__ = ["ImportResult", "run", "parse_joint", "candidate_joints"]
+
+_SPC_CARDS = ("SPC", "SPC1", "SPCADD")
+# MYSTRAN's own bulk-data card for debug printout: no effect on the solution, not NASTRAN.
+_SOLVER_DEBUG = ("DEBUG",)
+_INCLUDE = re.compile(r"INCLUDE\s*(?:'([^']*)'|\"([^\"]*)\"|([^\s'\"]+))\s*", re.IGNORECASE)
+_BEGIN_BULK = re.compile(r"BEGIN\s+BULK\b.*", re.IGNORECASE)
+
+
+@dataclass(frozen=True, eq=False)
+class ImportResult:
+    """The study made from one input file: the three files' text, the parsed model, the notes."""
+    source: Path
+    model_bdf: str
+    loads_csv: str
+    study_toml: str
+    cases: tuple[str, ...]
+    deck: Deck
+    notes: tuple[str, ...]
+    n_cards: int
+    read_seconds: float
+    joints: tuple[tuple[str, tuple[int, ...]], ...]
+    command: str = "import"
+
+    def write(self, out: Path) -> list[str]:
+        """``model.bdf``, ``loads.csv`` and ``study.toml`` into the (existing, empty) folder ``out``."""
+        out = Path(out)
+        (out / "model.bdf").write_text(self.model_bdf)
+        (out / "loads.csv").write_text(self.loads_csv)
+        (out / "study.toml").write_text(self.study_toml)
+        return ["model.bdf", "loads.csv", "study.toml"]
+
+
+# --------------------------------------------------------------------------------------------
+# joints
+# --------------------------------------------------------------------------------------------
+def parse_joint(text: str) -> tuple[str, tuple[int, ...]]:
+    """``NAME:G1,G2,...`` -> ``(NAME, (G1, G2, ...))``; StudyError naming ``--joint`` otherwise."""
+    name, sep, rest = text.partition(":")
+    name = name.strip()
+    try:
+        grids = tuple(int(g) for g in rest.split(",") if g.strip())
+    except ValueError:
+        grids = ()
+    if not sep or not name or len(grids) < 2:
+        raise StudyError(f"--joint {text!r}: expected NAME:G1,G2,... (a name, then at least two "
+                         f"grid IDs, branch 1 first)")
+    if len(set(grids)) != len(grids):
+        raise StudyError(f"--joint {text!r}: a grid is named twice")
+    if not re.fullmatch(r"[A-Za-z0-9_.-]+", name):
+        raise StudyError(f"--joint {text!r}: the name may hold letters, digits, '_', '.', '-'")
+    return name, grids
+
+
+def _model_size(deck: Deck) -> float:
+    xyz = np.array([g.xyz for g in deck.grids.values()]) if deck.grids else np.zeros((1, 3))
+    return max(float(np.ptp(xyz, axis=0).max()), 1e-300)
+
+
+def candidate_joints(deck: Deck) -> list[tuple[int, ...]]:
+    """Groups of coincident grids tied in translation by one RBE2 (CM containing 123): GN first,
+    then the coincident dependent grids in the RBE2's order."""
+    size = _model_size(deck)
+    out = []
+    for r in deck.rbe2s.values():
+        if not set("123") <= set(r.cm) or r.gn not in deck.grids:
+            continue
+        x0 = np.array(deck.grids[r.gn].xyz)
+        same = [g for g in r.gm if g in deck.grids
+                and float(np.max(np.abs(np.array(deck.grids[g].xyz) - x0))) <= 1e-9 * size]
+        if same:
+            out.append((r.gn, *same))
+    return out
+
+
+def _check_joints(joints, deck: Deck) -> None:
+    from blackbox.study import check_joints
+    config = SimpleNamespace(joints=[SimpleNamespace(name=n, grids=list(g), rigid_pairs=[])
+                                     for n, g in joints])
+    used: dict[int, str] = {}
+    for n, g in joints:
+        for gid in g:
+            if gid in used:
+                raise StudyError(f"--joint {n}: grid {gid} already belongs to joint {used[gid]}")
+            used[gid] = n
+    if len({n for n, _ in joints}) != len(joints):
+        raise StudyError("--joint: two joints have the same name")
+    check_joints(config, deck, Path("--joint"))
+
+
+def _study_toml(name: str, source: Path, cases, joints, deck: Deck) -> str:
+    lines = [f"# Made by `blackbox import` from {source.name}: model.bdf (its bulk data), loads.csv",
+             f"# ({len(cases)} case(s): {', '.join(cases[:20])}{' ...' if len(cases) > 20 else ''}, "
+             f"one per SUBCASE). Complete it, then add measurements.csv (docs/study-format.md).",
+             f"name = {json.dumps(name)}", "", "[solver]", 'adapter = "reference"', 'deck = "model.bdf"', ""]
+    if joints:
+        for n, g in joints:
+            lines += ["[[joints]]", f"name = {json.dumps(n)}", f"grids = [{', '.join(map(str, g))}]",
+                      'model = "simple"', "initial = 1.0e3", ""]
+        return "\n".join(lines)
+    cands = candidate_joints(deck)
+    lines += ["# Flexible joints: uncomment one [[joints]] table per joint to identify (the grids are",
+              "# the branch-end grids, branch 1 = the RBE2's GN first; `initial` in your units of",
+              "# moment per radian)."]
+    if cands:
+        lines.append(f"# Candidates found in the deck ({len(cands)}): groups of coincident grids tied "
+                     f"by an RBE2 with CM containing 123.")
+        for g in cands:
+            lines += ["#", "# [[joints]]", f'# name = "J{g[0]}"', f"# grids = [{', '.join(map(str, g))}]",
+                      '# model = "simple"', "# initial = 1.0e3"]
+    else:
+        lines.append("# No candidate found: the deck has no coincident grids tied by an RBE2 with "
+                     "CM containing 123 (docs/study-format.md, 'Declaring a flexible joint').")
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------------------------
+# model.bdf: the bulk data as written, minus the dropped cards
+# --------------------------------------------------------------------------------------------
+def _card_image(raw: str) -> str:
+    """A fixed-field line cut at column 80 (a card image is 80 columns; NASTRAN reads no further:
+    decks put remarks there). Free-field lines (commas) are left as they are."""
+    if "," in raw.partition("$")[0]:
+        return raw
+    body, dollar, comment = raw.partition("$")
+    wide = body.expandtabs(8)
+    if len(wide.rstrip()) <= 80:
+        return raw
+    return wide[:80].rstrip()
+
+
+def _card_lines(card) -> set[tuple[str, int]]:
+    last = max(f.line for f in card.fields)
+    return {(card.file, n) for n in range(card.line, last + 1)}
+
+
+def _inline(path: Path, shown: str, base: Path, start: int, drop: set, out: list[str]) -> bool:
+    """Append the lines of ``path`` from index ``start``, INCLUDEs inlined, dropped lines left
+    out; True once ENDDATA is met. File names as the bulk-data reader gives them (``shown``)."""
+    lines = path.read_text(encoding="utf-8", errors="replace").removeprefix("\ufeff").splitlines()
+    for k in range(start, len(lines)):
+        raw = lines[k]
+        if (shown, k + 1) in drop:
+            continue
+        body = raw.partition("$")[0] if raw.lstrip()[:7].upper() != "INCLUDE" else raw
+        s = body.strip()
+        if _BEGIN_BULK.fullmatch(s):
+            continue
+        if s[:7].upper() == "INCLUDE" and (len(s) == 7 or not s[7].isalnum()):
+            m = _INCLUDE.fullmatch(s.split("$")[0].strip()) or _INCLUDE.fullmatch(s)
+            name = next(g for g in m.groups() if g is not None)
+            out.append(f"$ ---- INCLUDE '{name}' inlined by blackbox import ----")
+            inc = (base / name).resolve()
+            ended = _inline(inc, str(base / name), inc.parent, 0, drop, out)
+            out.append(f"$ ---- end of '{name}' ----")
+            if ended:
+                return True
+            continue
+        if s and s.replace(",", " ").split()[0].upper().rstrip("*") == "ENDDATA":
+            return True
+        out.append(_card_image(raw).rstrip())
+    return False
+
+
+# --------------------------------------------------------------------------------------------
+# the import
+# --------------------------------------------------------------------------------------------
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
+def _spc_sets_of(cards) -> dict[int, list]:
+    sets: dict[int, list] = {}
+    for c in cards:
+        if c.name in _SPC_CARDS and c.text(2):
+            try:
+                sets.setdefault(int(c.text(2)), []).append(c)
+            except ValueError:
+                raise c.error(2, "SID must be an integer") from None
+    return sets
+
+
+def _spc_members(sid: int, sets: dict[int, list]) -> set[int]:
+    """The SPC/SPC1 set IDs that constraint set ``sid`` stands for (through SPCADD)."""
+    cards = sets.get(sid, [])
+    adds = [c for c in cards if c.name == "SPCADD"]
+    if not adds:
+        return {sid}
+    members = {sid}
+    for c in adds:
+        for i in range(3, len(c.fields) + 1):
+            t = c.text(i)
+            if t:
+                try:
+                    members.add(int(t))
+                except ValueError:
+                    raise c.error(i, "SPCADD set IDs must be integers") from None
+    return members
+
+
+def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = ()) -> ImportResult:
+    """Read the NASTRAN input file ``deck_path`` and make the study's files (not written yet)."""
+    path = Path(deck_path)
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise DeckFormatError(f"cannot read the deck: {exc.strerror or exc}", file=str(path)) from None
+    notes: list[str] = []
+    t0 = time.perf_counter()
+    raw_lines = text.removeprefix("\ufeff").splitlines()
+    images = [_card_image(r) for r in raw_lines]
+    cut = sum(a != b for a, b in zip(raw_lines, images))
+    source = read_input_file(path, "\n".join(images))
+    cc: CaseControl | None = source.case_control
+    cards, files, loads = source.cards, source.files, source.loads
+    load_cards = [c for c in cards if c.name in LOAD_CARDS or c.name in OTHER_LOAD_CARDS]
+    spc_sets = _spc_sets_of(cards)
+
+    # the cases: one per subcase that selects a load set
+    if cc is None:
+        top = sorted(loads.set_ids - {li for c in loads.combinations.values() for _, li in c.terms})
+        if len(top) > 1:
+            raise DeckFormatError(f"the deck has no case control (no CEND line), so no subcase "
+                                  f"selects a load set, and it has {len(top)} load sets "
+                                  f"({', '.join(map(str, top[:10]))}); add a case control with one "
+                                  f"SUBCASE per load case (SUBCASE n / LOAD = set) and import again",
+                                  file=str(path))
+        selected = [("1", top[0], f"{path}: the only load set")] if top else []
+        if top:
+            notes.append(f"no case control: load set {top[0]} (the deck's only one) imported as case 1")
+        spc_choice = None
+    else:
+        selected = []
+        for s in cc.subcases:
+            if s.load is None:
+                notes.append(f"subcase {s.id} selects no load set (no LOAD =): not imported")
+                continue
+            where = f"LOAD = {s.load} at {path}:{s.load_line}" + (f", subcase {s.id}" if cc.explicit else "")
+            selected.append((str(s.id), s.load, where))
+        spcs = {s.spc for s in cc.subcases if s.load is not None}
+        if len(spcs) > 1:
+            detail = ", ".join(f"subcase {s.id}: {'none' if s.spc is None else s.spc}"
+                               for s in cc.subcases if s.load is not None)
+            raise DeckFormatError(f"the subcases select different constraint sets ({detail}); a study "
+                                  f"has one set of supports: give every subcase the same SPC = set "
+                                  f"(or import the deck once per set)", file=str(path))
+        spc_choice = spcs.pop() if spcs else None
+    if not selected:
+        why = ("no subcase selects a load set with LOAD =" if cc is not None
+               else "the deck has no case control and no load cards")
+        raise DeckFormatError(f"no load case to import: {why}", file=str(path))
+
+    # the constraint sets kept in model.bdf
+    drop_cards = list(load_cards)
+    if cc is not None and spc_sets:
+        if spc_choice is None:
+            drop_cards += [c for cs in spc_sets.values() for c in cs]
+            notes.append(f"no subcase selects a constraint set (no SPC =), so NASTRAN applies none: "
+                         f"dropped the SPC/SPC1/SPCADD cards of set(s) "
+                         f"{', '.join(map(str, sorted(spc_sets)))}")
+        else:
+            line = next(s.spc_line for s in cc.subcases if s.load is not None)
+            if spc_choice not in spc_sets:
+                raise DeckFormatError(f"SPC = {spc_choice} selects a constraint set the bulk data "
+                                      f"does not have (no SPC, SPC1 or SPCADD with SID {spc_choice})",
+                                      file=str(path), line=line, card="SPC", value=str(spc_choice))
+            keep = _spc_members(spc_choice, spc_sets)
+            dropped = sorted(set(spc_sets) - keep)
+            drop_cards += [c for sid in dropped for c in spc_sets[sid]]
+            notes.append(f"SPC = {spc_choice} selected: kept constraint set(s) "
+                         f"{', '.join(map(str, sorted(keep & set(spc_sets))))}"
+                         + (f"; dropped set(s) {', '.join(map(str, dropped))} (not selected)" if dropped else ""))
+    debug = [c for c in cards if c.name in _SOLVER_DEBUG]
+    drop_cards += debug
+    dropped_ids = {id(c) for c in drop_cards}
+    kept = [c for c in cards if id(c) not in dropped_ids]
+    deck = deck_from_cards(kept)
+    read_seconds = time.perf_counter() - t0
+
+    # loads.csv
+    rows: list[str] = ["case,grid,component,value"]
+    cases: list[str] = []
+    for label, sid, where in selected:
+        values = loads.resolve(sid, deck, where=where)
+        nonzero = sorted((d, v) for d, v in values.items() if v != 0.0)
+        if not nonzero:
+            notes.append(f"case {label}: load set {sid} sums to zero at every DOF: not imported")
+            continue
+        cases.append(label)
+        rows += [f"{label},{g},{comp},{v!r}" for (g, comp), v in nonzero]
+    if not cases:
+        raise DeckFormatError("every selected load set is zero: nothing to import", file=str(path))
+
+    # joints
+    parsed = [parse_joint(j) for j in joints]
+    if parsed:
+        _check_joints(parsed, deck)
+
+    # the notes: what was read, dropped and skipped, once per kind
+    notes.insert(0, f"read {path.name}: {_plural(len(cards), 'bulk card')} in {_plural(len(files), 'file')}; "
+                    f"{_plural(len(cases), 'case')} ({', '.join(cases[:12])}{' ...' if len(cases) > 12 else ''})")
+    if cc is not None:
+        ex = [w if w != "SOL" else f"SOL {cc.sol}" for w in dict.fromkeys(cc.executive)]
+        notes.append(f"skipped the executive control ({', '.join(ex)})")
+        if cc.sol and cc.sol not in ("1", "101", "SESTATIC", "STATICS"):
+            notes.append(f"note: SOL {cc.sol} is not linear statics; the loads were imported as static loads")
+        titles = [t for t in ("TITLE", "SUBTITLE", "LABEL")
+                  if any(getattr(s, t.lower()) for s in cc.subcases)]
+        if titles:
+            notes.append(f"skipped {_plural(len(titles), 'title line')} ({', '.join(titles)})")
+        for kind, names in cc.skipped.items():
+            notes.append(f"skipped {len(names)} {kind if len(names) > 1 or not kind.endswith('s') else kind[:-1]} ({', '.join(names)})")
+    counts = Counter(c.name for c in load_cards)
+    if counts:
+        notes.append(f"dropped {_plural(len(load_cards), 'load card')} from model.bdf "
+                     f"({', '.join(f'{n} x{k}' for n, k in counts.items())}): the selected sets are in loads.csv")
+    if cut:
+        notes.append(f"ignored the text beyond column 80 of {_plural(cut, 'fixed-field line')} "
+                     f"(a card image ends at column 80)")
+    if debug:
+        notes.append(f"dropped {_plural(len(debug), 'DEBUG card')} (MYSTRAN debug printout, no effect on the solution)")
+
+    model_lines = [f"$ Bulk data of {path.name}, made by `blackbox import`: load cards removed (the "
+                   f"load cases are in loads.csv),", "$ only the constraint sets the case control "
+                   "selects kept, INCLUDEs inlined. The rest is as the deck wrote it.", "$"]
+    drop_lines = set().union(*(_card_lines(c) for c in drop_cards)) if drop_cards else set()
+    lines = text.removeprefix("\ufeff").splitlines()
+    start = 0
+    if cc is not None:
+        start = bulk_start(lines)[1] + 1
+    if not deck.autospc_src:
+        # NASTRAN's SOL 101 constrains components without stiffness by default (PARAM,AUTOSPC,YES);
+        # the reference solver does so only when the deck says it, so the study says it here.
+        model_lines += ["$ NASTRAN's default for linear statics, written out by `blackbox import`:",
+                        "PARAM,AUTOSPC,YES"]
+        notes.append("added PARAM,AUTOSPC,YES (NASTRAN's SOL 101 default, which the deck relied on): "
+                     "components without stiffness are constrained and listed by the reference solver")
+    _inline(path.resolve(), str(path), path.parent, start, drop_lines, model_lines)
+    model_lines.append("ENDDATA")
+
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", path.stem) or "imported"
+    toml = _study_toml(name, path, cases, parsed, deck)
+    return ImportResult(path, "\n".join(model_lines) + "\n", "\n".join(rows) + "\n", toml, tuple(cases),
+                        deck, tuple(notes), len(cards), read_seconds, tuple(parsed))

@@ -1,0 +1,264 @@
+"""The executive and case control of a NASTRAN input file: what ``blackbox import`` needs of them.
+
+A NASTRAN input file is executive control (``SOL 101``, ``ID``, ``TIME`` ...) up to ``CEND``, case
+control up to ``BEGIN BULK``, then bulk data. This module reads the two sections before the bulk
+data:
+
+* ``SUBCASE n`` starts a subcase; commands above the first SUBCASE are the defaults every subcase
+  inherits (a deck without SUBCASE has one case, numbered 1);
+* ``LOAD = n`` and ``SPC = n`` select the load set and the constraint set of a subcase;
+* ``TITLE``, ``SUBTITLE``, ``LABEL`` are kept as text;
+* output requests (``DISP``, ``STRESS``, ``FORCE`` ...), output controls (``ECHO``, ``SET``,
+  ``LINE`` ...), selections a linear static solve does not use (``METHOD``, ``FREQ`` ...),
+  case-control ``PARAM`` and the plot/XY-plot packets after ``OUTPUT(PLOT)`` are recognised and
+  listed in :attr:`CaseControl.skipped` by kind, so that a caller can say once what it skipped;
+* commands that change the static solution and that an import cannot carry over (``MPC``,
+  ``TEMPERATURE``, ``DEFORM``, ``SYMCOM`` ...) and unknown commands are errors naming the line;
+* ``SUBCOM`` (a combination of subcases) is skipped with its ``SUBSEQ``: the subcases it
+  combines are imported themselves.
+
+Commands are recognised by their first four letters, as NASTRAN does (``DISP`` = ``DISPLACEMENT``,
+``SUBTI`` = ``SUBTITLE``). A line ending with a comma continues on the next line (``SET``
+lists). ``$`` starts a comment.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+from solver_adapters.protocol import DeckFormatError
+
+__all__ = ["Subcase", "CaseControl", "read_case_control", "bulk_start"]
+
+_BEGIN_BULK = re.compile(r"BEGIN\s+BULK\b.*", re.IGNORECASE)
+_COMMAND = re.compile(r"\s*([A-Za-z][A-Za-z0-9]*)\s*(\([^)]*\))?\s*(=)?\s*(.*?)\s*$", re.DOTALL)
+
+# first four letters -> (canonical name, kind)
+_TITLES = {"TITL": "TITLE", "SUBT": "SUBTITLE", "LABE": "LABEL"}
+_OUTPUT_REQUESTS = {
+    "DISP": "DISPLACEMENT", "VECT": "VECTOR", "PRES": "PRESSURE", "STRE": "STRESS",
+    "ELST": "ELSTRESS", "STRA": "STRAIN", "ELSU": "ELSUM", "FORC": "FORCE", "ELFO": "ELFORCE",
+    "SPCF": "SPCFORCE", "MPCF": "MPCFORCE", "OLOA": "OLOAD", "GPFO": "GPFORCE", "ESE": "ESE",
+    "EKE": "EKE", "EDE": "EDE", "GPST": "GPSTRESS", "GPKE": "GPKE", "ACCE": "ACCELERATION",
+    "VELO": "VELOCITY", "ELDA": "ELDATA", "GROU": "GROUNDCHECK", "WEIG": "WEIGHTCHECK",
+    "THER": "THERMAL", "FLUX": "FLUX", "SDIS": "SDISPLACEMENT", "SVEC": "SVECTOR",
+    "NOUT": "NOUTPUT", "BOUT": "BOUTPUT", "MPRE": "MPRES", "STRF": "STRFIELD", "GPSD": "GPSDCON",
+    "ELSD": "ELSDCON", "NLST": "NLSTRESS", "MEFF": "MEFFMASS", "OTIM": "OTIME", "OFRE": "OFREQUENCY",
+    "OMOD": "OMODES", "PLOT": "PLOTID",
+}
+_OUTPUT_CONTROLS = {
+    "ECHO": "ECHO", "LINE": "LINE", "MAXL": "MAXLINES", "SET": "SET", "PAGE": "PAGE",
+    "SKIP": "SKIP", "POST": "POST", "OUTR": "OUTRCV", "MODS": "MODSEL", "SORT": "SORT",
+}
+_NOT_STATIC = {  # selections a linear static solve does not use
+    "METH": "METHOD", "SDAM": "SDAMPING", "FREQ": "FREQUENCY", "TSTE": "TSTEP", "DLOA": "DLOAD",
+    "NLPA": "NLPARM", "RESV": "RESVEC", "CMET": "CMETHOD", "RAND": "RANDOM", "IC": "IC",
+    "MODE": "MODES", "ANAL": "ANALYSIS", "STAT": "STATSUB", "RIGI": "RIGID", "MASS": "MASS",
+}
+_UNSUPPORTED = {  # change the static solution; an imported study cannot carry them
+    "MPC": "MPC (multipoint constraints)", "TEMP": "TEMPERATURE (thermal loads)",
+    "DEFO": "DEFORM (enforced element deformation)", "SUPO": "SUPORT1 (inertia relief)",
+    "K2GG": "K2GG (direct matrix input)", "P2G": "P2G (direct load input)",
+    "SYMC": "SYMCOM",
+    "SYMS": "SYMSEQ", "REPC": "REPCASE", "BCON": "BCONTACT", "AXIS": "AXISYMMETRIC",
+    "CLOA": "CLOAD", "INCL": "INCLUDE (in the case control)", "ADAP": "ADAPT",
+}
+_PLOT_PACKETS = {"PLOT", "XYPLOT", "XYOUT", "XYPUNCH", "POST", "CARDS"}
+
+
+@dataclass(frozen=True)
+class Subcase:
+    """One subcase: its ID, the selected load and constraint sets (``None``: not selected) with
+    the lines that selected them (0: inherited or none), and its title lines."""
+    id: int
+    load: int | None
+    spc: int | None
+    line: int = 0
+    load_line: int = 0
+    spc_line: int = 0
+    title: str = ""
+    subtitle: str = ""
+    label: str = ""
+
+
+@dataclass(frozen=True)
+class CaseControl:
+    """The executive and case control of an input file.
+
+    ``subcases``: in the deck's order (one subcase numbered 1 when the deck has no SUBCASE);
+    ``explicit``: the deck has SUBCASE commands; ``sol``: the SOL statement's value ("" if none);
+    ``executive``: the executive statements' keywords in order; ``skipped``: kind -> command names
+    (each once, in order of appearance); ``bulk_line``: the 1-based line of BEGIN BULK."""
+    file: str
+    subcases: tuple[Subcase, ...]
+    explicit: bool
+    sol: str
+    executive: tuple[str, ...]
+    skipped: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    bulk_line: int = 0
+
+
+def _is(word: str, name: str) -> bool:
+    """``word`` names the command ``name``: an abbreviation of at least four letters (or the
+    whole name), or the name with a plural ``S`` (``SPCFORCES``)."""
+    return name.startswith(word) or word == name + "S"
+
+
+def _uncomment(raw: str) -> str:
+    return raw.partition("$")[0].rstrip()
+
+
+def bulk_start(lines: list[str]) -> tuple[int | None, int | None]:
+    """``(CEND index, BEGIN BULK index)`` (0-based) of an input file's lines; ``None`` where absent."""
+    cend = begin = None
+    for i, raw in enumerate(lines):
+        s = _uncomment(raw).strip()
+        if cend is None and s.upper() == "CEND":
+            cend = i
+        elif cend is not None and _BEGIN_BULK.fullmatch(s):
+            begin = i
+            break
+    return cend, begin
+
+
+def _statements(lines: list[str], start: int, stop: int):
+    """``(line number, text)`` of the commands in ``lines[start:stop]``, comma continuations joined."""
+    pending, first = "", 0
+    for i in range(start, stop):
+        text = _uncomment(lines[i])
+        if not text.strip() and not pending:
+            continue
+        if not pending:
+            first = i + 1
+        pending += text.strip()
+        if pending.endswith(","):
+            continue
+        yield first, pending
+        pending = ""
+    if pending:
+        yield first, pending
+
+
+def _integer(file: str, line: int, name: str, value: str) -> int:
+    if not re.fullmatch(r"[+-]?\d+", value):
+        raise DeckFormatError(f"{name} must select a set by its integer ID", file=file, line=line,
+                              card=name, value=value)
+    return int(value)
+
+
+def read_case_control(text: str, file: str) -> CaseControl | None:
+    """The executive and case control of the input file ``text`` (named ``file`` in errors);
+    ``None`` for a file of bulk data only (no ``CEND`` line)."""
+    lines = text.removeprefix("\ufeff").splitlines()
+    cend, begin = bulk_start(lines)
+    if cend is None:
+        return None
+    if begin is None:
+        raise DeckFormatError("the deck has a CEND line (executive/case control) but no BEGIN BULK",
+                              file=file, line=cend + 1)
+    executive: list[str] = []
+    sol = ""
+    for line, stmt in _statements(lines, 0, cend):
+        word = stmt.split(None, 1)[0].upper().rstrip(",")
+        executive.append(word)
+        if word == "SOL":
+            sol = stmt.split(None, 1)[1].strip().upper() if len(stmt.split(None, 1)) > 1 else ""
+
+    skipped: dict[str, dict[str, None]] = {}
+
+    def skip(kind: str, name: str) -> None:
+        skipped.setdefault(kind, {})[name] = None
+
+    defaults: dict[str, tuple[object, int]] = {}
+    subcases: list[tuple[int, int, dict[str, tuple[object, int]]]] = []
+    current = defaults
+    plot_packet = in_subcom = False
+    for line, stmt in _statements(lines, cend + 1, begin):
+        if plot_packet:
+            skip("plot commands", stmt.split(None, 1)[0].upper())
+            continue
+        m = _COMMAND.match(stmt)
+        if m is None:
+            raise DeckFormatError("cannot read this case-control command", file=file, line=line,
+                                  value=stmt)
+        # "LOAD = 1" and "LOAD 1" read alike: the "=" (group 3) is optional
+        word, options, value = m.group(1).upper(), (m.group(2) or ""), m.group(4)
+        key = word[:4]
+        if word == "SUBCOM":
+            # a linear combination of the subcases above: its own commands (SUBSEQ, output
+            # requests) are read and dropped; the subcases it combines are imported themselves
+            current = {}
+            in_subcom = True
+            skip("subcase combinations", f"SUBCOM {value.strip()}")
+        elif word == "SUBSEQ":
+            if not in_subcom:
+                raise DeckFormatError("SUBSEQ outside a SUBCOM", file=file, line=line, card=word,
+                                      value=stmt)
+        elif word == "SUBCASE":
+            in_subcom = False
+            sid = _integer(file, line, "SUBCASE", value.strip())
+            if sid < 1:
+                raise DeckFormatError("SUBCASE ID must be >= 1", file=file, line=line,
+                                      card="SUBCASE", value=value)
+            if any(sid == s[0] for s in subcases):
+                first = next(s[1] for s in subcases if s[0] == sid)
+                raise DeckFormatError(f"SUBCASE {sid} appears twice (first at line {first})",
+                                      file=file, line=line, card="SUBCASE", value=value)
+            current = {}
+            subcases.append((sid, line, current))
+        elif word == "LOAD":
+            current["LOAD"] = (_integer(file, line, "LOAD", value.strip()), line)
+        elif word == "SPC":
+            current["SPC"] = (_integer(file, line, "SPC", value.strip()), line)
+        elif key in _TITLES and _is(word, _TITLES[key]):
+            current[_TITLES[key]] = (value, line)
+        elif word == "OUTPUT":
+            packet = options.strip("() ").upper()
+            if packet in _PLOT_PACKETS:
+                plot_packet = True
+                skip("plot commands", f"OUTPUT({packet})")
+            else:
+                skip("output controls", f"OUTPUT{options.upper()}")
+        elif key in ("SEAL", "SUPE", "SEKR", "SEMG", "SEEX", "SELG", "SELR", "SEDR", "SEFI"):
+            if value.strip().upper() not in ("ALL", "0", ""):
+                raise DeckFormatError("superelement selections other than ALL are not supported "
+                                      "(the import reads the residual structure only)", file=file,
+                                      line=line, card=word, value=stmt)
+            skip("superelement controls", f"{word} = {value.strip().upper()}")
+        elif word == "PARAM":
+            skip("case-control parameters", re.split(r"[,\s]+", value.strip(", "))[0].upper() or "PARAM")
+        elif word == "BEGIN":
+            raise DeckFormatError("only BEGIN BULK is supported (superelement bulk sections are not)",
+                                  file=file, line=line, value=stmt)
+        elif key in _UNSUPPORTED and _is(word, _UNSUPPORTED[key].split()[0]):
+            raise DeckFormatError(f"the case-control command {_UNSUPPORTED[key]} changes the static "
+                                  f"solution and cannot be imported; remove it from the deck (or "
+                                  f"model its effect with supported cards) and import again",
+                                  file=file, line=line, card=word, value=stmt)
+        else:
+            for kind, table in (("output requests", _OUTPUT_REQUESTS),
+                                ("output controls", _OUTPUT_CONTROLS),
+                                ("selections not used by a linear static solve", _NOT_STATIC)):
+                name = table.get(key)
+                if name is not None and _is(word, name):
+                    skip(kind, name)
+                    break
+            else:
+                raise DeckFormatError("unknown case-control command (not read by blackbox import)",
+                                      file=file, line=line, card=word, value=stmt)
+
+    def make(sid: int, line: int, own: dict) -> Subcase:
+        merged = {**defaults, **own}
+        load, load_line = merged.get("LOAD", (None, 0))
+        spc, spc_line = merged.get("SPC", (None, 0))
+        return Subcase(sid, load, spc, line, load_line, spc_line,
+                       str(merged.get("TITLE", ("", 0))[0]), str(merged.get("SUBTITLE", ("", 0))[0]),
+                       str(merged.get("LABEL", ("", 0))[0]))
+
+    if subcases:
+        cases = tuple(make(sid, line, own) for sid, line, own in subcases)
+    else:
+        cases = (make(1, 0, {}),)
+    return CaseControl(file, cases, bool(subcases), sol, tuple(executive),
+                       {k: tuple(v) for k, v in skipped.items()}, begin + 1)

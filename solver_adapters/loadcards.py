@@ -1,0 +1,299 @@
+"""NASTRAN static load cards: FORCE, MOMENT, FORCE1, MOMENT1, FORCE2, MOMENT2 and LOAD.
+
+The study's ``model.bdf`` carries no loads (they come from ``loads.csv``), so the bulk-data reader
+(:mod:`solver_adapters.bdf`) rejects these cards. ``blackbox import`` reads them here from the
+cards of a whole input file (:func:`solver_adapters.bdf.bulk_cards`) and resolves the set a
+subcase selects with ``LOAD = n`` into nodal forces and moments in the basic system:
+
+* ``FORCE  SID G CID F N1 N2 N3``: force F (N1, N2, N3) at grid G; ``MOMENT`` alike;
+* ``FORCE1 SID G F G1 G2``: force F along the unit vector from G1 to G2; ``MOMENT1`` alike;
+* ``FORCE2 SID G F G1 G2 G3 G4``: force F along the unit vector of (G2 - G1) x (G4 - G3);
+  ``MOMENT2`` alike;
+* ``LOAD SID S S1 L1 S2 L2 ...``: the set S * sum(Si * set Li), the Li being FORCE/MOMENT sets
+  (a LOAD set may not name another LOAD set, as in NASTRAN).
+
+Several cards of one set add up. A CID other than 0 gives the vector in that coordinate system (CORD1R/C/S,
+CORD2R/C/S of the deck; for a cylindrical or spherical system, along its directions at the
+grid). The resolved loads are returned in each grid's displacement system (its CD; the basic
+system for CD 0), the components loads.csv holds.
+Other load cards (GRAV, PLOAD*, TEMP, SPCD, ...) are recorded by set: selecting such a set is an
+error naming the card.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from solver_adapters.bdf import parse_int, parse_real
+from solver_adapters.protocol import DeckFormatError
+
+__all__ = ["LOAD_CARDS", "OTHER_LOAD_CARDS", "PointLoad", "LoadCombination", "LoadCards", "read_load_cards",
+           "InputFile", "read_input_file"]
+
+LOAD_CARDS = frozenset({"FORCE", "MOMENT", "FORCE1", "MOMENT1", "FORCE2", "MOMENT2", "LOAD"})
+"""The load cards this module reads."""
+
+OTHER_LOAD_CARDS = frozenset({
+    "GRAV", "ACCEL", "ACCEL1", "RFORCE", "RFORCE1", "PLOAD", "PLOAD1", "PLOAD2", "PLOAD4", "PLOADX1",
+    "PLOADB3", "SLOAD", "SPCD", "DEFORM", "TEMP", "TEMPD", "TEMPP1", "TEMPRB", "QBDY1", "QVOL",
+    "DAREA", "LSEQ", "CLOAD", "PRESAX", "FORCEAX", "MOMAX",
+})
+"""Load cards of other kinds: dropped from the model, an error when a selected set uses them."""
+
+
+@dataclass(frozen=True)
+class PointLoad:
+    """One FORCE/MOMENT-family card: ``vector`` is F*(N1, N2, N3) for FORCE/MOMENT (in system
+    ``cid``); for FORCE1/2, MOMENT1/2 the direction comes from ``direction_grids``."""
+    card: str
+    sid: int
+    grid: int
+    cid: int
+    scale: float
+    vector: tuple[float, float, float] | None
+    direction_grids: tuple[int, ...] = ()
+    src: str = ""
+    raw: object = None   # the card, for located errors
+
+    @property
+    def is_moment(self) -> bool:
+        return self.card.startswith("MOMENT")
+
+
+@dataclass(frozen=True)
+class LoadCombination:
+    """LOAD: SID, overall scale S and the (Si, Li) terms."""
+    sid: int
+    scale: float
+    terms: tuple[tuple[float, int], ...]
+    src: str = ""
+    raw: object = None
+
+
+@dataclass
+class LoadCards:
+    """The load cards of a deck, by set ID."""
+    point: dict[int, list[PointLoad]] = field(default_factory=dict)
+    combinations: dict[int, LoadCombination] = field(default_factory=dict)
+    other: dict[int, list[object]] = field(default_factory=dict)   # SID -> cards of other kinds
+
+    @property
+    def set_ids(self) -> set[int]:
+        return set(self.point) | set(self.combinations) | set(self.other)
+
+    def resolve(self, sid: int, deck, *, where: str = "") -> dict[tuple[int, int], float]:
+        """The nodal loads of set ``sid``: ``{(grid, component): value}`` in the basic system
+        (components 1-3 forces, 4-6 moments), summed over the set's cards. ``deck`` gives the
+        grids (for FORCE1/2 directions and existence). ``where`` names what selected the set."""
+        sel = f" (selected by {where})" if where else ""
+        if sid in self.combinations:
+            combo = self.combinations[sid]
+            total: dict[tuple[int, int], float] = {}
+            for k, (si, li) in enumerate(combo.terms):
+                if li in self.combinations:
+                    raise combo.raw.error(5 + 2 * k, f"LOAD set {li} is itself a LOAD combination; "
+                                                     f"NASTRAN does not allow nested LOAD sets")
+                if li not in self.point and li not in self.other:
+                    raise combo.raw.error(5 + 2 * k, f"load set {li} not found (no FORCE/MOMENT "
+                                                     f"card with SID {li}){sel}")
+                for dof, v in self._point_set(li, deck, sel).items():
+                    total[dof] = total.get(dof, 0.0) + combo.scale * si * v
+            return total
+        if sid not in self.point and sid not in self.other:
+            raise DeckFormatError(f"load set {sid}{sel} not found: no LOAD, FORCE or MOMENT card "
+                                  f"has SID {sid}")
+        return self._point_set(sid, deck, sel)
+
+    def _point_set(self, sid: int, deck, sel: str) -> dict[tuple[int, int], float]:
+        if sid in self.other:
+            c = self.other[sid][0]
+            kinds = sorted({o.name for o in self.other[sid]})
+            raise c.error(1, f"load set {sid}{sel} contains {', '.join(kinds)}: only FORCE, MOMENT, "
+                             f"FORCE1/2, MOMENT1/2 and LOAD are imported")
+        out: dict[tuple[int, int], float] = {}
+        for p in self.point[sid]:
+            if p.grid not in deck.grids:
+                raise p.raw.error(3, f"grid {p.grid} does not exist (no GRID){sel}")
+            vec = _basic_vector(p, deck)
+            if getattr(deck.grids[p.grid], "cd", 0):
+                # components in the grid's displacement system (rows: its directions in basic)
+                vec = deck.displacement_frames([p.grid])[0] @ vec
+            base = 4 if p.is_moment else 1
+            for k in range(3):
+                if vec[k] != 0.0:
+                    dof = (p.grid, base + k)
+                    out[dof] = out.get(dof, 0.0) + float(vec[k])
+        return out
+
+
+def _unit(v: np.ndarray, card, i: int, what: str) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    if n == 0.0:
+        raise card.error(i, f"{what} has zero length: no direction")
+    return v / n
+
+
+def _basic_vector(p: PointLoad, deck) -> np.ndarray:
+    c = p.raw
+    if p.vector is not None:
+        v = np.array(p.vector, dtype=float)
+        if p.cid == 0:
+            return v
+        system = (getattr(deck, "coords", None) or {}).get(p.cid)
+        if system is None:
+            raise c.error(4, f"coordinate system CID {p.cid} not found (no CORD1R/C/S or "
+                             f"CORD2R/C/S with that ID)")
+        if p.grid not in deck.grids:
+            raise c.error(3, f"grid {p.grid} does not exist (no GRID)")
+        try:
+            frame = system.frames_at(np.array([deck.grids[p.grid].xyz], dtype=float))[0]
+        except ValueError:
+            raise c.error(4, f"grid {p.grid} lies on the axis of the {system.card} {p.cid}, where "
+                             f"its directions are undefined") from None
+        return frame.T @ v                 # rows of frame: the system's directions in basic
+    xyz = {}
+    for k, g in enumerate(p.direction_grids):
+        if g not in deck.grids:
+            raise c.error(5 + k, f"grid {g} does not exist (no GRID)")
+        xyz[k] = np.array(deck.grids[g].xyz, dtype=float)
+    if len(p.direction_grids) == 2:
+        d = _unit(xyz[1] - xyz[0], c, 5, "the vector from G1 to G2")
+    else:
+        a = _unit(xyz[1] - xyz[0], c, 5, "the vector from G1 to G2")
+        b = _unit(xyz[3] - xyz[2], c, 7, "the vector from G3 to G4")
+        d = _unit(np.cross(a, b), c, 5, "(G2 - G1) x (G4 - G3)")
+    return p.scale * d
+
+
+def _int(c, i: int, *, minimum: int = 1, default: int | None = None) -> int:
+    text = c.text(i)
+    if not text:
+        if default is None:
+            raise c.error(i, "required integer field is blank")
+        return default
+    try:
+        v = parse_int(text)
+    except DeckFormatError as exc:
+        raise c.error(i, str(exc).split(": ")[-1]) from None
+    if v < minimum:
+        raise c.error(i, f"must be >= {minimum}")
+    return v
+
+
+def _real(c, i: int, default: float | None = None) -> float:
+    text = c.text(i)
+    if not text:
+        if default is None:
+            raise c.error(i, "required real field is blank")
+        return default
+    try:
+        return parse_real(text)
+    except DeckFormatError as exc:
+        raise c.error(i, str(exc).split(": ")[-1]) from None
+
+
+def _max_fields(c, n: int) -> None:
+    for i in range(n + 1, len(c.fields) + 1):
+        if c.text(i):
+            raise c.error(i, f"{c.name} has at most {n} fields")
+
+
+def _point(c) -> PointLoad:
+    name = c.name
+    sid, g = _int(c, 2), _int(c, 3)
+    if name in ("FORCE", "MOMENT"):
+        _max_fields(c, 8)
+        cid = _int(c, 4, minimum=0, default=0)
+        f = _real(c, 5)
+        n = (_real(c, 6, 0.0), _real(c, 7, 0.0), _real(c, 8, 0.0))
+        return PointLoad(name, sid, g, cid, f, (f * n[0], f * n[1], f * n[2]), (), c.src, c)
+    if name in ("FORCE1", "MOMENT1"):
+        _max_fields(c, 6)
+        f, grids = _real(c, 4), (_int(c, 5), _int(c, 6))
+        if grids[0] == grids[1]:
+            raise c.error(6, "G1 and G2 are the same grid: no direction")
+    else:
+        _max_fields(c, 8)
+        f, grids = _real(c, 4), tuple(_int(c, i) for i in range(5, 9))
+    return PointLoad(name, sid, g, 0, f, None, grids, c.src, c)
+
+
+def _combination(c) -> LoadCombination:
+    sid, s = _int(c, 2), _real(c, 3)
+    terms: list[tuple[float, int]] = []
+    seen: dict[int, int] = {}
+    i = 4
+    last = max((k for k in range(4, len(c.fields) + 1) if c.text(k)), default=3)
+    while i <= last:
+        si, li = _real(c, i), _int(c, i + 1)
+        if li in seen:
+            raise c.error(i + 1, f"load set {li} appears twice in this LOAD card (NASTRAN forbids it)")
+        if li == sid:
+            raise c.error(i + 1, f"LOAD set {sid} names itself")
+        seen[li] = i + 1
+        terms.append((si, li))
+        i += 2
+    if not terms:
+        raise c.error(4, "LOAD needs at least one pair S1 L1")
+    return LoadCombination(sid, s, tuple(terms), c.src, c)
+
+
+def read_load_cards(cards) -> LoadCards:
+    """The load cards among ``cards`` (from :func:`solver_adapters.bdf.bulk_cards`), by set;
+    the cards of other kinds are skipped. Errors name the file, line, card and field."""
+    out = LoadCards()
+    for c in cards:
+        if c.name == "LOAD":
+            combo = _combination(c)
+            if combo.sid in out.combinations:
+                raise c.error(2, f"duplicate LOAD set ID {combo.sid} (already defined at "
+                                 f"{out.combinations[combo.sid].src})")
+            out.combinations[combo.sid] = combo
+        elif c.name in LOAD_CARDS:
+            p = _point(c)
+            out.point.setdefault(p.sid, []).append(p)
+        elif c.name in OTHER_LOAD_CARDS:
+            sid = _int(c, 2)
+            out.other.setdefault(sid, []).append(c)
+    for sid, combo in out.combinations.items():
+        if sid in out.point or sid in out.other:
+            first = (out.point.get(sid) or [None])[0]
+            where = first.src if first is not None else out.other[sid][0].src
+            raise combo.raw.error(2, f"set ID {sid} is both a LOAD combination and a load set "
+                                     f"({where}); NASTRAN requires LOAD set IDs to be unique")
+    return out
+
+
+@dataclass(frozen=True)
+class InputFile:
+    """A whole NASTRAN input file: its case control (``None`` for bulk data only), every bulk
+    card as read (:func:`solver_adapters.bdf.bulk_cards`), the files read, and the load cards by set."""
+    path: str
+    case_control: object
+    cards: list
+    files: list
+    loads: LoadCards
+
+
+def read_input_file(path, text: str | None = None) -> InputFile:
+    """Read the input file ``path`` (``text``: its content, if already read): the case control
+    (:mod:`solver_adapters.casecontrol`), the bulk cards and the load cards. The model itself is
+    made from a chosen subset of the cards with :func:`solver_adapters.bdf.deck_from_cards`
+    (``blackbox import`` leaves out the load cards and the constraint sets not selected)."""
+    from pathlib import Path
+
+    from solver_adapters.bdf import bulk_cards
+    from solver_adapters.casecontrol import read_case_control
+
+    p = Path(path)
+    if text is None:
+        try:
+            text = p.read_text(encoding="utf-8", errors="replace")
+        except OSError as exc:
+            raise DeckFormatError(f"cannot read the deck: {exc.strerror or exc}", file=str(p)) from None
+    cc = read_case_control(text, str(p))
+    cards, files = bulk_cards(p, text)
+    loads = read_load_cards(c for c in cards if c.name in LOAD_CARDS or c.name in OTHER_LOAD_CARDS)
+    return InputFile(str(p), cc, cards, files, loads)

