@@ -48,11 +48,13 @@ def cmd_solve(args) -> int:
 
     out_dir = _out_for(args, "solve")
     study = load_study(args.study)
-    adapter = make_adapter_for(study, args.adapter)
-    report = adapter.dofs()
-    t0 = time.perf_counter()
-    out = adapter.solve(study.loads, report)
-    wall = time.perf_counter() - t0
+    with _executor(args, "solver chunks") as ex:
+        adapter = _chunked(study, args, ex)
+        adapter = make_adapter_for(study, adapter) if adapter is None or isinstance(adapter, str) else adapter
+        report = adapter.dofs()
+        t0 = time.perf_counter()
+        out = adapter.solve(study.loads, report)
+        wall = time.perf_counter() - t0
     if not np.all(np.isfinite(out.values)):
         raise SolverError(f"adapter {adapter.name!r} returned non-finite displacements")
 
@@ -94,8 +96,9 @@ def cmd_identify(args) -> int:
     study = load_study(args.study, need_measurements=True)
     print(f"identify {study.name}: {len(study.measurements)} measurements, joints "
           f"{[j.name for j in study.config.joints]}", flush=True)
-    res = identify.run(study, adapter=args.adapter, model=args.model, progress=progress,
-                       stages=_Throttled())
+    with _executor(args, "solver chunks") as ex:
+        res = identify.run(study, adapter=_chunked(study, args, ex), model=args.model, progress=progress,
+                           stages=_Throttled())
     print("  writing the report and plots", flush=True)
     files = write_output(out, "identify", res.write)
     r, cost = res.result, res.solver
@@ -179,6 +182,46 @@ def cmd_design(args) -> int:
     return EXIT_OK
 
 
+def cmd_import(args) -> int:
+    """``blackbox import DECK --out STUDY``: a NASTRAN input file becomes a study folder (docs/import.md)."""
+    from blackbox.commands import import_deck
+
+    out = check_out(args.out, "import")
+    res = import_deck.run(args.deck, joints=args.joint)
+    write_output(out, "import", res.write)
+    for note in res.notes:
+        print(f"  {note}")
+    what = (f"joints {[name for name, _ in res.joints]}" if res.joints
+            else "no joint declared: complete study.toml (candidate joints are listed there)")
+    print(f"imported {res.source.name}: {len(res.cases)} case(s) -> {out} ({what})")
+    return EXIT_OK
+
+
+def cmd_batch(args) -> int:
+    """``blackbox batch STUDY...``: identify or diagnose many studies side by side; exit 4 when a
+    study is not ok."""
+    from blackbox.commands import batch
+
+    out = check_out(args.out, "batch", protect=tuple(Path(s) for s in args.studies if Path(s).is_dir()))
+    options = {"model": args.model} if args.model and args.batch_command == "identify" else {}
+    with _executor(args, "studies") as ex:
+        res = batch.run(args.studies, command=args.batch_command, executor=ex, adapter=args.adapter,
+                        options=options, say=lambda s: print(s, flush=True))
+    write_output(out, "batch", res.write)
+    counts = ", ".join(f"{n} {s}" for s, n in res.counts().items())
+    print(f"batch {res.sub_command}: {len(res.outcomes)} studies ({counts}) in {res.wall_s:.1f} s on "
+          f"{res.executor} -> {out}")
+    bad = [o for o in res.outcomes if not o.ok]
+    for o in bad:
+        first = o.message.strip().splitlines()[0] if o.message.strip() else ""
+        print(f"  {o.name}: {o.status}: {first}", file=sys.stderr)
+    if bad:
+        print(f"blackbox batch: {len(bad)} of {len(res.outcomes)} studies not ok (exit {EXIT_UNUSABLE}); "
+              f"see {out / 'summary.md'}", file=sys.stderr)
+        return EXIT_UNUSABLE
+    return EXIT_OK
+
+
 def cmd_bench(args) -> int:
     from blackbox.commands import bench
 
@@ -187,7 +230,8 @@ def cmd_bench(args) -> int:
     out = check_out(args.out, "bench")
     print(f"bench: cases {cases}, adapters {adapters}")
     command = "blackbox bench " + " ".join(sys.argv[2:]) if len(sys.argv) > 2 else "blackbox bench"
-    res = bench.run(args.fixtures, adapters, cases, args.repeat, command=command)
+    with _executor(args, "bench rows") as ex:
+        res = bench.run(args.fixtures, adapters, cases, args.repeat, command=command, executor=ex)
     write_output(out, "bench", res.write)
     print(f"-> {out / 'bench.json'}, {out / 'bench.md'}")
     return EXIT_OK
@@ -280,7 +324,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--debug", action="store_true", help="show tracebacks (accepted anywhere)")
     sub = p.add_subparsers(dest="command", required=True)
 
-    _study_command(sub, "solve", "solve the study's load cases, no joint model added", cmd_solve)
+    s = sub.add_parser("import", help="a NASTRAN input file (case control + bulk data) becomes a study folder")
+    s.add_argument("deck", type=Path, help="the NASTRAN input file (.bdf, .dat, .nas ...)")
+    s.add_argument("--out", type=Path, required=True, help="the study folder to write")
+    s.add_argument("--joint", action="append", default=[], metavar="NAME:G1,G2,...",
+                   help="declare a flexible joint: its branch-end grids, the RBE2's GN first (repeatable)")
+    s.set_defaults(func=cmd_import)
+
+    s = _study_command(sub, "solve", "solve the study's load cases, no joint model added", cmd_solve)
+    add_parallel_options(s)
 
     s = _study_command(sub, "simulate", "a copy of the study with simulated measurements (Sec. 5.2)",
                        cmd_simulate, cache=False)
@@ -292,10 +344,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--cases", default=None, help="comma-separated subset of cube-simple,cube-complex,car-simple,car-complex")
     s.add_argument("--repeat", type=_positive_int, default=3, help="best of N timings per row")
     s.add_argument("--fixtures", type=Path, default=Path(__file__).resolve().parents[1] / "fixtures")
+    add_parallel_options(s)
     s.set_defaults(func=cmd_bench)
 
     s = _study_command(sub, "identify", "identify the joint parameters from the measurements (Ch. 4-5)",
                        cmd_identify)
+    add_parallel_options(s)
     s.add_argument("--model", choices=["simple", "complex"], default=None,
                    help="override every joint's declared model")
 
@@ -311,6 +365,18 @@ def build_parser() -> argparse.ArgumentParser:
                    help="comma-separated effect kinds to consider (default: all of joint_coupling, "
                         "joint_translation, undeclared_joint, support_flexibility, load_scale, "
                         "sensor_gain, sensor_offset, member_stiffness)")
+
+    s = sub.add_parser("batch", help="identify (or diagnose) many studies side by side; summary across them")
+    s.add_argument("studies", type=Path, nargs="+", metavar="STUDY")
+    s.add_argument("--out", type=Path, required=True)
+    s.add_argument("--command", dest="batch_command", choices=["identify", "diagnose"], default="identify")
+    s.add_argument("--adapter", default=None, help="override every study's [solver] adapter")
+    s.add_argument("--model", choices=["simple", "complex"], default=None)
+    s.add_argument("--trust-command", action="store_true",
+                   help="consent, for this run, to start the studies' external command (adapter \"command\")")
+    add_cache_options(s)
+    add_parallel_options(s)
+    s.set_defaults(func=cmd_batch)
 
     s = _study_command(sub, "design", "choose the load cases and sensors of a test before it is run", cmd_design)
     s.add_argument("--candidates", type=Path, required=True,
@@ -372,6 +438,34 @@ class _Throttled:
         if final or m is None or now - self.last >= self.every_s:
             print(f"  {message}", flush=True)
             self.last = now
+
+
+def add_parallel_options(s: argparse.ArgumentParser) -> None:
+    """``--workers N`` / ``--scheduler ADDRESS`` for a sub-command with independent work."""
+    g = s.add_mutually_exclusive_group()
+    g.add_argument("--workers", type=_positive_int, default=None,
+                   help="run the independent work on a local Dask cluster of N worker processes "
+                        "(needs: pip install 'blackbox-joints[distributed]')")
+    g.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the independent work on an existing Dask scheduler, e.g. tcp://host:8786")
+
+
+def _executor(args, label: str):
+    """The executor of ``--workers`` / ``--scheduler`` (serial without them, or without dask)."""
+    from blackbox.parallel import make_executor, terminal_progress
+    return make_executor(getattr(args, "workers", None), getattr(args, "scheduler", None),
+                         progress=terminal_progress(label, lambda s: print(s, flush=True)),
+                         warn=lambda m: _warn([m]))
+
+
+def _chunked(study, args, ex):
+    """The study's adapter with its large batches split over the executor's workers (external
+    solvers), or just its name when the work stays in this process."""
+    if ex.workers <= 1:
+        return args.adapter
+    from blackbox.adapters import make_adapter_for
+    from blackbox.parallel import use_executor
+    return use_executor(make_adapter_for(study, args.adapter), ex)
 
 
 def _heartbeat(elapsed_s: float, last_line: str) -> None:
