@@ -237,6 +237,12 @@ def check_joints(config: StudyConfig, deck, toml_path: Path) -> None:
         if span > 1e-9 * size:
             raise StudyError(f"joint {j.name!r}: branch grids {j.grids} are not coincident "
                              f"(they differ by up to {span:g})", file=str(toml_path))
+        cds = sorted({getattr(deck.grids[g], "cd", 0) for g in j.grids})
+        if len(cds) > 1:
+            # a joint's springs act between the same components of its branch grids: the grids
+            # must give their components in one system, or a spring would join unlike directions
+            raise StudyError(f"joint {j.name!r}: branch grids {j.grids} give their components in different "
+                             f"displacement systems (CD {cds}); give them one CD", file=str(toml_path))
         gn, others = j.grids[0], set(j.grids[1:])
         tied: set[int] = set()
         for r in deck.rbe2s.values():

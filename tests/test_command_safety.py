@@ -235,3 +235,15 @@ def test_not_identifiable_exits_4_with_warnings_on_the_terminal(cube, tmp_path, 
     captured = capsys.readouterr()
     assert "warning: parameter(s)" in captured.out and "not identifiable" in captured.err
     assert json.loads((tmp_path / "o" / "result.json").read_text())["identifiable"] == [False] * 9
+
+
+def test_joint_grids_in_different_displacement_systems_are_bad_input(cube, tmp_path, capsys):
+    """A joint's springs join the same components of its branch grids: grids 7 and 71 giving
+    their components in different CD systems is refused, located in study.toml."""
+    deck = cube / "model.bdf"
+    text = deck.read_text().replace("GRID          71             0.2     0.2     0.2",
+                                    "GRID          71             0.2     0.2     0.2       9")
+    deck.write_text(text.replace("ENDDATA", "CORD2R,9,,0.,0.,0.,0.,0.,1.,\n,1.,1.,0.\nENDDATA"))
+    assert main(["identify", str(cube), "--out", str(tmp_path / "o"), "--no-cache"]) == 2
+    err = capsys.readouterr().err
+    assert "study.toml" in err and "different displacement systems" in err
