@@ -37,7 +37,7 @@ from blackbox import design as D                                      # noqa: E4
 from blackbox.commands.common import study_adapter                    # noqa: E402
 from blackbox.declared import declared_model, read_truth, truth_joints  # noqa: E402
 from blackbox.joints import SimpleJoint, joint_dofs                   # noqa: E402
-from blackbox.simulate import NoiseConfig                             # noqa: E402
+from blackbox.simulation import NoiseConfig                             # noqa: E402
 from blackbox.study import load_study                                 # noqa: E402
 from solver_adapters.protocol import LoadMatrix                       # noqa: E402
 

@@ -9,7 +9,7 @@ One batched adapter call with ``n_B + L`` right-hand sides gives everything:
   The reduced loads of eq. 14 are ``F_R = K_R U_B0``.
 
 The joint matrices ``K_J`` are then added in the condensed space (eq. 22). Following the
-flexibility form (MYSTRAN.md: a 7-digit flexibility should not be inverted), with
+flexibility form (docs/mystran.md: a 7-digit flexibility should not be inverted), with
 ``dK = K_J(k) - K_deck`` (``K_deck``: joint springs already in the deck, ``deck_stiffness``):
 
     (K_R + dK) U_B = F_R   <=>   (I + G_BB dK) U_B = U_B0                   (eq. 22, 30)

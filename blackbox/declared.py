@@ -31,12 +31,12 @@ from pydantic import ValidationError
 from blackbox.condensation import Condensed, CondensedModel, condense
 from blackbox.errors import StudyError
 from blackbox.joints import ComplexJoint, JointModel, SimpleJoint, actual_joint_stub_kc, make_joint
-from blackbox.study import Study, joint_branches
+from blackbox.study import Study, joint_branches, read_text
 from solver_adapters.protocol import DofLabel, LoadMatrix, SolverAdapter
 
 if TYPE_CHECKING:
     from blackbox.identification import Observations
-    from blackbox.simulate import TruthConfig
+    from blackbox.simulation import TruthConfig
 
 __all__ = ["RIGID_FACTOR", "SolverCost", "FitOptions", "DeclaredModel", "declared_model",
            "joint_model", "rigid_pair_penalty", "read_truth", "read_truth_record", "truth_values", "truth_joints",
@@ -262,22 +262,12 @@ def rigid_pair_penalty(c: Condensed, joints: Sequence[JointModel],
 # --------------------------------------------------------------------------------------------
 # truths of simulated studies
 # --------------------------------------------------------------------------------------------
-def _read_text(path: Path) -> str:
-    """A text file as UTF-8 (a byte-order mark accepted); a bad byte is located."""
-    from solver_adapters.tables import TableFormatError, read_text
-
-    try:
-        return read_text(path)
-    except TableFormatError as exc:
-        raise StudyError(exc.message, file=exc.file, line=exc.line) from None
-
-
 def read_truth(path: Path) -> "TruthConfig":
     """``truth.toml`` of ``blackbox simulate``."""
-    from blackbox.simulate import TruthConfig
+    from blackbox.simulation import TruthConfig
 
     try:
-        return TruthConfig.model_validate(tomllib.loads(_read_text(path)))
+        return TruthConfig.model_validate(tomllib.loads(read_text(path)))
     except tomllib.TOMLDecodeError as exc:
         raise StudyError(f"not valid TOML: {exc}", file=str(path)) from None
     except ValidationError as exc:
@@ -291,7 +281,7 @@ def read_truth_record(study: Study) -> dict | None:
     if not p.exists():
         return None
     try:
-        rec = json.loads(_read_text(p))
+        rec = json.loads(read_text(p))
     except json.JSONDecodeError as exc:
         raise StudyError(f"not valid JSON: {exc}", file=str(p)) from None
     if not isinstance(rec, dict):

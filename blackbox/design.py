@@ -49,10 +49,10 @@ greedy steps ranked there. A candidate load is used at most once (a case is a ri
 standard deviations), each draw's sensitivities again from the one condensation.
 
 **Noise of a candidate sensor.** Its ``sigma``, or, blank, the noise model
-:func:`blackbox.simulate.noise_sigma` (``relative x |u|`` floored at ``relative x floor x max|u|``
+:func:`blackbox.simulation.noise_sigma` (``relative x |u|`` floored at ``relative x floor x max|u|``
 of its kind in the case, over every candidate sensor, ``absolute`` added in quadrature) at the
 prior's predicted response; with a reference grid (Sec. 5.2) proportional to the relative motion,
-as ``blackbox simulate`` does. The command picks the :class:`~blackbox.simulate.NoiseConfig`
+as ``blackbox simulate`` does. The command picks the :class:`~blackbox.simulation.NoiseConfig`
 (``blackbox.commands.design``).
 """
 
@@ -71,7 +71,7 @@ from blackbox.fitting.statistics import covariance
 from blackbox.identification import Observations
 from blackbox.identification.uncertainty import linear_intervals
 from blackbox.joints import ComplexJoint, SimpleJoint
-from blackbox.simulate import NoiseConfig, noise_sigma
+from blackbox.simulation import NoiseConfig, noise_sigma
 from solver_adapters.protocol import DofLabel, LoadMatrix
 
 __all__ = ["DesignError", "CRITERIA", "RIDGE", "CandidateLoad", "CandidateSensor", "Candidates",

@@ -45,7 +45,7 @@ import numpy as np
 
 __all__ = ["INSTALL_HINT", "Executor", "SerialExecutor", "DaskExecutor", "TaskFailure", "make_executor",
            "dask_available", "terminal_progress", "StudyPackage", "pack_study", "unpack_study",
-           "coverage_study", "CoverageResult", "bootstrap_samples", "bench_rows", "chunked", "use_executor"]
+           "coverage_study", "CoverageResult", "bootstrap_samples", "chunked", "use_executor"]
 
 INSTALL_HINT = "pip install 'blackbox-joints[distributed]'"
 """How to get dask for ``--workers`` / ``--scheduler``."""
@@ -557,36 +557,3 @@ def bootstrap_samples(model, obs, result, n: int, *, seed: int = 0, max_iteratio
              for rg in chunked(len(ys), n_chunks)] if ys else []
     ks = [k for part in executor.map(_bootstrap_chunk, tasks) for k in part if k is not None]
     return np.array(ks).reshape(-1, prob.p)
-
-
-
-# --------------------------------------------------------------------------------------------
-# blackbox bench: one task per (case, adapter)
-# --------------------------------------------------------------------------------------------
-def _bench_task(args) -> list[dict]:
-    """The rows of one (case, adapter) of :func:`blackbox.commands.bench.run_bench`, on a worker,
-    from the case's fixture folder rebuilt there."""
-    from blackbox.commands import bench
-
-    pkg, case, adapter, repeat = args
-    with scratch("blackbox-bench-") as tmp:
-        unpack_study(pkg, tmp)
-        return bench.run_bench(tmp, [adapter], [case], repeat, progress=lambda s: None)
-
-
-def bench_rows(fixtures: str | os.PathLike, adapters: Sequence[str], cases: Sequence[str], repeat: int = 1, *,
-               executor: Executor | None = None) -> list[dict]:
-    """``blackbox bench``'s rows (:func:`blackbox.commands.bench.run_bench`, same order) with
-    one task per (case, adapter): every method of a case runs in the same task, one after the
-    other, so its ``ratio_to_blackbox`` compares timings taken on the same worker. Tasks that
-    run at the same time share the machine: on a loaded machine the absolute times grow (run
-    serially, or one worker per core, for the published table)."""
-    from blackbox.commands import bench
-
-    executor = executor or SerialExecutor()
-    unknown = [c for c in cases if c not in bench.CASES]
-    if unknown:
-        raise ValueError(f"unknown bench case(s) {unknown}; known: {', '.join(bench.CASES)}")
-    packs = {c: pack_study(Path(fixtures) / bench.CASES[c]) for c in cases}
-    tasks = [(packs[c], c, a, int(repeat)) for c in cases for a in adapters]
-    return [row for part in executor.map(_bench_task, tasks) for row in part]

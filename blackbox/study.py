@@ -1,4 +1,4 @@
-"""Study folders (CONTRACT.md section 1): ``study.toml``, ``model.bdf``, ``loads.csv``,
+"""Study folders (``docs/study-format.md``): ``study.toml``, ``model.bdf``, ``loads.csv``,
 ``measurements.csv``. Everything is checked before any solver work, and every rejection names
 the file, the line and the column.
 
@@ -142,6 +142,12 @@ def _located():
         yield
     except TableFormatError as exc:
         raise StudyError(exc.message, file=exc.file, line=exc.line, column=exc.column) from None
+
+
+def read_text(path: Path) -> str:
+    """A study file as UTF-8 text (a byte-order mark accepted; a bad byte located)."""
+    with _located():
+        return tables.read_text(path)
 
 
 def read_loads(path: Path, grids: set[int] | None = None) -> LoadMatrix:

@@ -3,7 +3,7 @@
 A long study (identification, diagnosis, a benchmark) makes many batches; an interrupted one is
 resumed by running the same command again: every batch that finished before the interruption is
 read back, the others are computed. ``blackbox`` commands use ``STUDY/.blackbox_cache/`` (see
-``blackbox.workflows.make_adapter_for``; ``--no-cache`` bypasses it, ``--cache-dir`` moves it).
+``blackbox.adapters.make_adapter_for``; ``--no-cache`` bypasses it, ``--cache-dir`` moves it).
 
 The key
 -------

@@ -13,6 +13,10 @@ Batch
     Many load cases solved in one call: one factorization, many right-hand sides. The
     black-box condensation of Chapter 3 relies on this: ``n_B + L`` right-hand sides in one run.
 
+The parsed-deck data model (:mod:`solver_adapters.deck`: plain dataclasses of grids, bars,
+springs, constraints; no solver code) is re-exported here too: diagnosis edits a deck (cuts a
+support, splits a joint) and hands the edited deck to the same adapter, which stays a black box.
+
 Errors are typed and all derive from :class:`SolverError` (defined in
 :mod:`solver_adapters.errors`, re-exported here): a solver's crash, garbage output, timeout or
 singular stiffness is always a :class:`SolverError` subclass, whatever adapter saw it.
@@ -28,6 +32,8 @@ import scipy.sparse as sp
 
 # every error class lives in solver_adapters.errors; re-exported here because this is the one
 # module of solver_adapters that blackbox's method layers may import
+from solver_adapters.deck import (Bush, CBar, Coord, Deck, Grid, Mat1, PBar, PBush, Pelas, Prod,  # noqa: F401
+                                  Rbe2, Rbe3, Rod, Spc1, SpcAdd, Spring)
 from solver_adapters.errors import (COMPONENT_NAMES, AdapterNotFound, CheckFailure,  # noqa: F401
                                     ConsentError, CorruptEntry, DeckFormatError, FactorizationError,
                                     InsecureFileError, ModelError, OptionError, PluginConflictError,

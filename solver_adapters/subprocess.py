@@ -17,8 +17,7 @@ Three layers, each usable alone:
   command only with the user's consent (:func:`check_command_consent`), removes failed runs'
   folders unless asked to keep them and cleans the stale folders of killed runs.
 
-A legacy code's exit status means little (MYSTRAN exits 0 after fatal errors, ``MYSTRAN.md``
-"Running it"), so deciding success is the dialect's job; the runner only reports what happened.
+A legacy code's exit status means little (MYSTRAN exits 0 after fatal errors, ``docs/mystran.md``), so deciding success is the dialect's job; the runner only reports what happened.
 """
 
 from __future__ import annotations
@@ -767,13 +766,18 @@ class CommandAdapter:
         _clean_stale_once(self.workdir_root)
         self.stats = SolverStats()
         self._lock = threading.Lock()
-        from solver_adapters.bdf import read_deck  # the reader is only needed here
-        self._base = BaseDeck(self.deck_path, read_deck(self.deck_path))
+        self._base = BaseDeck(self.deck_path, self._read_model(self.deck_path))
         grids = self._base.model.grids
         self._xyz = {int(g): tuple(float(v) for v in grids[g].xyz) for g in sorted(grids)}
         self._dofs = tuple((g, c) for g in self._xyz for c in range(1, 7))
         self._dofset = frozenset(self._dofs)
         self.springs = self._checked_springs(springs)
+
+    def _read_model(self, path: Path) -> Any:
+        """The parsed model of the deck (``bdf.read_deck``); an adapter whose solver reads cards
+        the reader does not model overrides this (:class:`solver_adapters.nastran.MystranAdapter`)."""
+        from solver_adapters.bdf import read_deck  # the reader is only needed here
+        return read_deck(path)
 
     # ---- protocol ------------------------------------------------------------------------
     def dofs(self) -> tuple[DofLabel, ...]:

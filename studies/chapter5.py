@@ -14,7 +14,7 @@ to the joint's first grid (Sec. 5.2), the layout that reproduces the dissertatio
 6. biased (force_scale = 1.1) vs unbiased data (Figures 5.6-5.7, 5.11, 5.15, 5.19)
 
 How it stays fast: each *setup* (cube/car x simple/complex, the measurement layout of the fixture)
-is condensed once (one solver run, ``condensed_for_study``) on a temporary copy of the fixture whose
+is condensed once (one solver run, ``DeclaredModel.condense``) on a temporary copy of the fixture whose
 ``loads.csv`` holds 30 load cases (the fixture's L1-L20 and L21-L30 from the fixture generator's own
 random stream continued). Measurements are then simulated in the condensed space exactly as
 ``blackbox simulate`` does (same noise model, same random stream: checked bit for bit against the
@@ -38,12 +38,13 @@ import scipy.linalg as sla
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from blackbox import simulate as sim                                       # noqa: E402
+from blackbox import reference_tables as rt                                # noqa: E402
+from blackbox import simulation as sim                                       # noqa: E402
 from blackbox.identification import IdentificationResult, Observations, identify  # noqa: E402
 from blackbox.joints import joint_dofs                                     # noqa: E402
 from blackbox.study import Study, load_study                               # noqa: E402
-from blackbox.workflows import (condensed_for_study, make_adapter_for, read_truth,  # noqa: E402
-                                study_joints, truth_joints)
+from blackbox.adapters import make_adapter_for  # noqa: E402
+from blackbox.declared import declared_model, read_truth, truth_joints  # noqa: E402
 
 FIXTURES = ROOT / "fixtures"
 OUT_MD = ROOT / "studies" / "chapter5.md"
@@ -83,12 +84,9 @@ SIMPLE_NAMES = ("kx12", "ky12", "kz12", "kx23", "ky23", "kz23", "kx13", "ky13", 
 COMPLEX_NAMES = ("k11", "k12", "k13", "k14", "k15", "k16", "k22", "k23", "k24", "k25", "k26", "k33",
                  "k34", "k35", "k36", "k44", "k45", "k46", "k55", "k56", "k66")
 DISS_TRUTH = {"cube-simple": 1.0e4, "car-simple": 1.15e5}   # Sec. 5.3.1, 5.3.2 ("1.15 x 10^5")
-TABLE_5_12 = [0.6098e7, -0.7255e6, 0.7508e5, 0.2627e5, -0.1502e6, 0.2830e7, 0.6098e7, 0.7805e5,
-              -0.2550e5, 0.1374e6, -0.1502e6, 0.3122e6, -0.1530e4, -0.2551e5, 0.2627e5, 0.3122e6,
-              0.7805e5, 0.7805e5, 0.6098e7, -0.7255e6, 0.6098e7]
-TABLE_5_18 = [0.3607e7, -0.1321e6, 0.2355e5, 0.2355e5, -0.1321e6, 0.9408e6, 0.3607e7, 0.2355e5,
-              -0.7697e4, -0.1321e6, -0.1321e6, 0.1567e6, 0.4648e3, -0.7697e4, 0.2355e5, 0.1567e6,
-              0.2355e5, 0.2355e5, 0.3607e7, -0.1321e6, 0.3607e7]
+# Tables 5.12 and 5.18 as printed (blackbox.reference_tables says which entries are questionable)
+TABLE_5_12 = list(rt.TABLE_5_12.values())
+TABLE_5_18 = list(rt.TABLE_5_18.values())
 
 
 def _rows(text: str) -> np.ndarray:
@@ -430,7 +428,7 @@ class Setup:
     k_true: np.ndarray
     k0: np.ndarray
     names: tuple[str, ...]
-    dofs: list                          # measured DOFs in simulate_study's order
+    dofs: list                          # measured DOFs in blackbox simulate's order
     reference: int | None
     floor: float
     fixture_seed: int
@@ -477,18 +475,19 @@ def make_setup(key: str, workdir: Path) -> Setup:
     truth_path = src / "truth.toml"
     truth = read_truth(truth_path)
     _, k_true = truth_joints(study, truth, truth_path)
-    joints = study_joints(study)
+    declared = declared_model(study)
+    joints = list(declared.joints)
     jc = study.config.joints[0]
     m = truth.measure
     if ref_override is not None:
         m = m.model_copy(update={"reference_grid": ref_override})
     dofs = joint_dofs(jc.grids) + [(g, c) for g in m.away_grids for c in range(1, 7)]
     dofs = list(dict.fromkeys(dofs))
-    if m.reference_grid is not None:        # simulate_study: the reference grid first, absolutely
+    if m.reference_grid is not None:        # as blackbox simulate: the reference grid first, absolutely
         dofs = [(m.reference_grid, c) for c in range(1, 7)] + [d for d in dofs if d[0] != m.reference_grid]
     needed = list(dict.fromkeys(dofs))
     adapter = make_adapter_for(study, cache=False)
-    cm = condensed_for_study(study, adapter, joints, needed)
+    cm = declared.condense(adapter, needed)
     U = cm.pick(cm.response(k_true), needed)
     return Setup(key=key, fixture=fixture, study=study, cm=cm, k_true=np.asarray(k_true, float),
                  k0=joints[0].initial_params(jc.initial), names=tuple(joints[0].param_names), dofs=dofs,
@@ -1225,7 +1224,7 @@ SETUP_NOTES = [
     "them near the joint, 200-1000 N vertical and/or lateral). The simple model uses L1-L20 only, as the "
     "dissertation. 'n cases' means L1..Ln of one measurement set (as the dissertation: its 5-case column "
     "equals Table 5.2 and its 10-case complex column Table 5.14).",
-    "* **Simulation** happens in the condensed space of the one solver run, with `blackbox.simulate`'s "
+    "* **Simulation** happens in the condensed space of the one solver run, with `blackbox.simulation`'s "
     "functions in the order `blackbox simulate` calls them; the last column above is the largest difference "
     "from the fixture's `measurements.csv` (same seed, same cases) in units of sigma: 0 means bit for bit.",
     f"* **Seeds and replicates.** Replicate r uses seed r (simple model r = {SEEDS_SIMPLE[0]}..{SEEDS_SIMPLE[-1]}, "

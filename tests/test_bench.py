@@ -1,4 +1,4 @@
-"""`blackbox bench` writes the contract's rows; its methods reach the same estimate.
+"""`blackbox bench` writes the rows of docs/commands.md; its methods reach the same estimate.
 
 Timings are not asserted (machines are noisy; the figures go in the closing note): only the
 structure of the output and the solver-run counts, which are exact.

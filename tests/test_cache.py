@@ -433,7 +433,7 @@ def test_two_processes_solving_the_same_batch_end_with_one_valid_entry(cube, tmp
 # --------------------------------------------------------------------------------------------
 def test_make_adapter_for_wraps_only_when_asked(cube, tmp_path):
     from blackbox.study import load_study
-    from blackbox.workflows import ADAPTER_CACHE, make_adapter_for
+    from blackbox.adapters import ADAPTER_CACHE, make_adapter_for
 
     study = load_study(cube[0])
     assert not isinstance(make_adapter_for(study), CachedAdapter)            # library default: off
@@ -477,7 +477,7 @@ def test_blackbox_solve_resumes_from_the_cache(cube, tmp_path):
 
 def test_cli_in_process_resets_the_cache_choice(cube, tmp_path):
     from blackbox.cli import main
-    from blackbox.workflows import ADAPTER_CACHE
+    from blackbox.adapters import ADAPTER_CACHE
 
     study, _ = cube
     assert main(["solve", str(study), "--out", str(tmp_path / "o")]) == 0

@@ -1,6 +1,6 @@
-"""Comparison of the simple and complex joint models (``blackbox.compare``, ``blackbox compare``).
+"""Comparison of the simple and complex joint models (``blackbox.comparison``, ``blackbox compare``).
 
-Reference: the dissertation in ``/work/shared/seed``, Chapter 6 -- eq. 34-35 (the MDSE loading is
+Reference: the dissertation, Chapter 6 -- eq. 34-35 (the MDSE loading is
 the top eigenvector of ``C_complex - C_simple``), Tables 6.1-6.3 (cube: complex truth = Table
 5.12, the isolated-joint MDSE loading practically a unit moment, R = 76 %). Units N, m, rad.
 
@@ -13,31 +13,25 @@ from __future__ import annotations
 
 import json
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from blackbox import compare as cmp
-from blackbox import simulate as sim
+from blackbox import comparison as cmp
+from blackbox import simulation as sim
 from blackbox.cli import main
 from blackbox.condensation import CondensedModel, condense
 from blackbox.identification import Observations
 from blackbox.joints import ComplexJoint, SimpleJoint, actual_joint_stub_kc, joint_dofs
+from blackbox.reference_tables import TABLE_3_1, TABLE_5_12, TABLE_6_1_COMPLEX, TABLE_6_1_SIMPLE
 from blackbox.structures import cube, random_loads
 from blackbox.study import load_study
-from solver_adapters.bdf import read_deck_text
 from solver_adapters.protocol import LoadMatrix
 from solver_adapters.reference import ReferenceAdapter
 
-FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
-TABLE_5_12 = {  # N*m/rad, Table 5.12 as printed (the cube joint, complex model)
-    "k11": 0.6098e7, "k12": -0.7255e6, "k13": 0.7508e5, "k14": 0.2627e5, "k15": -0.1502e6,
-    "k16": 0.2830e7, "k22": 0.6098e7, "k23": 0.7805e5, "k24": -0.2550e5, "k25": 0.1374e6,
-    "k26": -0.1502e6, "k33": 0.3122e6, "k34": -0.1530e4, "k35": -0.2551e5, "k36": 0.2627e5,
-    "k44": 0.3122e6, "k45": 0.7805e5, "k46": 0.7805e5, "k55": 0.6098e7, "k56": -0.7255e6,
-    "k66": 0.6098e7}
+from conftest import FIXTURES, adapter_of, copy_fixture, load_matrix
+
 K_HALF = 1.0e4          # N*m/rad, the cube's simple-model truth (Sec. 5.3.1)
 ROUND = 1e-10           # relative: identities that only rounding separates (condition ~1e4)
 
@@ -80,14 +74,6 @@ def test_mdse_is_the_top_eigenvector_brute_force():
     assert np.allclose(m.displacements["simple"], Cs @ load, rtol=1e-14)
 
 
-# Table 6.1 (cube): the dissertation's estimated K_C of both models, k11 k12 ... k66, N*m/rad
-TABLE_6_1_COMPLEX = [0.6093e7, -0.7237e6, 0.7896e5, 0.3134e5, -0.1431e6, 0.2812e7, 0.6240e7, 0.7428e5,
-                     -0.4054e5, 0.7228e5, -0.1295e6, 0.3108e6, -0.9172e3, -0.2547e5, 0.1992e5, 0.3009e6,
-                     0.8608e5, 0.7609e5, 0.6006e7, -0.6980e6, 0.6032e7]
-TABLE_6_1_SIMPLE = [0.166e7, 0, 0, -0.4847e6, 0, 0, 0.3281e7, 0, 0, -0.7254e6, 0, 0.4401e6, 0, 0,
-                    -0.1941e6, 0.1328e7, 0, 0, 0.2553e7, 0, 0.2063e7]
-
-
 def test_dissertation_estimates_reproduce_tables_6_2_to_6_4():
     """Eq. 34-35 applied to Table 6.1's two estimated K_C: the MDSE loading of Table 6.2, the
     energies and R of Table 6.3 and the displacements of Table 6.4 (cube). The table's
@@ -96,8 +82,8 @@ def test_dissertation_estimates_reproduce_tables_6_2_to_6_4():
     (printed to 4 decimals), 2e-3 of the largest component on the displacements (the
     loading itself differs in the 4th decimal: -0.0790 vs -0.0786)."""
     j = ComplexJoint("J7", (7, 71, 72))
-    Cc = cmp.isolated_flexibility(j, TABLE_6_1_COMPLEX)
-    Cs = cmp.isolated_flexibility(j, TABLE_6_1_SIMPLE)
+    Cc = cmp.isolated_flexibility(j, list(TABLE_6_1_COMPLEX.values()))
+    Cs = cmp.isolated_flexibility(j, list(TABLE_6_1_SIMPLE.values()))
     m = cmp.compare_flexibilities(j.rotation_dofs[:6], ["x"] * 6, {"complex": Cc, "simple": Cs})
     assert np.allclose(m.load, [-0.0786, 0.0083, 0.0051, 1.0000, -0.0197, -0.0162], rtol=0, atol=6e-4)
     assert m.dominant == 3                                           # theta_x2, "practically a unit moment"
@@ -231,17 +217,12 @@ def test_several_joints_compared_joint_by_joint():
     g5 = f.flexible_joint("J5", 5, [bars_at_5[1], bars_at_5[6], bars_at_5[8]], 51)
     (n7, g7), _ = f.joints
     boundary = joint_dofs(g7) + joint_dofs(g5)
-    rows = random_loads(f, 24, seed=1)
-    cases = list(dict.fromkeys(r[0] for r in rows))
-    dofs = list(dict.fromkeys((r[1], r[2]) for r in rows))
-    Fm = np.zeros((len(dofs), len(cases)))
-    for cs, g, comp, v in rows:
-        Fm[dofs.index((g, comp)), cases.index(cs)] += v
-    c = condense(ReferenceAdapter(read_deck_text(f.bdf())), LoadMatrix.from_dense(dofs, Fm, cases), boundary)
+    loads = load_matrix(random_loads(f, 24, seed=1))
+    cases = list(loads.cases)
+    c = condense(adapter_of(f), loads, boundary)
     simple = [SimpleJoint(n7, g7), SimpleJoint("J5", g5)]
     complex_ = [ComplexJoint(n7, g7), ComplexJoint("J5", g5)]
-    kc5 = actual_joint_stub_kc([(0, 0, -1), (1, 0, 0), (0, 1, 0)], 0.3, E=200e9, G=80e9, A=4e-4,
-                               Iy=1.333e-8, Iz=1.333e-8, J=0.4e-8)
+    kc5 = actual_joint_stub_kc([(0, 0, -1), (1, 0, 0), (0, 1, 0)], 0.3, **TABLE_3_1)
     truth = CondensedModel(c, [simple[0], complex_[1]])
     k_true = np.concatenate([np.full(9, K_HALF), complex_[1].params_from_kc(kc5)])
     U = truth.response(k_true).U_B
@@ -310,8 +291,7 @@ def test_cli_compare_writes_the_contract_and_the_11_case_study(simulated_cube, c
 
 def test_cli_compare_bad_input_exits_2(tmp_path, capsys):
     bare = tmp_path / "bare"                                  # the cube without measurements
-    shutil.copytree(FIXTURES / "cube", bare, ignore=shutil.ignore_patterns(
-        "measurements.csv", "truth.*", ".blackbox_cache"))
+    copy_fixture("cube", bare, "measurements.csv", "truth.*")
     assert main(["compare", str(bare), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "measurements.csv" in err and "Traceback" not in err

@@ -8,7 +8,6 @@ condensed flexibility form is ~1e-13 here.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,18 +15,15 @@ import pytest
 from blackbox import sensitivity as S
 from blackbox.condensation import CondensedModel, condense
 from blackbox.joints import ComplexJoint, SimpleJoint, actual_joint_stub_kc, make_joint
+from blackbox.reference_tables import TABLE_3_1
 from blackbox.structures import FrameBuilder, cube, random_loads, star_joint_frame
 from blackbox.study import load_study
-from solver_adapters.bdf import read_deck_text
 from solver_adapters.protocol import LoadMatrix
 from solver_adapters.reference import ReferenceAdapter
 
-FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
+from conftest import FIXTURES, adapter_of, load_matrix, max_rel
+
 REL = 1e-9
-
-
-def rel_err(a, b):
-    return float(np.max(np.abs(a - b)) / np.max(np.abs(b)))
 
 
 def complex_params(joint: ComplexJoint, scale: float, seed: int = 0) -> np.ndarray:
@@ -45,7 +41,7 @@ def check_condensed_equals_full(adapter, loads, joints, k, observed=()):
     r = m.response(k)
     report = list(c.boundary) + list(c.observed)
     full = S.full_response(adapter, joints, k, loads, report)
-    assert rel_err(np.vstack([r.U_B, r.U_O]), full) < REL
+    assert max_rel(np.vstack([r.U_B, r.U_O]), full) < REL
     return m
 
 
@@ -65,21 +61,11 @@ def test_condensed_equals_full_on_fixtures(fixture, scale, model):
 @pytest.mark.parametrize("model", ["simple", "complex"])
 def test_condensed_equals_full_n_branches(n, model):
     f = star_joint_frame(n, seed=n)
-    adapter = ReferenceAdapter(read_deck_text(f.bdf()))
+    adapter = adapter_of(f)
     joint = make_joint(*f.joints[0], model)
     k = np.linspace(2e4, 9e4, joint.n_params) if model == "simple" else complex_params(joint, 5e4, n)
-    loads = LoadMatrix.from_dense(*_loads(f, 5))
+    loads = load_matrix(random_loads(f, 5, seed=4))
     check_condensed_equals_full(adapter, loads, [joint], k, observed=[(100, 1), (101, 5)])
-
-
-def _loads(f: FrameBuilder, n_cases: int):
-    rows = random_loads(f, n_cases, seed=4)
-    cases = list(dict.fromkeys(r[0] for r in rows))
-    dofs = list(dict.fromkeys((r[1], r[2]) for r in rows))
-    F = np.zeros((len(dofs), len(cases)))
-    for c, g, comp, v in rows:
-        F[dofs.index((g, comp)), cases.index(c)] += v
-    return dofs, F, cases
 
 
 def two_joint_frame() -> FrameBuilder:
@@ -102,24 +88,24 @@ def two_joint_frame() -> FrameBuilder:
 
 def test_several_joints_at_once_and_mixed_models():
     f = two_joint_frame()
-    adapter = ReferenceAdapter(read_deck_text(f.bdf()))
+    adapter = adapter_of(f)
     ja = make_joint(*f.joints[0], "simple")
     jb = make_joint(*f.joints[1], "complex")
     assert (ja.n_branches, jb.n_branches) == (3, 4)
     k = np.r_[np.full(ja.n_params, 3e4), complex_params(jb, 6e4)]
-    loads = LoadMatrix.from_dense(*_loads(f, 4))
+    loads = load_matrix(random_loads(f, 4, seed=4))
     m = check_condensed_equals_full(adapter, loads, [ja, jb], k, observed=[(5, 3), (12, 1)])
     dofs = list(m.c.boundary) + list(m.c.observed)
     d = S.direct(m, k, dofs)
     c = S.finite_difference(adapter, [ja, jb], k, loads, dofs, "central", rel_step=1e-4)
-    assert rel_err(d, c) < 1e-6   # central differences: O(h^2) truncation ~1e-8, round-off ~1e-12/h
+    assert max_rel(d, c) < 1e-6   # central differences: O(h^2) truncation ~1e-8, round-off ~1e-12/h
 
 
 @pytest.mark.parametrize("model", ["simple", "complex"])
 def test_direct_equals_central_differences_cube(model):
     """Eq. 18 (no solver run) against eq. 7 on the full model (2 n solver runs)."""
     f = cube()
-    adapter = ReferenceAdapter(read_deck_text(f.bdf()))
+    adapter = adapter_of(f)
     joint = make_joint(*f.joints[0], model)
     k = np.full(joint.n_params, 1e4) if model == "simple" else complex_params(joint, 1e4)
     loads = LoadMatrix.from_dense([(5, 6), (6, 6), (8, 6)], np.full((3, 1), 0.5), ["L1"])
@@ -129,11 +115,11 @@ def test_direct_equals_central_differences_cube(model):
     c = S.finite_difference(adapter, [joint], k, loads, list(joint.dofs), "central", rel_step=1e-4)
     assert adapter.stats.runs - runs0 == 2 * joint.n_params
     # relative step 1e-4: truncation (h^2 u''') ~1e-8 of the derivative, plus round-off
-    assert rel_err(d, c) < 1e-6
+    assert max_rel(d, c) < 1e-6
     fwd = S.finite_difference(adapter, [joint], k, loads, list(joint.dofs), "forward", rel_step=1e-6)
-    assert rel_err(d, fwd) < 1e-4   # forward: O(h) truncation with h = 1e-6 relative
+    assert max_rel(d, fwd) < 1e-4   # forward: O(h) truncation with h = 1e-6 relative
     semi = S.semi_analytic(m, k, list(joint.dofs))
-    assert rel_err(d, semi) < 1e-8  # K_J is linear in k: the matrix difference is exact to round-off
+    assert max_rel(d, semi) < 1e-8  # K_J is linear in k: the matrix difference is exact to round-off
 
 
 def test_deck_stiffness_is_subtracted():
@@ -142,22 +128,22 @@ def test_deck_stiffness_is_subtracted():
     f = cube()
     joint = SimpleJoint(*f.joints[0])
     k0 = 2.5e3
-    plain = ReferenceAdapter(read_deck_text(f.bdf()))
+    plain = adapter_of(f)
     from blackbox.joints import spring_network
     f.springs += [(s.a[0], s.a[1], s.b[0], s.b[1], s.k) for s in spring_network(joint, np.full(9, k0))]
-    coupled = ReferenceAdapter(read_deck_text(f.bdf()))
+    coupled = adapter_of(f)
     loads = LoadMatrix.from_dense([(5, 6), (6, 6), (8, 6)], np.full((3, 1), 0.5), ["L1"])
     k = np.linspace(5e3, 2e4, 9)
     m_plain = CondensedModel(condense(plain, loads, joint.dofs), [joint])
     m_coupled = CondensedModel(condense(coupled, loads, joint.dofs), [joint],
                                K_deck=joint.matrix(np.full(9, k0)))
-    assert rel_err(m_coupled.response(k).U_B, m_plain.response(k).U_B) < REL
+    assert max_rel(m_coupled.response(k).U_B, m_plain.response(k).U_B) < REL
 
 
 def test_recovery_of_whole_field_by_superposition():
     """Every grid's displacement from the same single call, without enlarging B."""
     f = cube()
-    adapter = ReferenceAdapter(read_deck_text(f.bdf()))
+    adapter = adapter_of(f)
     joint = make_joint(*f.joints[0], "complex")
     k = complex_params(joint, 2e4, 3)
     loads = LoadMatrix.from_dense([(5, 6), (6, 6), (8, 6)], np.full((3, 1), 0.5), ["L1"])
@@ -165,7 +151,7 @@ def test_recovery_of_whole_field_by_superposition():
     assert len(c.boundary) == 12 and c.solver_runs == 1
     m = CondensedModel(c, [joint])
     full = S.full_response(adapter, [joint], k, loads, list(c.observed))
-    assert rel_err(m.response(k).U_O, full) < REL
+    assert max_rel(m.response(k).U_O, full) < REL
 
 
 def test_stub_joint_is_a_valid_complex_truth():
@@ -173,8 +159,8 @@ def test_stub_joint_is_a_valid_complex_truth():
     f = cube()
     joint = ComplexJoint(*f.joints[0])
     dirs = [(0, 0, -1), (-1, 0, 0), (0, -1, 0)]          # towards nodes 3, 8, 6
-    K_C = actual_joint_stub_kc(dirs, 0.01, 200e9, 80e9, 4e-4, 1.333e-8, 1.333e-8, 0.4e-8)
+    K_C = actual_joint_stub_kc(dirs, 0.01, **TABLE_3_1)
     assert np.all(np.linalg.eigvalsh(K_C) > 0)
-    adapter = ReferenceAdapter(read_deck_text(f.bdf()))
+    adapter = adapter_of(f)
     loads = LoadMatrix.from_dense([(5, 6), (6, 6), (8, 6)], np.full((3, 1), 0.5), ["L1"])
     check_condensed_equals_full(adapter, loads, [joint], joint.params_from_kc(K_C))

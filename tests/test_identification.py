@@ -1,6 +1,6 @@
 """Statistical identification of joint parameters (``blackbox.identification``).
 
-Reference: the dissertation in ``/work/shared/seed`` -- Sec. 4.3 (eq. 22-32: fixed point, Newton,
+Reference: the dissertation, Sec. 4.3 (eq. 22-32: fixed point, Newton,
 weights), Sec. 4.4 (confidence intervals), Sec. 5.2 (simulated measurements), Sec. 5.3.1 (the cube:
 ``k = 1e4 N m/rad`` for all nine springs, start ``1e3``, 5 % noise, Figure 5.3: fixed point +
 Newton 4 iterations, Newton alone 9), Tables 5.16-5.17 (the complex model from 30 load cases).
@@ -25,7 +25,6 @@ from __future__ import annotations
 import csv
 import json
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -39,47 +38,22 @@ from blackbox.joints import (ComplexJoint, SimpleJoint, actual_joint_stub_kc, jo
                              spring_network)
 from blackbox.structures import FrameBuilder, cube, random_loads, star_joint_frame
 from blackbox.study import Measurements
-from solver_adapters.bdf import read_deck_text
-from solver_adapters.protocol import LoadMatrix
+from blackbox.reference_tables import TABLE_3_1, TABLE_5_12_SYMMETRIC, TABLE_5_18
 from solver_adapters.reference import ReferenceAdapter
+
+from conftest import FIXTURES, adapter_of, load_matrix, max_rel
 
 K_TRUE = 1.0e4          # N m/rad, Sec. 5.3.1 ("half way between rigid and infinitely flexible")
 K_START = 1.0e3         # N m/rad, the dissertation's start (Sec. 3.7.1, Figure 3.6)
 NOISE = 0.05            # sigma / |true value|, Sec. 5.3.1
-TABLE_3_1 = dict(E=200e9, G=80e9, A=4.0e-4, Iy=1.333e-8, Iz=1.333e-8, J=0.4e-8)
 # Noise-free recovery: the data are exact to ~1e-15 relative; the estimate is then limited by the
 # conditioning of the normal equations (~1e4 here), so 1e-6 (the issue's figure) has margin.
 RTOL_RECOVER = 1e-6
-FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
-# Table 5.12: the cube joint's K_C (N m/rad), the dissertation's complex-model truth
-TABLE_5_12 = dict(k11=6.098e6, k12=-7.255e5, k13=7.805e4, k14=2.627e4, k15=-1.502e5, k16=2.830e6,
-                  k22=6.098e6, k23=7.805e4, k24=-2.550e4, k25=1.374e5, k26=-1.502e5, k33=3.122e5,
-                  k34=-1.530e3, k35=-2.551e4, k36=2.627e4, k44=3.122e5, k45=7.805e4, k46=7.805e4,
-                  k55=6.098e6, k56=-7.255e5, k66=6.098e6)
-# Table 5.18: the car's B-pillar-to-roof-rail joint (N m/rad); positive definite (eigenvalues
-# 1.56e5 ... 4.61e6)
-TABLE_5_18 = dict(k11=0.3607e7, k12=-0.1321e6, k13=0.2355e5, k14=0.2355e5, k15=-0.1321e6, k16=0.9408e6,
-                  k22=0.3607e7, k23=0.2355e5, k24=-0.7697e4, k25=-0.1321e6, k26=-0.1321e6, k33=0.1567e6,
-                  k34=0.4648e3, k35=-0.7697e4, k36=0.2355e5, k44=0.1567e6, k45=0.2355e5, k46=0.2355e5,
-                  k55=0.3607e7, k56=-0.1321e6, k66=0.3607e7)
 
 
 # --------------------------------------------------------------------------------------------
 # helpers
 # --------------------------------------------------------------------------------------------
-def adapter_of(f: FrameBuilder) -> ReferenceAdapter:
-    return ReferenceAdapter(read_deck_text(f.bdf()))
-
-
-def load_matrix(rows) -> LoadMatrix:
-    cases = list(dict.fromkeys(r[0] for r in rows))
-    dofs = list(dict.fromkeys((r[1], r[2]) for r in rows))
-    F = np.zeros((len(dofs), len(cases)))
-    for c, g, comp, v in rows:
-        F[dofs.index((g, comp)), cases.index(c)] += v
-    return LoadMatrix.from_dense(dofs, F, cases)
-
-
 def cube_loads(f: FrameBuilder, n_random: int):
     """L1 (Sec. 3.7.1) and R1..Rn from random_loads."""
     return ([("L1", g, 6, 0.5) for g in (5, 6, 8)]
@@ -101,10 +75,6 @@ def simulate(model: CondensedModel, k_true, dofs, cases, rng=None, rel=NOISE) ->
     return Observations(tuple(d for _ in range(n_cases) for d in dofs),
                         np.repeat(np.asarray(cases), n_rows), values.T.ravel(), sigma.T.ravel(),
                         tuple(model.c.cases))
-
-
-def max_rel(a, b) -> float:
-    return float(np.max(np.abs(np.asarray(a) - b)) / np.max(np.abs(b)))
 
 
 @pytest.fixture(scope="module")
@@ -350,7 +320,7 @@ def simulate_relative(model: CondensedModel, k_true, dofs, ref_grid: int, rng=No
 
 
 FIXTURE_JOINTS = {  # fixture: joint, grids, away grids, reference grid, truth, fixture start
-    "cube": ("J7", (7, 71, 72), (5, 6, 8, 3), 7, TABLE_5_12, 1.0e3),
+    "cube": ("J7", (7, 71, 72), (5, 6, 8, 3), 7, TABLE_5_12_SYMMETRIC, 1.0e3),
     "car": ("JB", (11, 111, 112), (9, 10, 12, 13), 11, TABLE_5_18, 1.0e4),
 }
 
@@ -472,10 +442,11 @@ def test_fixture_studies_converge_in_six_iterations(fixture):
     Newton). Measured: cube 6, car 5, cube_complex 6 (14 before the matrix-log coordinates),
     car_complex 6 (8 before)."""
     from blackbox.study import load_study
-    from blackbox.workflows import identify_study, make_adapter_for
+    from blackbox.adapters import make_adapter_for
+    from blackbox.commands import identify
 
     study = load_study(FIXTURES / fixture, need_measurements=True)
-    run = identify_study(study, make_adapter_for(study, cache=False), profile=False)
+    run = identify.run(study, adapter=make_adapter_for(study, cache=False), profile=False)
     r = run.result
     print(f"\n{fixture}: {r.iterations} iterations ({r.n_fixed_point} + {r.n_newton}), "
           f"reduced chi2 {r.reduced_chi2:.3f}")
@@ -610,7 +581,7 @@ def test_profile_bootstrap_and_scaled_covariance(cube_setup):
 
 def test_fit_statistics_and_result_json(cube_setup):
     """chi2, AIC, BIC with the Gaussian likelihood of known sigma; standardized residuals;
-    holdout; the result.json structure of CONTRACT.md section 3 (strict JSON: no NaN)."""
+    holdout; the result.json structure of docs/commands.md (strict JSON: no NaN)."""
     s = cube_setup
     model = s["model"]
     obs = simulate(model, np.full(9, K_TRUE), s["joint_dofs"] + s["away"], range(11),

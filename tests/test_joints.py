@@ -1,6 +1,6 @@
 """Tests of the joint models of Chapter 2 (``blackbox.joints``).
 
-Reference: the dissertation in ``/work/shared/seed`` -- Sec. 2.2 (eq. 1-3, Table 2.1), Sec. 2.3
+Reference: the dissertation, Sec. 2.2 (eq. 1-3, Table 2.1), Sec. 2.3
 (eq. 4, Tables 2.2-2.4), Table 5.1 (form of X_m) and Sec. 5.4.1 (Table 5.12). Units N, m, rad.
 """
 
@@ -27,6 +27,7 @@ from blackbox.joints import (
     simple_to_complex_params,
     spring_network,
 )
+from blackbox.reference_tables import TABLE_3_1, TABLE_5_12
 from solver_adapters.protocol import ScalarSpring
 
 NS = [2, 3, 4, 5, 6]
@@ -34,7 +35,7 @@ NS = [2, 3, 4, 5, 6]
 RTOL_EXACT = 1e-12
 
 # Cube frame members, Table 3.1 (SI units); the joint is node 7 = (0.2, 0.2, 0.2).
-CUBE = dict(E=200e9, G=80e9, A=4.0e-4, Iy=1.333e-8, Iz=1.333e-8, J=0.4e-8)
+CUBE = TABLE_3_1
 
 
 def grids(n: int) -> tuple[int, ...]:
@@ -58,14 +59,14 @@ def models(n: int, rng: np.random.Generator):
 # layout and names
 # --------------------------------------------------------------------------------------------
 def test_joint_dofs_contract_labels():
-    # CONTRACT.md Sec. 1: 3 translations of GN, then components 4-6 of every branch grid.
+    # docs/study-format.md: 3 translations of GN, then components 4-6 of every branch grid.
     assert joint_dofs([7, 71, 72]) == [(7, 1), (7, 2), (7, 3), (7, 4), (7, 5), (7, 6),
                                        (71, 4), (71, 5), (71, 6), (72, 4), (72, 5), (72, 6)]
     assert SimpleJoint("J7", (7, 71, 72)).dofs == tuple(joint_dofs([7, 71, 72]))
 
 
 def test_simple_param_names_order():
-    # CONTRACT.md Sec. 3: pairs i<j lexicographic, then planes; dissertation's k_x31 is kx13.
+    # docs/study-format.md: pairs i<j lexicographic, then planes; dissertation's k_x31 is kx13.
     assert SimpleJoint("J", (1, 2, 3)).param_names == (
         "kx12", "ky12", "kz12", "kx13", "ky13", "kz13", "kx23", "ky23", "kz23")
     assert SimpleJoint("J", (1, 2, 3, 4)).param_names[9:12] == ("kx23", "ky23", "kz23")
@@ -347,7 +348,7 @@ def test_admissibility():
 
 
 def test_initial_params_contract():
-    # CONTRACT.md Sec. 1: simple: every spring = initial; complex: K_C = initial * I.
+    # docs/study-format.md: simple: every spring = initial; complex: K_C = initial * I.
     np.testing.assert_array_equal(SimpleJoint("J", (1, 2, 3)).initial_params(1e3), np.full(9, 1e3))
     c = ComplexJoint("J", (1, 2, 3))
     np.testing.assert_array_equal(c.kc_matrix(c.initial_params(1e3)), 1e3 * np.eye(6))
@@ -453,16 +454,6 @@ def test_stub_kc_scaling_with_length():
     EI, GJ, L = CUBE["E"] * CUBE["Iy"], CUBE["G"] * CUBE["J"], 0.01
     expected = 4 * EI / L - (2 * EI / L) ** 2 / (8 * EI / L + GJ / L)
     np.testing.assert_allclose(k1[0, 0], expected, rtol=1e-6)
-
-
-# Table 5.12 (cube example; complex model), N*m/rad.
-TABLE_5_12 = dict(
-    k11=0.6098e7, k12=-0.7255e6, k13=0.7508e5, k14=0.2627e5, k15=-0.1502e6, k16=0.2830e7,
-    k22=0.6098e7, k23=0.7805e5, k24=-0.2550e5, k25=0.1374e6, k26=-0.1502e6,
-    k33=0.3122e6, k34=-0.1530e4, k35=-0.2551e5, k36=0.2627e5,
-    k44=0.3122e6, k45=0.7805e5, k46=0.7805e5,
-    k55=0.6098e7, k56=-0.7255e6,
-    k66=0.6098e7)
 
 
 def test_stub_kc_against_table_5_12():

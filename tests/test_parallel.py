@@ -243,7 +243,7 @@ def test_bench_rows_on_cluster_are_the_serial_rows(cluster):
 
     cases = ["cube-simple", "car-simple"]
     ser = bench.run_bench(FIXTURES, ["reference"], cases, 1, progress=lambda s: None)
-    dist = par.bench_rows(FIXTURES, ["reference"], cases, 1, executor=cluster)
+    dist = bench.bench_rows(FIXTURES, ["reference"], cases, 1, executor=cluster)
     keep = ("case", "method", "adapter", "solver_runs", "right_hand_sides", "iterations", "converged",
             "same_estimate_as_blackbox", "chi2_to_blackbox")
     assert [{k: r[k] for k in keep} for r in dist] == [{k: r[k] for k in keep} for r in ser]

@@ -246,8 +246,8 @@ def test_none_options_are_left_out_before_the_check():
         make_adapter("reference", DECK, timeout_s=60)
 
 
-def test_workflows_call_signature_keeps_working():
-    # blackbox.workflows: make_adapter(name, deck, **opts) with these option sets
+def test_make_adapter_call_signature_keeps_working():
+    # blackbox.adapters.make_adapter_for: make_adapter(name, deck, **opts) with these option sets
     for name, opts in [("reference", {"backend": "auto", "parsed": None}),
                        ("command", {"command": ["true", "{deck}"], "dialect": "nastran", "timeout_s": 5.0,
                                     "trusted": True}),
@@ -377,7 +377,7 @@ def test_solver_failures_are_solver_errors_and_other_errors_are_not():
 
 def test_blackbox_errors_share_one_base():
     import blackbox.errors as bb
-    from blackbox.compare import ComparisonError
+    from blackbox.comparison import ComparisonError
     from blackbox.joints import JointModelError
 
     assert JointModelError is bb.JointModelError and ComparisonError is bb.ComparisonError

@@ -2,19 +2,17 @@
 solver run when it is run again: the finished batch comes from the cache."""
 
 import json
-import shutil
-from pathlib import Path
 
 
 import blackbox.identification as identification
 from blackbox.cli import main
 
-FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
+from conftest import copy_fixture
 
 
 def test_interrupted_identify_resumes_without_solver_run(tmp_path, monkeypatch, capsys):
     study = tmp_path / "cube"
-    shutil.copytree(FIXTURES / "cube", study, ignore=shutil.ignore_patterns(".blackbox_cache", "*.png"))
+    copy_fixture("cube", study, "*.png")
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt          # after the condensation's batch, before the estimate

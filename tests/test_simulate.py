@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from blackbox import simulate as sim
+from blackbox import simulation as sim
 from blackbox.cli import main
 from blackbox.study import load_study
 from blackbox.structures import FrameBuilder

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import pytest
@@ -10,14 +9,14 @@ import pytest
 from blackbox.errors import StudyError
 from blackbox.study import load_study
 
-FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
+from conftest import copy_fixture
 GOOD_MEAS = "case,grid,component,value,sigma\nL1,7,4,1.0e-5,1.0e-6\nL1,7,5,2.0e-5,1.0e-6\n"
 
 
 @pytest.fixture
 def study(tmp_path) -> Path:
     root = tmp_path / "cube"
-    shutil.copytree(FIXTURES / "cube", root, ignore=shutil.ignore_patterns("*.png", "measurements*"))
+    copy_fixture("cube", root, "*.png", "measurements*")
     (root / "measurements.csv").write_text(GOOD_MEAS)
     return root
 

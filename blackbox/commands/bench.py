@@ -25,8 +25,9 @@ import json
 import platform
 import time
 from dataclasses import dataclass
+import os
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -37,6 +38,7 @@ from blackbox.joints import JointModel
 from blackbox.standard import standard_condense
 from blackbox.study import Study, load_study
 from blackbox.adapters import make_adapter_for
+from blackbox.parallel import Executor, SerialExecutor, pack_study, scratch, unpack_study
 from blackbox.declared import declared_model
 
 CASES = {"cube-simple": "cube", "cube-complex": "cube_complex", "car-simple": "car",
@@ -256,10 +258,37 @@ def run(fixtures: Path, adapters: list[str], cases: list[str], repeat: int = 1, 
     if unknown:
         raise ValueError(f"unknown bench case(s) {unknown}; known: {', '.join(CASES)}")
     if executor is not None and executor.workers > 1:      # one task per (case, adapter) on the cluster
-        from blackbox.parallel import bench_rows
         rows = bench_rows(Path(fixtures), adapters, cases, repeat, executor=executor)
     else:
         rows = run_bench(Path(fixtures), adapters, cases, repeat, progress=progress)
     meta = {"machine": platform.platform(), "cpus": os.cpu_count(), "python": platform.python_version(),
             "date": time.strftime("%Y-%m-%d %H:%M:%S"), "repeat": repeat, "command": command}
     return BenchResult(rows, meta)
+
+
+# --------------------------------------------------------------------------------------------
+# blackbox bench: one task per (case, adapter)
+# --------------------------------------------------------------------------------------------
+def _bench_task(args) -> list[dict]:
+    """The rows of one (case, adapter) of :func:`run_bench`, on a worker,
+    from the case's fixture folder rebuilt there."""
+    pkg, case, adapter, repeat = args
+    with scratch("blackbox-bench-") as tmp:
+        unpack_study(pkg, tmp)
+        return run_bench(tmp, [adapter], [case], repeat, progress=lambda s: None)
+
+
+def bench_rows(fixtures: str | os.PathLike, adapters: Sequence[str], cases: Sequence[str], repeat: int = 1, *,
+               executor: Executor | None = None) -> list[dict]:
+    """``blackbox bench``'s rows (:func:`run_bench`, same order) with
+    one task per (case, adapter): every method of a case runs in the same task, one after the
+    other, so its ``ratio_to_blackbox`` compares timings taken on the same worker. Tasks that
+    run at the same time share the machine: on a loaded machine the absolute times grow (run
+    serially, or one worker per core, for the published table)."""
+    executor = executor or SerialExecutor()
+    unknown = [c for c in cases if c not in CASES]
+    if unknown:
+        raise ValueError(f"unknown bench case(s) {unknown}; known: {', '.join(CASES)}")
+    packs = {c: pack_study(Path(fixtures) / CASES[c]) for c in cases}
+    tasks = [(packs[c], c, a, int(repeat)) for c in cases for a in adapters]
+    return [row for part in executor.map(_bench_task, tasks) for row in part]

@@ -1,16 +1,16 @@
 """``blackbox compare``: Chapter 6 on a study folder (wiring, reports and plots).
 
 1. One solver run condenses the structure on the joints' boundary DOFs (plus every measured
-   DOF); both joint models are identified on it (:func:`blackbox.compare.identify_both`).
+   DOF); both joint models are identified on it (:func:`blackbox.comparison.identify_both`).
 2. The MDSE loadings (eq. 34-35) of the isolated joint and of the joint in the structure, the
    strain energies, their relative difference and the joint displacements
-   (:func:`blackbox.compare.compare_joints`).
+   (:func:`blackbox.comparison.compare_joints`).
 3. The "11-case study" (Tables 6.6-6.7, Figure 6.3): when the study was written by
    ``blackbox simulate`` (it has ``truth.json``), the assembly MDSE loading becomes a new load
    case ``MDSE`` at the joint DOFs, its measurements are simulated from the same truth (same
    noise and measured DOFs, seed + 1) in a copy of the study, ``DIR/with_mdse/``, and both
    models are identified again -- on the first condensation extended by superposition
-   (:func:`blackbox.compare.append_case`: a load at boundary DOFs needs no solver run). Real
+   (:func:`blackbox.comparison.append_case`: a load at boundary DOFs needs no solver run). Real
    data (no ``truth.json``): the MDSE loading is written as ``mdse_loads.csv``, the recommended
    next experiment.
 """
@@ -29,15 +29,15 @@ from typing import Callable
 
 import numpy as np
 
-from blackbox import compare as cmp
-from blackbox.compare import Stage
+from blackbox import comparison as cmp
+from blackbox.comparison import Stage
 from blackbox.commands.common import as_study, copy_study, study_adapter
 from blackbox.condensation import Condensed
 from blackbox.declared import DeclaredModel, SolverCost, declared_model, joint_model, read_truth_record
 from blackbox.errors import StudyError
 from blackbox.identification import IdentificationResult
 from blackbox.joints import ComplexJoint, JointModel, complex_param_names, simple_to_complex_params
-from blackbox.simulate import TruthConfig
+from blackbox.simulation import TruthConfig
 from blackbox.study import Study, load_study
 from solver_adapters.protocol import SolverAdapter
 
@@ -104,7 +104,7 @@ def _toml_value(v) -> str:
 
 
 def truth_toml(cfg: TruthConfig) -> str:
-    """A truth TOML that :func:`blackbox.workflows.read_truth` reads back as ``cfg``."""
+    """A truth TOML that :func:`blackbox.declared.read_truth` reads back as ``cfg``."""
     lines = [f"seed = {cfg.seed}", f"force_scale = {_toml_value(float(cfg.force_scale))}"]
     if cfg.deck is not None:
         lines.append(f"deck = {_toml_value(cfg.deck)}")
@@ -380,7 +380,7 @@ def run(study: Study | str | Path, *, adapter: str | SolverAdapter | None = None
 
     j0 = first.joints[0]
     result = {
-        "study": study.name, "study_dir": str(study.root),
+        "study": study.name, "study_dir": study.root.name,
         "mdse_load": j0.isolated.load.tolist(),
         "strain_energy": {"complex": j0.isolated.energies["complex"], "simple": j0.isolated.energies["simple"],
                           "relative_difference": j0.isolated.relative_difference},

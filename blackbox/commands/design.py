@@ -42,7 +42,7 @@ from blackbox.condensation import CondensedModel
 from blackbox.declared import DeclaredModel, SolverCost, declared_model, read_truth, read_truth_record, truth_joints
 from blackbox.errors import StudyError
 from blackbox.joints import ComplexJoint, SimpleJoint
-from blackbox.simulate import NoiseConfig
+from blackbox.simulation import NoiseConfig
 from blackbox.study import Study
 from solver_adapters.protocol import SolverAdapter
 

@@ -259,11 +259,13 @@ def prepare(study: Study | str | Path, deck_dir: Path, *, adapter: str | None = 
 def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float = 0.01, max_steps: int = 5,
         refit_top: int = 6, max_joint_candidates: int = 300, effects: Sequence[str] | None = None,
         plots: bool = True, progress: Callable[[str], None] | None = None) -> DiagnosisResult:
-    """Diagnose the study (module docstring). ``alpha``: significance after the Bonferroni
-    correction; ``max_steps``: effects added at most; ``refit_top``: candidates refitted per
-    round; ``max_joint_candidates``: undeclared-joint grids considered at most (those nearest the
-    residual beyond); ``effects``: the families to consider (default: every registered one);
-    ``plots``: whether :meth:`DiagnosisResult.write` draws the plots; ``progress(message)``."""
+    """Diagnose the study (module docstring). ``alpha``: the family-wise significance level of
+    the whole search (alpha spending over rounds, Bonferroni within a round over the candidates
+    and their variant upgrades; :mod:`blackbox.diagnosis.search`); ``max_steps``: effects added
+    at most; ``refit_top``: candidates refitted per round; ``max_joint_candidates``:
+    undeclared-joint grids considered at most (those nearest the residual beyond); ``effects``:
+    the families to consider (default: every registered one); ``plots``: whether
+    :meth:`DiagnosisResult.write` draws the plots; ``progress(message)``."""
     t0 = time.perf_counter()
     check_options(alpha, max_steps, refit_top, max_joint_candidates, effects)
     say = progress or (lambda msg: None)

@@ -2,7 +2,7 @@
 
 The truth is joint models with values, the stub "actual joint" of Section 5.4.1, or another
 deck; the noise model, force-scale bias, eq. 33 averaging and reference-point measurement are
-Section 5.2's (:mod:`blackbox.simulate`). The joint truths go through the study's declared model
+Section 5.2's (:mod:`blackbox.simulation`). The joint truths go through the study's declared model
 (:mod:`blackbox.declared`): rigid pairs and deck springs act in the simulation as in the fit.
 """
 
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from blackbox import simulate as sim
+from blackbox import simulation as sim
 from blackbox.commands.common import as_study, copy_study, study_adapter
 from blackbox.condensation import CondensedModel, condense
 from blackbox.declared import DeclaredModel, declared_model, read_truth, truth_joints

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 
 from blackbox.diagnosis.split import Pair
-from solver_adapters.deck import CBar, Deck, Grid, Spc1, Spring
+from solver_adapters.protocol import CBar, Deck, Grid, Spc1, Spring
 from solver_adapters.protocol import DofLabel
 
 if TYPE_CHECKING:

@@ -47,7 +47,17 @@ def _candidate(c: CandidateScore) -> dict:
         out.update({"refit": True, "lr": _num(c.lr), "lr_p_value": _num(c.lr_p_value),
                     "lr_p_value_bonferroni": _num(c.lr_p_adjusted), "reduced_chi2": _num(c.refit.reduced_chi2),
                     "holdout_delta_chi2": _num(c.holdout_delta_chi2), "decision": c.reason})
+    out["variants_tried"] = [_trial(t) for t in c.variants]
     return out
+
+
+def _trial(t) -> dict:
+    """One richer variant refitted against the one it extends (:class:`search.VariantTrial`)."""
+    return {"variant": t.effect.variant, "from_variant": t.from_variant, "parameters": list(t.effect.names),
+            "reduced_chi2": None if t.refit is None else _num(t.refit.reduced_chi2),
+            "lr": _num(t.lr), "lr_p_value": _num(t.lr_p_value), "lr_p_value_adjusted": _num(t.lr_p_adjusted),
+            "delta_bic": _num(t.delta_bic), "holdout_delta_chi2": _num(t.holdout_delta_chi2),
+            "accepted": bool(t.accepted), "decision": t.reason}
 
 
 def _joint_params(fit: Fit) -> dict:
@@ -69,7 +79,8 @@ def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: li
         e = s.added.effect
         added.append({"effect": e.kind, "where": e.where_json(), **e.details_json(),
                       "parameters": e.parameters(s.after),
-                      "delta_bic": _num(s.added.delta_bic), "lr_p_value": _num(s.added.lr_p_value)})
+                      "delta_bic": _num(s.added.delta_bic), "lr_p_value": _num(s.added.lr_p_value),
+                      "variants_tried": [_trial(t) for t in s.added.variants]})
     steps = []
     for i, s in enumerate(diag.steps):
         steps.append({
@@ -86,6 +97,8 @@ def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: li
             "residual_structure_before": _trim(s.structure_before),
             "residual_structure_after": _trim(s.structure_after),
             "solver_runs": s.runs,
+            "lr_level": _num(s.level),
+            "hypotheses": s.hypotheses,
         })
     return {
         "study": study_name,
@@ -97,7 +110,12 @@ def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: li
         "stop_reason": diag.stop_reason,
         "joint_parameters": {"declared": _joint_params(diag.declared), "final": _joint_params(diag.final)},
         "holdout": {"cases": list(holdout), "declared_in_study": declared_holdout},
-        "settings": {"alpha": diag.alpha, "multiplicity": "Bonferroni over the candidates scored per round",
+        "settings": {"alpha": diag.alpha,
+                     "multiplicity": "alpha spending over rounds (round r spends alpha / 2^r), Bonferroni "
+                                     "within a round over its candidates and their variant upgrades; "
+                                     "the *_bonferroni p-values are p x 2^r x M_r, compared with alpha",
+                     "variants": "each accepted candidate refined through its family's richer variants "
+                                 "(LR at the round's level, BIC and hold-out chi2 must improve)",
                      "band": "99% band of chi2(n - p) / (n - p)", "candidates_by_effect": diag.n_candidates},
         "identify_check": None if ident is None else {
             "reduced_chi2": _num(ident.reduced_chi2), "converged": bool(ident.converged),

@@ -49,6 +49,7 @@ class CandidateScore:
     holdout_delta_chi2: float | None = None
     accepted: bool = False
     reason: str = ""
+    variants: tuple = ()                # search.VariantTrial: richer variants tried after acceptance
 
 
 class Projector:

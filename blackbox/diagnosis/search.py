@@ -3,16 +3,31 @@
 Fit the declared model (on the split structure's rigid state, which is the declared model
 exactly); test the standardized residuals against the declared noise (chi-square band, structure
 per case / grid / component); score every candidate effect against the residual
-(:mod:`blackbox.diagnosis.scoring`); refit the ``refit_top`` best by ``p`` (bounded
-Levenberg-Marquardt from the starts each effect offers; parameters that end at their nested
-bound are dropped). A candidate is *accepted* when its likelihood-ratio p-value times the number
-of candidates scored (Bonferroni) is below ``alpha``, BIC improves, and the hold-out chi2 does
-not grow by more than its number of parameters (the effect must improve prediction, not only the
-fit); the accepted one with the lowest BIC is added. Repeat until no candidate is accepted: a
-candidate that is significant after the correction is still added when the overall reduced chi2
-is already inside its 99 % band (the band is a weak omnibus test; a localised effect is found by
-the targeted score first), and with no effect present the Bonferroni level bounds the chance of a
-false addition per round by ``alpha``.
+(:mod:`blackbox.diagnosis.scoring`; each candidate at its family's simplest variant); refit the
+``refit_top`` best by ``p`` (bounded Levenberg-Marquardt from the starts each effect offers;
+parameters that end at their nested bound are dropped). A candidate is *accepted* when its
+likelihood-ratio p-value passes the round's multiplicity-controlled level, BIC improves, and the
+hold-out chi2 decreases (the effect must improve prediction of cases it was not fitted to, not
+only the fit). The ``refine_top`` accepted candidates with the lowest BIC are then *refined*
+(:func:`refine`): its richer variants
+(:meth:`blackbox.diagnosis.effects.Effect.richer`, nested: per-axis springs, per-branch springs,
+a member's separate EA / EI1 / EI2 / GJ factors) are refitted from their nested point and one
+is kept only when its LR test against the variant it extends passes the same level, BIC
+improves and the hold-out chi2 decreases; this repeats from the kept variant. The accepted
+candidate with the lowest BIC *at its refined variant* is added, so a mis-specified simple
+variant never stays in the model for a further effect to patch. Repeat until no candidate is
+accepted: a candidate that is significant after the correction is still added when the overall
+reduced chi2 is already inside its 99 % band (the band is a weak omnibus test; a localised effect
+is found by the targeted score first).
+
+*Multiplicity* (alpha spending, :func:`round_level`): round ``r`` (1, 2, ...) spends
+``alpha / 2^r``, split evenly (Bonferroni) over its hypotheses: every candidate scored in the
+round plus the variant upgrades each could be refined through (:attr:`Effect.variant_tests`).
+Each LR test of the round (a candidate's, a variant's) is made at ``alpha / (2^r M_r)``; the
+reported adjusted p-value is ``p 2^r M_r``, compared with ``alpha``. Over the whole search, with
+no effect present, the chance of any false addition is at most ``sum_r alpha / 2^r < alpha``,
+however many rounds run. Without hold-out cases an addition rests on the LR test and BIC only
+(a warning says so).
 
 The verdict (:func:`verdict`) compares the final reduced chi2 with its 99 % band: *adequate*
 (nothing added, within or below the band), *explained* (effects added, back within or below the
@@ -44,7 +59,34 @@ from blackbox.identification import Observations
 from blackbox.joints import ComplexJoint, JointModel
 from solver_adapters.protocol import DofLabel
 
-__all__ = ["Step", "Diagnosis", "VERDICTS", "verdict", "refit_candidate", "diagnose"]
+__all__ = ["Step", "Diagnosis", "VariantTrial", "VERDICTS", "verdict", "refit_candidate", "refine",
+           "round_level", "diagnose"]
+
+
+REFINE_TOP = 3              # accepted candidates refined per round, best delta BIC first: a richer
+                            # variant can overtake the runner-ups (an EI-only member against an
+                            # undeclared joint at its end); refining all six refits costs 2x the round
+
+
+def round_level(alpha: float, round_no: int, n_hypotheses: int) -> float:
+    """The LR-test level of one hypothesis in round ``round_no`` (1-based) of ``n_hypotheses``:
+    ``alpha / (2^round_no n_hypotheses)`` (module docstring, alpha spending)."""
+    return alpha / (2.0 ** round_no * max(n_hypotheses, 1))
+
+
+@dataclass(frozen=True, eq=False)
+class VariantTrial:
+    """One richer variant refitted against the variant it extends."""
+    effect: Effect
+    from_variant: str
+    refit: Fit | None
+    lr: float | None
+    lr_p_value: float | None
+    lr_p_adjusted: float | None
+    delta_bic: float | None
+    holdout_delta_chi2: float | None
+    accepted: bool
+    reason: str
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,6 +100,8 @@ class Step:
     structure_before: dict
     structure_after: dict
     runs: int
+    level: float = float("nan")         # the LR-test level of one hypothesis in this round
+    hypotheses: int = 0                 # the round's hypotheses (candidates + variant upgrades)
 
 
 @dataclass(frozen=True, eq=False)
@@ -126,10 +170,101 @@ def refit_candidate(base: SplitBase, fit: Fit, e: Effect, om: ObsMap, hold: ObsM
     return best, e
 
 
+def _judge(fit: Fit, f2: Fit, multiplier: float, alpha: float, hold) -> tuple[float, float, float, float,
+                                                                               float | None, list[str]]:
+    """``(lr, lr_p, lr_p_adjusted, delta_bic, holdout_delta_chi2, reasons)`` of ``f2`` against
+    ``fit`` (``multiplier``: ``2^r M_r``, module docstring); no reason: accepted."""
+    dp = f2.n_params - fit.n_params
+    lr = max(fit.chi2 - f2.chi2, 0.0)
+    lr_p = float(stats.chi2.sf(lr, dp)) if dp > 0 else 1.0
+    lr_adj = min(1.0, multiplier * lr_p)
+    dbic = f2.bic - fit.bic
+    dh = (f2.holdout_chi2 - fit.holdout_chi2) if (hold is not None and fit.holdout_chi2 is not None
+                                                  and f2.holdout_chi2 is not None) else None
+    reasons = []
+    if not lr_adj < alpha:
+        reasons.append(f"not significant (LR p x {multiplier:.4g} = {lr_adj:.3g} >= {alpha:g})")
+    if not dbic < 0:
+        reasons.append(f"BIC does not improve ({dbic:+.4g})")
+    if dh is not None and not dh < 0:
+        reasons.append(f"hold-out prediction not better (chi2 {dh:+.4g})")
+    return lr, lr_p, lr_adj, dbic, dh, reasons
+
+
+def _refit_variant(base: SplitBase, fit: Fit, i: int, e: Effect, x_e: np.ndarray, om: ObsMap, hold,
+                   boundary, K_deck, o_dofs) -> tuple[Fit, Effect]:
+    """Refit ``fit`` with its effect ``i`` replaced by the variant ``e`` from its nested start
+    ``x_e`` (and, when some compliance starts at its bound 0, from it lifted off the bound); a
+    parameter that ends at its nested bound is dropped and the rest refitted."""
+    sl = fit.spec.effect_slices()[i]
+
+    def at(e_new, xe):
+        spec2 = fit.spec.replace_effect(i, e_new)
+        x2 = np.concatenate([fit.x[:sl.start], xe, fit.x[sl.stop:]])
+        return AugmentedModel(base, spec2, boundary, K_deck, o_dofs), x2
+
+    m2, x2 = at(e, np.asarray(x_e, float))
+    starts = [x2]
+    one = e.one_sided
+    if np.any(one & (x2[sl.start:sl.start + e.n_params] <= 0)):
+        xs = x2.copy()
+        xs[sl.start:sl.start + e.n_params] = np.where(one, np.maximum(x_e, 1e-3), x_e)
+        starts.append(xs)
+    best = None
+    for xs in starts:
+        try:
+            f = fit_model(m2, om, hold, xs)
+        except (np.linalg.LinAlgError, IdentificationError):
+            continue
+        if best is None or f.chi2 < best.chi2:
+            best = f
+    if best is None:
+        raise IdentificationError(f"refit of {e.label()} failed")
+    xe = best.x[sl.start:sl.start + e.n_params]
+    e2 = e.trimmed(xe)
+    if e2 is not None:
+        keep = np.array([n in e2.names for n in e.names])
+        m3, x3 = at(e2, xe[keep])
+        x3[:sl.start] = best.x[:sl.start]
+        x3[sl.start + e2.n_params:] = best.x[sl.start + e.n_params:]
+        best = fit_model(m3, om, hold, x3)
+        e = e2
+    return best, e
+
+
+def refine(base: SplitBase, fit: Fit, i: int, om: ObsMap, hold: ObsMap | None, boundary, K_deck, o_dofs,
+           alpha: float, multiplier: float) -> tuple[Fit, tuple[VariantTrial, ...]]:
+    """Climb effect ``i`` of ``fit`` up its richer variants (module docstring): refit each richer
+    variant from its nested point, keep the accepted one with the lowest BIC, repeat from it.
+    Returns the final fit and every variant tried."""
+    trials: list[VariantTrial] = []
+    while True:
+        e = fit.spec.effects[i]
+        sl = fit.spec.effect_slices()[i]
+        best = None
+        for r, xr in e.richer(fit.x[sl]):
+            try:
+                f2, r2 = _refit_variant(base, fit, i, r, xr, om, hold, boundary, K_deck, o_dofs)
+            except IdentificationError as exc:
+                trials.append(VariantTrial(r, e.variant, None, None, None, None, None, None, False,
+                                           f"refit failed: {exc}"))
+                continue
+            lr, lr_p, lr_adj, dbic, dh, reasons = _judge(fit, f2, multiplier, alpha, hold)
+            if f2.n_params <= fit.n_params:
+                reasons.append("no parameter added after dropping those at their bound")
+            trials.append(VariantTrial(r2, e.variant, f2, lr, lr_p, lr_adj, dbic, dh, not reasons,
+                                       "; ".join(reasons) or "accepted"))
+            if not reasons and (best is None or f2.bic < best.bic):
+                best = f2
+        if best is None:
+            return fit, tuple(trials)
+        fit = best
+
+
 def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray | None,
              joints: Sequence[JointModel], k_start: np.ndarray, obs_fit: Observations,
              obs_hold: Observations | None, candidates: Sequence[Effect], *, alpha: float = 0.01,
-             refit_top: int = 6, max_steps: int = 5, band_level: float = 0.99,
+             refit_top: int = 6, refine_top: int = REFINE_TOP, max_steps: int = 5, band_level: float = 0.99,
              declared_prediction: np.ndarray | None = None, xyz: dict | None = None,
              progress=None) -> Diagnosis:
     """The loop of the module docstring. ``k_start``: the declared joints' estimate (e.g. from
@@ -168,14 +303,15 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         if not pool:
             stop = "no candidate left"
             break
-        M = len(pool)
+        M = len(pool) + sum(e.variant_tests for e in pool)       # the round's hypotheses
+        mult = 2.0 ** (it + 1) * M
         raw = score_candidates(model, fit, om, pool, boundary, K_deck, o_dofs)
         n = fit.n_obs
         scored = []
         for e, S, df, step in raw:
             p = float(stats.chi2.sf(S, df)) if df else 1.0
             lp = log10_sf(S, df)
-            scored.append(CandidateScore(e, S, df, p, lp, min(1.0, M * p), step,
+            scored.append(CandidateScore(e, S, df, p, lp, min(1.0, mult * p), step,
                                          (-S + df * math.log(n)) if df else 0.0, "score approximation"))
         scored.sort(key=lambda c: (c.log10_p, -c.score))
         short = [c for c in scored[:refit_top] if c.df > 0]
@@ -189,22 +325,22 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
             except IdentificationError as exc:
                 refits.append(replace(c, reason=f"refit failed: {exc}"))
                 continue
-            dp = f2.n_params - fit.n_params
-            lr = max(fit.chi2 - f2.chi2, 0.0)
-            lr_p = float(stats.chi2.sf(lr, dp)) if dp > 0 else 1.0
-            lr_adj = min(1.0, M * lr_p)
-            dbic = f2.bic - fit.bic
-            dh = (f2.holdout_chi2 - fit.holdout_chi2) if (hold is not None and fit.holdout_chi2 is not None) else None
-            reasons = []
-            if not lr_adj < alpha:
-                reasons.append(f"not significant (LR p x {M} = {lr_adj:.3g} >= {alpha:g})")
-            if not dbic < 0:
-                reasons.append(f"BIC does not improve ({dbic:+.4g})")
-            if dh is not None and dh > max(dp, 1):
-                reasons.append(f"hold-out prediction worse (chi2 {dh:+.4g})")
+            lr, lr_p, lr_adj, dbic, dh, reasons = _judge(fit, f2, mult, alpha, hold)
             refits.append(replace(c, effect=e2, refit=f2, lr=lr, lr_p_value=lr_p, lr_p_adjusted=lr_adj,
                                   delta_bic=dbic, delta_bic_method="refit", holdout_delta_chi2=dh,
                                   accepted=not reasons, reason="; ".join(reasons) or "accepted"))
+        # the best accepted candidates at the variant their data support, before they compete
+        order = sorted((k for k, c in enumerate(refits) if c.accepted), key=lambda k: refits[k].delta_bic)
+        for k in order[:refine_top]:
+            c = refits[k]
+            f3, trials = refine(base, c.refit, len(c.refit.spec.effects) - 1, om, hold, boundary, K_deck,
+                                o_dofs, alpha, mult)
+            if f3 is not c.refit:
+                lr, lr_p, lr_adj, dbic, dh, reasons = _judge(fit, f3, mult, alpha, hold)
+                c = replace(c, effect=f3.spec.effects[-1], refit=f3, lr=lr, lr_p_value=lr_p, lr_p_adjusted=lr_adj,
+                            delta_bic=dbic, holdout_delta_chi2=dh, accepted=not reasons,
+                            reason="; ".join(reasons) or "accepted")
+            refits[k] = replace(c, variants=trials)
         ok = [c for c in refits if c.accepted]
         best = min(ok, key=lambda c: c.delta_bic) if ok else None
         if best is not None:
@@ -215,17 +351,22 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         ranked = [by_key.get(c.effect.key, c) for c in scored]
         sb = residual_structure(obs_fit, fit.residuals, xyz)
         if best is None:
-            steps.append(Step(fit, tuple(ranked), None, fit, sb, sb, len(base.log) - runs0))
-            stop = "no candidate is significant after the Bonferroni correction and improves BIC"
+            steps.append(Step(fit, tuple(ranked), None, fit, sb, sb, len(base.log) - runs0,
+                              round_level(alpha, it + 1, M), M))
+            stop = ("no candidate is significant at the round's level (alpha spending, Bonferroni within "
+                    "the round), improves BIC and improves the hold-out prediction")
             break
         new = best.refit
         steps.append(Step(fit, tuple(ranked), best, new, sb, residual_structure(obs_fit, new.residuals, xyz),
-                          len(base.log) - runs0))
+                          len(base.log) - runs0, round_level(alpha, it + 1, M), M))
         if progress is not None:
             progress(steps[-1])
         fit = new
         model = AugmentedModel(base, fit.spec, boundary, K_deck, o_dofs)
     lo, hi = chi2_band(fit.n_obs - fit.n_params, band_level)
+    if hold is None:
+        warnings.append("no hold-out cases: effects were added on the LR test and BIC alone, "
+                        "without a check of their prediction")
     if fit.reduced_chi2 > hi:
         warnings.append(f"the final reduced chi2 {fit.reduced_chi2:.4g} is above the {band_level:.0%} "
                         f"band [{lo:.4g}, {hi:.4g}] of the declared noise: the misfit is unexplained")

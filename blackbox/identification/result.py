@@ -1,7 +1,7 @@
 """What an identification returns: :class:`IdentificationResult` (the estimate, its
 uncertainty, the fit statistics of :class:`blackbox.fitting.statistics.FitStatistics`, the
 hold-out prediction of :class:`~blackbox.fitting.statistics.HoldoutStats`) and the iteration
-history of :class:`IterationRecord`. Reports are written elsewhere (``blackbox.report``)."""
+history of :class:`IterationRecord`. Reports are written elsewhere (``blackbox.reports.identify``)."""
 
 from __future__ import annotations
 

@@ -7,8 +7,8 @@ import math
 from pathlib import Path
 import numpy as np
 
-from blackbox import compare as cmp
-from blackbox.compare import Stage
+from blackbox import comparison as cmp
+from blackbox.comparison import Stage
 from blackbox.joints import SimpleJoint, simple_to_complex_params
 from blackbox.reports.plots import pyplot
 

@@ -12,7 +12,7 @@ import numpy as np
 from blackbox.diagnosis.search import Diagnosis
 from blackbox.reports.plots import pyplot
 from blackbox.study import Study
-from solver_adapters.deck import Deck
+from solver_adapters.protocol import Deck
 
 __all__ = ["diagnosis_report", "diagnosis_plots"]
 
@@ -27,8 +27,10 @@ def diagnosis_report(study: Study, doc: dict, files: list[str]) -> str:
     out = [f"# Diagnosis of {study.name}", "",
            "Declared model fitted, standardized residuals tested against the declared noise, candidate "
            "effects scored against the residual (score test), the best few refitted (likelihood ratio, "
-           f"BIC); an effect is added when its LR p-value x the number of candidates scored is below "
-           f"{doc['settings']['alpha']:g}, BIC improves and hold-out prediction does not get worse.", "",
+           f"BIC); an effect is added when its LR p-value x 2^round x the round's hypotheses is below "
+           f"{doc['settings']['alpha']:g} (alpha spending), BIC improves and hold-out prediction improves; "
+           "an accepted effect is first refined through its richer variants (per-axis, per-branch "
+           "springs; a member's EA, EI1, EI2, GJ), each kept only on the same three conditions.", "",
            "## Before and after", "",
            "| | reduced chi2 | 99% band | RMS residual | hold-out RMS | BIC | parameters |",
            "|---|---|---|---|---|---|---|"]
@@ -56,14 +58,21 @@ def diagnosis_report(study: Study, doc: dict, files: list[str]) -> str:
     out += ["## Effects added", ""]
     if not doc["added"]:
         out.append("None: the residuals are explained by the declared model and noise." if verdict != "unexplained"
-                   else "None: no candidate effect is significant after the Bonferroni correction and improves BIC.")
+                   else "None: no candidate effect is significant at its round's level, improves BIC and "
+                        "improves the hold-out prediction.")
     for i, e in enumerate(doc["added"], 1):
-        extra = "".join(f", {k} {e[k]}" for k in ("component", "group") if k in e)
+        extra = "".join(f", {k} {e[k]}" for k in ("component", "group", "variant") if k in e)
         out += [f"### {i}. {e['effect']} at {', '.join(map(str, e['where']))}{extra}", "",
                 f"delta BIC {_g(e['delta_bic'])}, LR p-value {_g(e['lr_p_value'], 3)}", "",
                 "| parameter | value | std |", "|---|---|---|"]
         out += [f"| {p['name']} | {_g(p['value'])} | {_g(p['std'], 3)} |" for p in e["parameters"]]
         out.append("")
+        if e.get("variants_tried"):
+            out += ["Richer variants tried:", "", "| variant | from | reduced chi2 | delta BIC | hold-out delta chi2 | "
+                    "decision |", "|---|---|---|---|---|---|"]
+            out += [f"| {t['variant']} | {t['from_variant']} | {_g(t['reduced_chi2'])} | {_g(t['delta_bic'])} | "
+                    f"{_g(t['holdout_delta_chi2'])} | {t['decision']} |" for t in e["variants_tried"]]
+            out.append("")
     out += ["## Steps", "", "| step | added | reduced chi2 before -> after | hold-out RMS before -> after | "
             "BIC before -> after | runs |", "|---|---|---|---|---|---|"]
     for s in doc["steps"]:
@@ -171,8 +180,9 @@ def diagnosis_plots(diag: Diagnosis, deck: Deck, out_dir: Path) -> list[str]:
         val = [min(-c.log10_p, 300.0) for c in sc]
         ax.barh(y, val, color=[cmap(kinds.index(c.effect.kind)) for c in sc])
         ax.set_yticks(y, [f"{c.effect.kind} @ {', '.join(map(str, c.effect.where))[:24]}" for c in sc], fontsize=7)
-        thr = -math.log10(diag.alpha / max(len(steps[0].scores), 1))
-        ax.axvline(thr, color="k", ls="--", lw=1, label=f"Bonferroni threshold ({len(steps[0].scores)} candidates)")
+        n_hyp = len(steps[0].scores) + sum(c.effect.variant_tests for c in steps[0].scores)
+        thr = -math.log10(diag.alpha / (2.0 * max(n_hyp, 1)))
+        ax.axvline(thr, color="k", ls="--", lw=1, label=f"round-1 level ({n_hyp} hypotheses, alpha / 2)")
         for yi, c in zip(y, sc):
             if c.refit is not None:
                 ax.text(min(-c.log10_p, 300.0), yi, f" dBIC {c.delta_bic:.3g}", va="center", fontsize=6)

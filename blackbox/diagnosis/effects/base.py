@@ -19,6 +19,11 @@ at grid 1, member 88...). Everything that differs between families lives on the 
 * **scoring and refits** -- :meth:`Effect.scored_columns`, :meth:`Effect.batch_columns`
   (a whole family scored without augmenting the model: members by reciprocity),
   :meth:`Effect.refit_starts`, :meth:`Effect.refit_columns`, :meth:`Effect.trimmed`.
+* **variants** -- :attr:`Effect.variant` names the parameterisation of a family that offers
+  several at one place (nested: each richer variant equals the simpler one at a known point);
+  candidates are listed at their simplest variant and :meth:`Effect.richer` gives the richer
+  ones with their nested starts, which the search refits and keeps only when the data support
+  them (:func:`blackbox.diagnosis.search.refine`).
 * **reports** -- :meth:`Effect.where_json`, :meth:`Effect.label`, :meth:`Effect.parameters`,
   :meth:`Effect.marker_points`, :attr:`Effect.summary`.
 """
@@ -39,7 +44,7 @@ if TYPE_CHECKING:
     from blackbox.diagnosis.model import AugmentedModel, ModelSpec, ObsMap, State
     from blackbox.identification import Observations
     from blackbox.joints import JointModel
-    from solver_adapters.deck import Deck
+    from solver_adapters.protocol import Deck
 
 __all__ = ["CandidateContext", "Effect", "finite_or_none"]
 
@@ -75,6 +80,7 @@ class Effect:
 
     where: tuple
     names: tuple[str, ...] = ()
+    variant: str = ""           # the parameterisation ("" for a family with only one)
 
     # ---- listing ------------------------------------------------------------------------------
     @classmethod
@@ -185,16 +191,30 @@ class Effect:
         ``None`` when every parameter stays."""
         return None
 
+    @property
+    def variant_tests(self) -> int:
+        """How many variant-against-variant LR tests refining this candidate can make (counted
+        in the search's multiplicity control)."""
+        return 0
+
+    def richer(self, x_effect: np.ndarray) -> list[tuple["Effect", np.ndarray]]:
+        """The richer variants of this effect at the same place, each with its parameters at the
+        nested point (where it predicts exactly what this effect predicts at ``x_effect``);
+        empty for the richest variant or a family with one parameterisation."""
+        return []
+
     # ---- reports ----------------------------------------------------------------------------------
     def where_json(self) -> list:
         return [w if isinstance(w, str) else int(w) for w in self.where]
 
     def details_json(self) -> dict:
-        """Keys beside ``where`` that locate the effect further (a sensor's component)."""
-        return {}
+        """Keys beside ``where`` that locate the effect further (a sensor's component) or name
+        its parameterisation (``variant``)."""
+        return {"variant": self.variant} if self.variant else {}
 
     def label(self) -> str:
-        return f"{self.kind} @ {', '.join(map(str, self.where))}"
+        v = f" ({self.variant})" if self.variant else ""
+        return f"{self.kind} @ {', '.join(map(str, self.where))}{v}"
 
     def parameters(self, fit: "Fit") -> list[dict]:
         """``[{name, value, std, ...}]`` of this effect in ``fit`` (it must be part of it)."""

@@ -6,6 +6,15 @@ is rigid: the declared state, exactly and well conditioned). ``D_i`` is :attr:`C
 form of :class:`blackbox.diagnosis.model.AugmentedModel` takes it; the parameters are one-sided
 (``theta >= 0``), bounded by ``THETA_MAX`` (a free cut is a mechanism), and a parameter that a
 refit leaves at 0 is dropped (that part of the connection stays rigid).
+
+*Variants.* A connection carries a ladder of nested parameterisations of the same cut
+(:class:`Rung`: simplest first), each with the matrix that maps the previous rung's parameters to
+its own nested point; a candidate starts at the first rung and :meth:`Connection.richer` offers the
+higher ones. The helpers build the usual ladders: :func:`branch_ladder` for springs between the
+branches of a joint per axis ("equal": one factor on the members' own stiffness along every axis;
+"per-axis": one per axis; "per-branch": per axis, one spring from each branch to the joint's
+centre) and :func:`grounded_ladder` for grounded springs ("equal": one factor for the
+translations and one for the rotations; "per-axis": one per component).
 """
 
 from __future__ import annotations
@@ -19,9 +28,10 @@ from blackbox.diagnosis.effects.base import Effect, finite_or_none
 
 if TYPE_CHECKING:
     from blackbox.diagnosis.fit import Fit
-    from solver_adapters.deck import Deck
+    from solver_adapters.protocol import Deck
 
-__all__ = ["Connection", "THETA_MAX", "AT_BOUND", "complete_graph_basis"]
+__all__ = ["Connection", "Rung", "THETA_MAX", "AT_BOUND", "complete_graph_basis", "branch_ladder",
+           "grounded_ladder"]
 
 THETA_MAX = 1e4             # a compliance parameter: connection >= 1e-4 K0 (a free cut is a mechanism)
 AT_BOUND = 1e-7             # theta below this after a refit: the connection is rigid (parameter dropped)
@@ -41,13 +51,117 @@ def complete_graph_basis(n: int, k_ref: np.ndarray) -> np.ndarray:
     return out
 
 
+def star_basis(n: int, k_ref: np.ndarray) -> np.ndarray:
+    """Compliance per unit parameter of one spring per axis from each of ``n`` branches to a
+    common centre (coordinates and ordering as :func:`complete_graph_basis`): branch 1's spring
+    moves every relative coordinate of its axis alike (``1 1^T``), branch ``i >= 2``'s only its
+    own (``e_i e_i^T``); ``3 n`` parameters, axis-major. Equal compliances ``c`` on one axis give
+    ``c (I + 1 1^T)``: the complete graph of equal springs ``1 / (n c)`` (the star-mesh identity),
+    so this variant nests :func:`complete_graph_basis` at ``c = theta / n``."""
+    m = n - 1
+    out = np.zeros((3 * n, 3 * m, 3 * m))
+    for p in range(3):
+        blk = slice(p * m, (p + 1) * m)
+        out[p * n, blk, blk] = np.ones((m, m)) / k_ref[p]
+        for i in range(1, n):
+            out[p * n + i, p * m + i - 1, p * m + i - 1] = 1.0 / k_ref[p]
+    return out
+
+
+@dataclass(frozen=True)
+class Rung:
+    """One parameterisation of a cut: its ``variant`` name, parameter ``names``, compliance
+    ``basis`` ``(p, m, m)``, ``k_ref`` (p) and ``embed`` ``(p, p_prev)``: the previous rung's
+    parameters -> this rung's nested point (``None`` for the first rung)."""
+    variant: str
+    names: tuple[str, ...]
+    basis: np.ndarray
+    k_ref: np.ndarray
+    embed: np.ndarray | None = None
+
+
+def branch_ladder(n: int, k_ref: np.ndarray, axis_names: tuple[str, str, str], equal_name: str,
+                  branch_tags: tuple[str, ...]) -> tuple[Rung, ...]:
+    """The ladder of springs between ``n`` branches along three axes: "equal" (one parameter,
+    stiffness ``k_ref_p / theta`` along every axis ``p``; reported at the geometric mean of
+    ``k_ref``), "per-axis" (``theta_p``: equal springs between every pair of branches along axis
+    ``p``, :func:`complete_graph_basis`), "per-branch" (with ``n >= 3``: per axis, one spring from
+    each branch to the centre, :func:`star_basis`; names ``<axis name>_<branch tag>``)."""
+    k_ref = np.asarray(k_ref, float)
+    per_axis = complete_graph_basis(n, k_ref)
+    rungs = [Rung("equal", (equal_name,), per_axis.sum(axis=0)[None],
+                  np.array([float(np.exp(np.mean(np.log(k_ref))))])),
+             Rung("per-axis", tuple(axis_names), per_axis, k_ref, np.ones((3, 1)))]
+    if n >= 3:
+        embed = np.zeros((3 * n, 3))
+        for p in range(3):
+            embed[p * n:(p + 1) * n, p] = 1.0 / n
+        rungs.append(Rung("per-branch", tuple(f"{a}_{t}" for a in axis_names for t in branch_tags),
+                          star_basis(n, k_ref), np.repeat(k_ref, n), embed))
+    return tuple(rungs)
+
+
+def grounded_ladder(comps: str, k_ref: np.ndarray, name: str) -> tuple[Rung, ...]:
+    """The ladder of grounded springs on the components ``comps`` (one cut pair each, in that
+    order): "equal" (one factor on the translations' ``k_ref`` and one on the rotations', names
+    ``<name>_T``, ``<name>_R``; reported at each group's geometric mean) and "per-axis" (one per
+    component, ``<name>_<c>``); only "per-axis" when no group has two components."""
+    k_ref = np.asarray(k_ref, float)
+    m = len(comps)
+    per = np.zeros((m, m, m))
+    for q in range(m):
+        per[q, q, q] = 1.0 / k_ref[q]
+    per_axis = Rung("per-axis", tuple(f"{name}_{c}" for c in comps), per, k_ref)
+    groups = [(tag, [q for q, c in enumerate(comps) if c in cs]) for tag, cs in (("T", "123"), ("R", "456"))]
+    groups = [(tag, qs) for tag, qs in groups if qs]
+    if len(groups) == m:
+        return (per_axis,)
+    basis = np.stack([per[qs].sum(axis=0) for _, qs in groups])
+    kg = np.array([float(np.exp(np.mean(np.log(k_ref[qs])))) for _, qs in groups])
+    embed = np.zeros((m, len(groups)))
+    for j, (_, qs) in enumerate(groups):
+        embed[qs, j] = 1.0
+    return (Rung("equal", tuple(f"{name}_{tag}" for tag, _ in groups), basis, kg),
+            Rung(per_axis.variant, per_axis.names, per, k_ref, embed))
+
+
 @dataclass(frozen=True, eq=False)
 class Connection(Effect):
     """A released cut: ``pairs`` (indices into the split run's pairs), ``basis`` ``(p, m, m)``,
-    ``k_ref`` (p) the stiffness that parameter value 1 stands for."""
+    ``k_ref`` (p) the stiffness that parameter value 1 stands for; ``ladder`` the variants of the
+    cut (module docstring), the current one named by ``variant``."""
     pairs: tuple[int, ...] = ()
     basis: np.ndarray | None = None
     k_ref: np.ndarray | None = None
+    ladder: tuple[Rung, ...] = ()
+
+    @classmethod
+    def on_ladder(cls, where: tuple, pairs, ladder: tuple[Rung, ...], level: int = 0, **kw) -> "Connection":
+        """The candidate at rung ``level`` of ``ladder``."""
+        r = ladder[level]
+        return cls(tuple(where), r.names, r.variant, pairs=tuple(pairs), basis=r.basis, k_ref=r.k_ref,
+                   ladder=tuple(ladder), **kw)
+
+    @property
+    def variant_tests(self) -> int:
+        """Every pair of rungs at or above the current one (each may be refitted against another)."""
+        n = len(self.ladder) - [r.variant for r in self.ladder].index(self.variant) if self.ladder else 1
+        return n * (n - 1) // 2
+
+    def richer(self, x_effect: np.ndarray) -> list[tuple["Connection", np.ndarray]]:
+        """Every higher rung with its nested start: the current parameters by name (a dropped
+        one at 0, rigid) carried up through the rungs' ``embed`` maps."""
+        levels = [r.variant for r in self.ladder]
+        if self.variant not in levels:
+            return []
+        j = levels.index(self.variant)
+        val = dict(zip(self.names, np.asarray(x_effect, float)))
+        x = np.array([val.get(n, 0.0) for n in self.ladder[j].names])
+        out = []
+        for r in self.ladder[j + 1:]:
+            x = r.embed @ x
+            out.append((replace(self, names=r.names, variant=r.variant, basis=r.basis, k_ref=r.k_ref), x.copy()))
+        return out
 
     @property
     def nominal(self) -> np.ndarray:

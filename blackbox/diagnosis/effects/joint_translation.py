@@ -2,8 +2,11 @@
 
 Cut: the RBE2 (CM=123) that ties the joint's branch grids to its first grid is removed for those
 branches, and each translation is bridged by a spring ``K0`` (the smaller of the two branches'
-own stiffness there). Released: equal springs between every pair of branches along each global
-axis (three parameters ``ktx_J, kty_J, ktz_J``). A joint whose tie is not one RBE2 CM=123 on its
+own stiffness there). Released, as the data support (:func:`~blackbox.diagnosis.effects.connection.branch_ladder`):
+"equal" (``kt_J``: one factor on that stiffness along every global axis), "per-axis" (``ktx_J,
+kty_J, ktz_J``: equal springs between every pair of branches along each axis) or "per-branch"
+(``ktx_J_G`` ...: per axis, a spring from each branch grid ``G`` to the joint's centre; three
+or more branches). A joint whose tie is not one RBE2 CM=123 on its
 first grid has no candidate.
 """
 
@@ -13,7 +16,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from blackbox.diagnosis.effects.connection import Connection, complete_graph_basis
+from blackbox.diagnosis.effects.connection import Connection, branch_ladder
 from blackbox.diagnosis.effects.registry import register
 from blackbox.errors import DiagnosisError
 
@@ -56,7 +59,8 @@ class JointTranslation(Connection):
                     idx.append(editor.connect(k0, (gi, c), (g1, c)))
                     ks.append(k0)
                 k_ref.append(float(np.mean(ks)))
-            k_ref = np.array(k_ref)
-            out.append(cls((jc.name,), (f"ktx_{jc.name}", f"kty_{jc.name}", f"ktz_{jc.name}"),
-                           pairs=tuple(idx), basis=complete_graph_basis(len(jc.grids), k_ref), k_ref=k_ref))
+            ladder = branch_ladder(len(jc.grids), np.array(k_ref),
+                                   (f"ktx_{jc.name}", f"kty_{jc.name}", f"ktz_{jc.name}"), f"kt_{jc.name}",
+                                   tuple(str(g) for g in jc.grids))
+            out.append(cls.on_ladder((jc.name,), idx, ladder))
         return out

@@ -6,6 +6,10 @@ flexibility at the member's DOFs under the unit loads at ``B`` and ``O`` (recipr
 split run reports (:meth:`MemberStiffness.batch_columns`: every member scored without a run); its
 refit needs the member's own columns, one batched run for every short-listed member of a round.
 Candidates: every member.
+
+Variants: "whole" (``alpha_E``: one factor on ``K_e``) and, when ``K_e`` splits cleanly,
+"sections" (``EA_E, EI1_E, EI2_E, GJ_E``: one factor on each of its axial, plane-1 bending,
+plane-2 bending and torsion parts; :func:`section_parts`), nested at all four equal to alpha.
 """
 
 from __future__ import annotations
@@ -18,7 +22,73 @@ from blackbox.diagnosis.effects.base import Effect
 from blackbox.diagnosis.effects.registry import register
 from solver_adapters.protocol import DofLabel
 
-__all__ = ["MemberStiffness"]
+__all__ = ["MemberStiffness", "section_parts", "SECTIONS", "SPLIT_RTOL"]
+
+SECTIONS = ("EA", "EI1", "EI2", "GJ")
+# the element's tip DOFs (u_x u_y u_z th_x th_y th_z, element axes) of each part: plane 1 is the
+# element x-y plane (y along the orientation vector, I1), plane 2 the x-z plane (I2)
+_GROUPS = ((0,), (1, 5), (2, 4), (3,))
+SPLIT_RTOL = 1e-6           # a coupling between parts above this (diagonal-scaled) in the element
+                            # axes: K_e is not a plain beam there (offsets, pins, I12): no split
+
+
+def _unskew(S: np.ndarray) -> np.ndarray:
+    return np.array([S[2, 1], S[0, 2], S[1, 0]])
+
+
+def section_parts(K_e: np.ndarray, v: np.ndarray) -> np.ndarray | None:
+    """``(4, 12, 12)``: ``K_e`` (global axes, DOFs ``a1..a6, b1..b6``) split into its axial,
+    plane-1 bending, plane-2 bending and torsion parts, which sum to ``K_e``; ``None`` when it does
+    not split (coupling above ``SPLIT_RTOL``).
+
+    ``K_e = T^T K_bb T`` with ``T = [-Gamma, I]`` the rigid-body map (how
+    :func:`blackbox.diagnosis.runs.element_stiffness` builds it), so the member's vector ``r`` is
+    read from ``K_e`` itself (``Gamma = -K_bb^-1 K_ba``, its upper right block ``-[r x]``). In the
+    element axes (x along ``r``, y along the part of the orientation vector ``v`` normal to x) the
+    cantilever stiffness ``K_bb`` of a beam is block diagonal over the four parts (Euler-Bernoulli
+    or Timoshenko alike); each part is that block mapped back by ``T``."""
+    K_bb, K_ba = K_e[6:, 6:], K_e[6:, :6]
+    gamma = -np.linalg.solve(K_bb, K_ba)
+    r = _unskew(-gamma[:3, 3:])
+    L = float(np.linalg.norm(r))
+    v = np.asarray(v, float)
+    if L == 0.0 or not np.all(np.isfinite(v)):
+        return None
+    ex = r / L
+    y = v - (v @ ex) * ex
+    if np.linalg.norm(y) <= 1e-9 * np.linalg.norm(v):
+        return None
+    ey = y / np.linalg.norm(y)
+    R = np.vstack([ex, ey, np.cross(ex, ey)])
+    Rb = np.zeros((6, 6))
+    Rb[:3, :3] = Rb[3:, 3:] = R
+    K_loc = Rb @ K_bb @ Rb.T
+    d = np.sqrt(np.abs(np.diag(K_loc)))
+    scaled = K_loc / np.outer(d, d)
+    T = np.hstack([-gamma, np.eye(6)])
+    parts, covered = [], np.zeros((6, 6), bool)
+    for grp in _GROUPS:
+        mask = np.zeros((6, 6), bool)
+        mask[np.ix_(grp, grp)] = True
+        covered |= mask
+        Kg = Rb.T @ np.where(mask, K_loc, 0.0) @ Rb
+        parts.append(T.T @ Kg @ T)
+    if np.max(np.abs(scaled[~covered])) > SPLIT_RTOL:
+        return None
+    parts = np.array(parts)
+    if np.max(np.abs(parts.sum(axis=0) - K_e)) > 1e-8 * np.max(np.abs(K_e)):
+        return None
+    return 0.5 * (parts + parts.transpose(0, 2, 1))
+
+
+def orientation(deck, eid: int) -> np.ndarray | None:
+    """The orientation vector of CBAR ``eid`` (basic system): ``X1 X2 X3`` or ``G0 - GA``."""
+    b = deck.cbars[eid]
+    if b.x is not None:
+        return np.asarray(b.x, float)
+    if b.g0 is not None and b.g0 in deck.grids:
+        return np.subtract(deck.grids[b.g0].xyz, deck.grids[b.ga].xyz)
+    return None
 
 
 @register
@@ -30,6 +100,7 @@ class MemberStiffness(Effect):
 
     dofs: tuple[DofLabel, ...] = ()
     K_e: np.ndarray | None = None
+    parts: np.ndarray | None = None         # (4, 12, 12) section parts, None: "whole" only
 
     @property
     def eid(self) -> int:
@@ -37,8 +108,25 @@ class MemberStiffness(Effect):
 
     @classmethod
     def candidates(cls, ctx, split) -> list["MemberStiffness"]:
-        return [cls((eid,), (f"alpha_{eid}",), dofs=split.member_dofs[eid], K_e=ctx.K_e[eid])
-                for eid in sorted(ctx.K_e)]
+        out = []
+        for eid in sorted(ctx.K_e):
+            v = orientation(ctx.deck, eid) if eid in ctx.deck.cbars else None
+            parts = section_parts(ctx.K_e[eid], v) if v is not None else None
+            out.append(cls((eid,), (f"alpha_{eid}",), "whole" if parts is not None else "",
+                           dofs=split.member_dofs[eid], K_e=ctx.K_e[eid], parts=parts))
+        return out
+
+    @property
+    def variant_tests(self) -> int:
+        return 1 if self.variant == "whole" and self.parts is not None else 0
+
+    def richer(self, x_effect):
+        """"whole" -> "sections", all four factors at the whole factor."""
+        if self.variant != "whole" or self.parts is None:
+            return []
+        return [(MemberStiffness(self.where, tuple(f"{s}_{self.eid}" for s in SECTIONS), "sections",
+                                 dofs=self.dofs, K_e=self.K_e, parts=self.parts),
+                 np.full(4, float(np.asarray(x_effect)[0])))]
 
     @property
     def bounds(self):
@@ -49,6 +137,8 @@ class MemberStiffness(Effect):
         return self.dofs
 
     def stiffness_terms(self):
+        if self.variant == "sections":
+            return [(q, self.parts[q]) for q in range(4)]
         return [(0, self.K_e)]
 
     def refit_columns(self) -> tuple[DofLabel, ...]:
@@ -63,6 +153,8 @@ class MemberStiffness(Effect):
         IDK = np.eye(m) - st.D * model.K0[None, :]
         cond = model.cond
         out = np.zeros((len(om.y), len(effects)))
+        if any(e.variant == "sections" for e in effects):
+            return None
         for q, e in enumerate(effects):
             E = list(e.dofs)
             G_ES = cond.G(E, model.S) if nS else np.zeros((len(E), 0))

@@ -2,7 +2,9 @@
 
 Cut: the grid's SPC components (SPC1 sets and GRID PS) are removed and each is replaced by a
 grounded spring ``K0`` (the sum of the members' own stiffness at the grid in that component).
-Released: one spring per constrained component (parameters ``ks_G_C``). Grids in an RBE2 or with
+Released, as the data support (:func:`~blackbox.diagnosis.effects.connection.grounded_ladder`):
+"equal" (``ks_G_T``, ``ks_G_R``: one factor on that stiffness for the translations and one for
+the rotations) or "per-axis" (``ks_G_C``: one spring per constrained component). Grids in an RBE2 or with
 no member have no candidate.
 """
 
@@ -13,9 +15,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from blackbox.diagnosis.decks import constrained_grids, rbe2_grids
-from blackbox.diagnosis.effects.connection import GridConnection
+from blackbox.diagnosis.effects.connection import GridConnection, grounded_ladder
 from blackbox.diagnosis.effects.registry import register
-from solver_adapters.deck import Spc1
+from solver_adapters.protocol import Spc1
 
 __all__ = ["SupportFlexibility"]
 
@@ -54,9 +56,5 @@ class SupportFlexibility(GridConnection):
                 k0 = sum(editor.kdiag(eid, g, int(c)) for eid in at[g])
                 idx.append(editor.connect(k0, (g, int(c))))
                 ks.append(k0)
-            k_ref = np.array(ks)
-            basis = np.zeros((len(ks), len(ks), len(ks)))
-            for q in range(len(ks)):
-                basis[q, q, q] = 1.0 / k_ref[q]
-            out.append(cls((g,), tuple(f"ks_{g}_{c}" for c in comps), pairs=tuple(idx), basis=basis, k_ref=k_ref))
+            out.append(cls.on_ladder((g,), idx, grounded_ladder(comps, np.array(ks), f"ks_{g}")))
         return out

@@ -3,8 +3,10 @@
 Cut: the grid is split into one grid per member (the first member keeps the original grid), the
 branches are tied in translation by an RBE2 (CM=123) as the study's joints are, and their
 rotations are bridged by springs ``K0`` (the smaller of the two members' own rotational stiffness
-at the grid). Released: equal springs between every pair of branches about each global axis
-(three parameters ``kx_G, ky_G, kz_G``; :func:`~blackbox.diagnosis.effects.connection.complete_graph_basis`).
+at the grid). Released, as the data support (:func:`~blackbox.diagnosis.effects.connection.branch_ladder`):
+"equal" (``k_G``: one factor on that stiffness about every global axis), "per-axis" (``kx_G, ky_G,
+kz_G``: equal springs between every pair of branches about each axis) or "per-branch" (``kx_G_eE``
+...: per axis, a spring from each member ``E``'s end to the joint's centre; three or more members).
 Candidates: grids of >= 2 members that are not a declared joint's, constrained, in an RBE2 or on a
 spring; beyond ``max_joint_candidates`` those nearest the declared fit's residual concentration.
 """
@@ -17,9 +19,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from blackbox.diagnosis.decks import constrained_grids, members_at, rbe2_grids
-from blackbox.diagnosis.effects.connection import GridConnection, complete_graph_basis
+from blackbox.diagnosis.effects.connection import GridConnection, branch_ladder
 from blackbox.diagnosis.effects.registry import register
-from solver_adapters.deck import Deck, Rbe2
+from solver_adapters.protocol import Deck, Rbe2
 
 __all__ = ["UndeclaredJoint", "joint_candidate_grids", "preselect"]
 
@@ -82,7 +84,7 @@ class UndeclaredJoint(GridConnection):
                     idx.append(editor.connect(k0, (branches[i], c), (g, c)))
                     ks.append(k0)
                 k_ref.append(float(np.mean(ks)))
-            k_ref = np.array(k_ref)
-            out.append(cls((g,), (f"kx_{g}", f"ky_{g}", f"kz_{g}"), pairs=tuple(idx),
-                           basis=complete_graph_basis(len(eids), k_ref), k_ref=k_ref))
+            ladder = branch_ladder(len(eids), np.array(k_ref), (f"kx_{g}", f"ky_{g}", f"kz_{g}"), f"k_{g}",
+                                   tuple(f"e{e}" for e in eids))
+            out.append(cls.on_ladder((g,), idx, ladder))
         return out
