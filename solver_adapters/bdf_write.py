@@ -16,7 +16,7 @@ from solver_adapters.deck import CBar, Deck, Grid, Mat1, PBar, Pelas, Prod, Rbe2
 __all__ = ["print_int", "print_float_8", "print_float_16", "print_float_free", "print_field",
            "format_card", "write_grid", "write_cbar", "write_pbar", "write_mat1", "write_spc1",
            "write_rbe2", "write_pelas", "write_celas1", "write_celas2", "write_spring", "write_spcadd",
-           "write_prod", "write_rod", "write_deck"]
+           "write_prod", "write_rod", "write_coord", "write_deck"]
 
 Field = int | float | str | None
 _FORMATS = ("small", "large", "free")
@@ -246,6 +246,16 @@ def write_celas2(s: Spring, fmt: str = "small", k: float | None = None) -> str:
 def write_spring(s: Spring, fmt: str = "small") -> str:
     """The spring as it was read: CELAS1 (``pid`` set) or CELAS2."""
     return write_celas1(s, fmt) if s.card == "CELAS1" else write_celas2(s, fmt)
+
+
+def write_coord(c, fmt: str = "small") -> str:
+    """A resolved coordinate system (``deck.Coord``) as CORD2R/CORD2C/CORD2S in the basic system
+    (RID blank): CID, RID, A (origin), B (a point on the z axis), C (a point in the x-z plane, on
+    the x axis). Any CORD1x/CORD2x the reader resolved is written this way."""
+    origin = [float(v) for v in c.origin]
+    z = [o + float(v) for o, v in zip(origin, c.axes[2])]
+    x = [o + float(v) for o, v in zip(origin, c.axes[0])]
+    return format_card(f"CORD2{c.kind}", [c.cid, None, *origin, *z, *x], fmt)
 
 
 def _pairs(items: list[Pelas]) -> Iterable[tuple[Pelas, Pelas | None]]:

@@ -28,6 +28,17 @@ The checks (names as in the report)
 ``with_springs``             ``with_springs`` agrees with the reference's ``with_springs``, the
                              springs change the answer, and the original adapter is unchanged
 ``stats_counters``           every run advances ``stats.runs``; ``right_hand_sides`` by the cases
+``probe_loads``              unit loads on all six components at seeded grids of the deck agree
+                             with the reference (said, not failed, when the reference cannot read
+                             the deck: cards it does not model)
+``field_formats``            the deck spelt in every field format and continuation style
+                             (:data:`FIELD_STYLES`: small, large with implicit and explicit
+                             ``+``/``*`` markers, a bare ``+`` then ``*``, ``+APEX``/``*APEX``,
+                             free, large free) agrees with the reference on the same text
+``grounded_springs``         a CELAS2 with G2 blank and a CELAS1 with G1 blank (springs to ground)
+``deck_edits``               the decks ``blackbox diagnose`` edits: the element deck (every member
+                             alone, clamped at end a) and a split deck (grids split into members
+                             tied by CELAS2, supports on CELAS2 to ground), in large field
 ``misbehaviour[S]``          (adapters with a misbehave switch) switch ``S`` raises a typed
                              :class:`SolverError` (:class:`SolverTimeoutError` for a hang, within
                              the timeout plus a grace), never returns a result, leaves no process
@@ -720,6 +731,268 @@ def check_misbehaviour(s: Suite, switch: str) -> str:
         shutil.rmtree(root, ignore_errors=True)
 
 
+# ---- what the commands send: every field format, grounded springs, the edited decks ----------
+FIELD_STYLES = ("small", "small_markers", "large", "large_markers", "large_plus_star", "large_apex",
+                "free", "free_large")
+"""The ways a deck may spell the same cards (``deck_text``): small field with implicit
+(blank field 1) and explicit (``+Cn`` in columns 73-80 and field 1) continuations; large field
+with implicit ``*`` continuations, explicit ``+Cn``/``*Cn`` markers, a bare ``+`` continued by a
+bare ``*``, and the one marker ``+APEX``/``*APEX`` for every card; free field (``,``
+continuations) and large free field (``GRID*,`` four fields a line, ``*,`` continuations)."""
+
+
+def _card_lines(text: str) -> list[list[str]]:
+    """The cards of a :func:`~solver_adapters.bdf_write.write_deck` text, each a list of lines."""
+    cards: list[list[str]] = []
+    for line in text.splitlines():
+        if not line.strip() or line.startswith("$") or line.strip() in ("BEGIN BULK", "ENDDATA"):
+            continue
+        if line[:1] in (" ", "*", "+", ","):
+            cards[-1].append(line)
+        else:
+            cards.append([line])
+    return cards
+
+
+def deck_text(model, style: str) -> str:
+    """The bulk data of ``model`` (a parsed :class:`~solver_adapters.deck.Deck`) written in
+    ``style`` (:data:`FIELD_STYLES`), ``BEGIN BULK`` to ``ENDDATA``."""
+    from solver_adapters.bdf_write import write_deck
+
+    if style not in FIELD_STYLES:
+        raise ValueError(f"style must be one of {FIELD_STYLES}, got {style!r}")
+    base = {"small": "small", "small_markers": "small", "free": "free"}.get(style, "large")
+    if style == "free_large":
+        base = "large"
+    cards = _card_lines(write_deck(model, base))
+    out = ["BEGIN BULK"]
+    tag = 0
+    for lines in cards:
+        if style in ("small", "large", "free"):
+            out += lines
+            continue
+        if style == "free_large":
+            rows = [ln.ljust(72) for ln in lines]
+            name = rows[0][:8].strip()
+            fields = [[r[8 + 16 * k: 24 + 16 * k].strip() for k in range(4)] for r in rows]
+            out += [(name if i == 0 else "*") + "," + ",".join(f) for i, f in enumerate(fields)]
+            continue
+        for i, line in enumerate(lines):
+            if i > 0:
+                marker = {"small_markers": f"+C{tag:X}", "large_markers": f"*C{tag:X}",
+                          "large_plus_star": "*", "large_apex": "*APEX"}[style]
+                line = marker.ljust(8) + line[8:]
+            if i < len(lines) - 1:
+                tag += 1
+                marker = {"small_markers": f"+C{tag:X}", "large_markers": f"+C{tag:X}",
+                          "large_plus_star": "+", "large_apex": "+APEX"}[style]
+                line = line.ljust(72) + marker
+            out.append(line.rstrip())
+    return "\n".join(out + ["ENDDATA"]) + "\n"
+
+
+def probe_loads(adapter: SolverAdapter, n_grids: int = 4, seed: int = SEED) -> LoadMatrix:
+    """Unit loads on all six components of ``n_grids`` seeded grids (6 n cases): every kind of
+    load at places spread over the model."""
+    grids = sorted({g for g, _ in adapter.dofs()})
+    picked = sorted(int(g) for g in np.random.default_rng(seed).permutation(grids)[:n_grids])
+    return LoadMatrix.unit([(g, c) for g in picked for c in range(1, 7)], prefix="probe")
+
+
+def _agree_on(s: Suite, deck: Path, what: str, loads: LoadMatrix | None = None) -> str:
+    """The adapter and the reference built on ``deck`` agree under ``loads`` (default: probe
+    loads) at every DOF, normwise per case to ``rtol`` (as ``reference_agreement``)."""
+    a = s.factory(deck)
+    ref = s.reference_factory(deck)
+    loads = loads if loads is not None else probe_loads(ref)
+    report = ref.dofs()
+    U = _solve(a, loads, report, what).values
+    R = ref.solve(loads, report).values
+    worst = _compare(U, R, s.rtol * _scale(R), f"{what} vs reference", report, loads.cases)
+    return f"{loads.n_cases} cases, worst {worst:.2g} of the tolerance"
+
+
+def _work_dir(s: Suite, name: str) -> Path:
+    return Path(tempfile.mkdtemp(prefix=f"conformance-{name}-"))
+
+
+def check_field_formats(s: Suite) -> str:
+    """The suite's deck spelt in every style of :data:`FIELD_STYLES`: each agrees with the
+    reference on the same text (our reader reads all of them alike, the adapter must too)."""
+    model = _read(s.deck)
+    tmp = _work_dir(s, "formats")
+    try:
+        details, failed = [], []
+        for style in FIELD_STYLES:
+            deck = tmp / style / "model.bdf"
+            deck.parent.mkdir()
+            deck.write_text(deck_text(model, style))
+            try:
+                details.append(f"{style}: {_agree_on(s, deck, style).split(', ')[1]}")
+            except CheckFailure as exc:
+                failed.append(f"{style}: {exc}")
+            except Exception as exc:  # noqa: BLE001 - the report names what the adapter raised
+                failed.append(f"{style}: raised {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}")
+        if failed:
+            raise _fail(f"{len(failed)} of {len(FIELD_STYLES)} styles disagree: " + "; ".join(failed))
+        return "; ".join(details)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _read(deck: Path):
+    from solver_adapters.bdf import read_deck
+    return read_deck(deck)
+
+
+def _member_stiffness(model, b) -> tuple[float, float]:
+    """A translational and a rotational stiffness of the order of CBAR ``b``'s own end stiffness
+    (12 E I / L^3, 4 E I / L with the larger I): springs of that size change the answer visibly
+    and keep the model as well conditioned as the structure."""
+    p = model.pbars[b.pid]
+    e = model.mat1s[p.mid].e
+    length = float(np.linalg.norm(np.subtract(model.grids[b.gb].xyz, model.grids[b.ga].xyz)))
+    i = max(p.i1, p.i2, 1e-30)
+    return 12 * e * i / length**3, 4 * e * i / length
+
+
+def check_grounded_springs(s: Suite) -> str:
+    """Springs to ground as a deck writes them: a CELAS2 with G2 C2 blank and a CELAS1 (PELAS)
+    with G1 C1 blank, at free DOFs, each about as stiff as the structure there."""
+    from solver_adapters.bdf_write import format_card, write_deck
+    import copy
+    model = copy.deepcopy(_read(s.deck))
+    ref = s.reference
+    cands = sample_dofs(ref, n=8, seed=SEED + 2)
+    F = np.diag(ref.solve(LoadMatrix.unit(cands), cands).values)
+    free = [(d, f) for d, f in zip(cands, F) if f > 0]
+    if len(free) < 2:
+        raise _fail(f"no free DOFs for grounded springs among {cands}")
+    eid = max([0, *model.cbars, *model.rbe2s, *model.springs, *model.rods]) + 1
+    pid = max([0, *model.pbars, *model.pelas, *model.prods]) + 1
+    (g1, c1), f1 = free[0]
+    (g2, c2), f2 = free[1]
+    text = write_deck(model, "free").replace("ENDDATA\n", "")
+    text += format_card("CELAS2", [eid, 1.0 / f1, g1, c1], "free")
+    text += format_card("PELAS", [pid, 1.0 / f2], "free")
+    text += format_card("CELAS1", [eid + 1, pid, None, None, g2, c2], "free") + "ENDDATA\n"
+    tmp = _work_dir(s, "grounded")
+    try:
+        deck = tmp / "grounded.bdf"
+        deck.write_text(text)
+        loads = probe_loads(ref).hstack(LoadMatrix.unit([(g1, c1), (g2, c2)], prefix="spring"))
+        return f"CELAS2 at {(g1, c1)}, CELAS1 at {(g2, c2)} to ground: " + _agree_on(s, deck, "grounded springs", loads)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def element_deck_of(model):
+    """Every CBAR alone between two grids of its own at its ends (same EID, PID, orientation;
+    G0 turned into a vector), end a clamped by one SPC1: the element deck ``blackbox diagnose``
+    runs to get each member's stiffness."""
+    from solver_adapters.deck import CBar, Deck, Grid, Spc1
+    d = Deck(pbars=dict(model.pbars), mat1s=dict(model.mat1s))
+    ends = []
+    for i, eid in enumerate(sorted(model.cbars)):
+        b = model.cbars[eid]
+        ga, gb = 2 * i + 1, 2 * i + 2
+        d.grids[ga] = Grid(ga, model.grids[b.ga].xyz)
+        d.grids[gb] = Grid(gb, model.grids[b.gb].xyz)
+        x = b.x if b.g0 is None else tuple(np.subtract(model.grids[b.g0].xyz, model.grids[b.ga].xyz).tolist())
+        d.cbars[eid] = CBar(eid, b.pid, ga, gb, x=tuple(float(v) for v in x), pa=b.pa, pb=b.pb, wa=b.wa, wb=b.wb)
+        ends.append(gb)
+    d.spc1s = [Spc1(1, "123456", tuple(2 * i + 1 for i in range(len(model.cbars))))]
+    return d, ends
+
+
+def split_deck_of(model):
+    """The kind of split deck ``blackbox diagnose`` runs: at every grid where several CBARs end,
+    each member but the first moved to a new grid at the same place and tied back by six CELAS2
+    (between the two grids), and every SPC1 support replaced by CELAS2 springs to ground (G2
+    blank), all about as stiff as the members there. Returns the deck and the spring DOFs."""
+    import copy
+    from dataclasses import replace as _replace
+    from solver_adapters.deck import Grid, Spring
+    d = copy.deepcopy(model)
+    for eid, b in d.cbars.items():    # G0 as a vector: a split G0 grid must not turn the bar
+        if b.g0 is not None:
+            v = np.subtract(d.grids[b.g0].xyz, d.grids[b.ga].xyz)
+            d.cbars[eid] = _replace(b, g0=None, x=tuple(float(t) for t in v))
+    next_grid = max(d.grids) + 1
+    next_eid = max([0, *d.cbars, *d.rbe2s, *d.springs, *d.rods]) + 1
+    at: dict[int, list[int]] = {}
+    for eid in sorted(d.cbars):
+        b = d.cbars[eid]
+        at.setdefault(b.ga, []).append(eid)
+        at.setdefault(b.gb, []).append(eid)
+    tied = {g for r in d.rbe2s.values() for g in (r.gn, *r.gm)} | {g for sp in d.springs.values() for g in (sp.g1, sp.g2)}
+    touched = []
+    for g, eids in sorted(at.items()):
+        if len(eids) < 2 or g in tied or d.grids[g].ps:
+            continue
+        for eid in eids[1:]:
+            b = d.cbars[eid]
+            new = next_grid
+            next_grid += 1
+            d.grids[new] = Grid(new, d.grids[g].xyz)
+            d.cbars[eid] = _replace(b, ga=new) if b.ga == g else _replace(b, gb=new)
+            kt, kr = _member_stiffness(model, model.cbars[eid])
+            for c in range(1, 7):
+                d.springs[next_eid] = Spring(next_eid, g, c, new, c, k=kt if c <= 3 else kr, card="CELAS2")
+                next_eid += 1
+            touched.append(g)
+    grounded = []
+    for spc in d.spc1s:
+        for g in spc.grids:
+            eid = at.get(g, [None])[0]
+            kt, kr = _member_stiffness(model, model.cbars[eid]) if eid is not None else (1e9, 1e9)
+            for c in spc.components:
+                d.springs[next_eid] = Spring(next_eid, g, int(c), 0, 0, k=kt if int(c) <= 3 else kr, card="CELAS2")
+                next_eid += 1
+                grounded.append((g, int(c)))
+    d.spc1s, d.spcadds = [], {}
+    return d, touched, grounded
+
+
+def check_deck_edits(s: Suite) -> str:
+    """The decks ``blackbox diagnose`` edits and runs (written in large field, as it does): the
+    element deck (every member alone, clamped at end a) and the split deck (grids split into
+    members tied by CELAS2, supports on CELAS2 to ground)."""
+    from solver_adapters.bdf_write import write_deck
+    model = _read(s.deck)
+    if not model.cbars:
+        return "no CBAR members: diagnose makes no edited decks for this deck"
+    tmp = _work_dir(s, "edits")
+    try:
+        out = []
+        edeck, ends = element_deck_of(model)
+        p = tmp / "elements.bdf"
+        p.write_text(write_deck(edeck, "large"))
+        some = ends[:: max(1, len(ends) // 6)][:6]
+        out.append("element deck: " + _agree_on(s, p, "element deck",
+                                                  LoadMatrix.unit([(g, c) for g in some for c in range(1, 7)])))
+        sdeck, touched, grounded = split_deck_of(model)
+        p = tmp / "split.bdf"
+        p.write_text(write_deck(sdeck, "large"))
+        out.append(f"split deck ({len(touched)} grids split, {len(grounded)} supports on springs to ground): "
+                   + _agree_on(s, p, "split deck"))
+        return "; ".join(out)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def check_probe_loads(s: Suite) -> str:
+    """Unit loads on all six components at seeded grids of the deck itself agree with the
+    reference; when the reference cannot read the deck (cards it does not model) there is
+    nothing to compare with, and the check says so."""
+    from solver_adapters.protocol import DeckFormatError
+    try:
+        s.reference
+    except DeckFormatError as exc:
+        return f"not compared: the reference solver cannot read the deck ({str(exc).splitlines()[0][:120]})"
+    return _agree_on(s, s.deck, "probe loads")
+
+
 CHECKS: tuple[tuple[str, Callable[[Suite], str]], ...] = (
     ("dof_labels", check_dof_labels),
     ("unknown_labels", check_unknown_labels),
@@ -729,6 +1002,10 @@ CHECKS: tuple[tuple[str, Callable[[Suite], str]], ...] = (
     ("determinism", check_determinism),
     ("with_springs", check_with_springs),
     ("stats_counters", check_stats_counters),
+    ("probe_loads", check_probe_loads),
+    ("field_formats", check_field_formats),
+    ("grounded_springs", check_grounded_springs),
+    ("deck_edits", check_deck_edits),
 )
 """The checks on the main deck, in the order :func:`run_conformance` runs them (the reference
 agreement and misbehaviour checks follow, one per deck and per switch)."""
@@ -878,6 +1155,18 @@ class AdapterConformance:
 
     def test_stats_counters(self, conformance_deck, tmp_path):
         self._run(check_stats_counters, conformance_deck, tmp_path)
+
+    def test_probe_loads(self, conformance_deck, tmp_path):
+        self._run(check_probe_loads, conformance_deck, tmp_path)
+
+    def test_field_formats(self, conformance_deck, tmp_path):
+        self._run(check_field_formats, conformance_deck, tmp_path)
+
+    def test_grounded_springs(self, conformance_deck, tmp_path):
+        self._run(check_grounded_springs, conformance_deck, tmp_path)
+
+    def test_deck_edits(self, conformance_deck, tmp_path):
+        self._run(check_deck_edits, conformance_deck, tmp_path)
 
     def test_misbehaviour(self, misbehave_switch, tmp_path):
         deck = self.misbehaviour_deck if self.misbehaviour_deck in fixture_decks() else "generated"

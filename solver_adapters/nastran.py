@@ -3,17 +3,24 @@
 Facts this module relies on were measured and are written down in ``docs/mystran.md``;
 the ones that shaped a decision are cited where they matter:
 
-* **Bulk data copied, not INCLUDEd.** MYSTRAN 18 does expand a bulk-data ``INCLUDE 'abs/path'``,
-  but it does not follow an INCLUDE inside an included file (seen: "NGRID = 0"), an ``ENDDATA``
-  inside the included file ends the bulk data, and the INCLUDE line itself is echoed as an
-  unprocessed entry. So the user's bulk data is copied verbatim into the run deck, its own
-  INCLUDEs inlined, executive/case control before ``BEGIN BULK`` and everything from ``ENDDATA``
-  on left out. No card of the user is edited.
+* **The run deck is written from the parsed model, in one format.** MYSTRAN 18 misreads some
+  spellings without a word: a ``GRID*`` whose first line ends in a bare ``+`` and whose
+  continuation starts with a bare ``*`` loses X3 and CD, and so does a ``+APEX``/``*APEX`` pair
+  (seen: 73 % off on a three-bar frame, 96 % and ~50x on users' decks), a PELAS with two
+  properties loses the second (only a warning in the ERR file), and a CELAS with a blank second
+  grid is rejected (``*ERROR 1133``). So nothing of the user's text is copied: every card the reader models is
+  written back from the model (:func:`model_cards`), every other card field by field from the
+  reader's split of it (:func:`raw_card_text`), all in large field with implicit ``*``
+  continuations (:data:`RUN_FORMAT`). INCLUDEs are resolved by the reader (MYSTRAN itself does
+  not follow nested ones), executive and case control before ``BEGIN BULK`` and everything after
+  ``ENDDATA`` are left out. Springs to ground end on a fixed dummy grid (:func:`ground_grid_text`).
+  Cards the reader does not model are errors unless ``MystranAdapter(unmodelled="pass")``.
 * **AUTOSPC off.** AUTOSPC removes DOFs whose stiffness is below 1e-8 of the grid's largest and
-  silently drops the loads on them (docs/mystran.md, "How MYSTRAN fails"); a black-box flexibility must be
-  exact, so ``PARAM,AUTOSPC,N`` is written *last* (the last PARAM of a name wins, so a user's
-  ``AUTOSPC,YES`` cannot override it) and a singular model fails loudly (SuperLU ``*ERROR 981``)
-  or is caught by its ``EPSILON ERROR ESTIMATE``. ``NastranDialect(autospc=True)`` allows it.
+  silently drops the loads on them (docs/mystran.md, "How MYSTRAN fails"); a black-box
+  flexibility must be exact, so ``PARAM,AUTOSPC,N`` is written *last* (the last PARAM of a name
+  wins, so a user's ``AUTOSPC,YES`` cannot override it) and a singular model fails loudly
+  (SuperLU ``*ERROR 981``) or is caught by its ``EPSILON ERROR ESTIMATE``.
+  ``NastranDialect(autospc=True)`` allows it.
 * **Failure is read, not exited.** MYSTRAN exits 0 after fatal errors; success needs ``MYSTRAN
   terminated normally`` on stdout and no ``*ERROR``/``FATAL`` line in the F06 or ERR file, every
   subcase and grid present and every epsilon estimate small (a nearly singular model returned
@@ -23,22 +30,27 @@ the ones that shaped a decision are cited where they matter:
   residual estimate means the printed digits cannot be trusted. Seen here on a 2 m cantilever
   (tip load): 200 elements 2e-8 (tip error 6e-8); 1000 elements 3.6e-6 (flagged, tip error 9e-7);
   4000 elements 9e-4 (tip error 1.5e-2). A free-free beam held by 1e-6 springs: 8e-3.
-* **Precision.** Loads and spring values are written free-field with up to 16 characters (read
-  as double; small field would truncate to 8). The F06 has 7 significant digits; exponents of
+* **Precision.** Every number is written in a 16-character field (read as double; small field
+  would truncate to 8): the shortest digits that read back exactly when they fit, else 11-15
+  significant digits. The F06 has 7 significant digits; exponents of
   100 or more print without the ``E`` (``1.000000-300``) and overflow prints ``Infinity``.
-* **Supports.** NASTRAN applies an SPC1 set only when case control selects it, while the study format
-  says every SPC1 set of the deck applies: one set is selected with ``SPC = sid``, several are
-  combined by an ``SPCADD`` written after the user's cards.
+* **Supports.** NASTRAN applies an SPC1 set only when case control selects it, while the study
+  format says every SPC1 set of the deck applies: one set is selected with ``SPC = sid``, several
+  are combined by an ``SPCADD`` written after the user's cards.
 * **Chunking.** The FORCE/MOMENT processor's cost grows quadratically with the number of load sets
   (10,000 subcases on 384 DOF: 76 s of 134 s there), while each extra run costs one more
   factorization; batches above ``max_cases_per_run`` (default 2000, a few seconds of FORCE
   processing) are split into several runs.
-* Grounded CELAS2 (C2 blank) is rejected by MYSTRAN (``*ERROR 1133``): a grounded spring is tied
-  to a dummy grid with all six components permanently constrained (GRID field PS = 123456).
+* Grounded CELAS1/CELAS2 (G2 blank) are rejected by MYSTRAN (``*ERROR 1021``/``1133``): every
+  spring to ground, of the deck or added (``with_springs``), ends on one dummy grid with all six
+  components permanently constrained (GRID field PS = 123456), same component.
+* **Ignored fields are errors.** MYSTRAN only warns ("FIELD(s) ... SHOULD BE BLANK AND ARE
+  IGNORED") when it drops fields of an entry; like a skipped card this changes the model.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import os
@@ -46,7 +58,7 @@ import re
 import subprocess
 import tempfile
 from collections import defaultdict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Sequence
 
@@ -130,54 +142,267 @@ def grid_set_lines(set_id: int, grids: Sequence[int], width: int = 72) -> list[s
 def ascii_text(text: object) -> str:
     """``text`` with every non-ASCII character escaped (``\\xe9``, ``\\u03a9``): for the
     comments that name files in a run deck. A path may hold any character, but the deck is
-    written in latin-1 (the user's own lines are copied byte for byte) and MYSTRAN reads bytes."""
+    written in latin-1 and MYSTRAN reads bytes."""
     return str(text).encode("ascii", "backslashreplace").decode("ascii")
 
 
-_BEGIN_BULK = re.compile(r"^\s*BEGIN\s+BULK", re.IGNORECASE)
-_ENDDATA = re.compile(r"^\s*ENDDATA", re.IGNORECASE)
-_INCLUDE = re.compile(r"^\s*INCLUDE\s+(?:'([^']*)'|(\S+))", re.IGNORECASE)
+# --------------------------------------------------------------------------------------------
+# the run deck's bulk data: the parsed model written in one normalised format
+# --------------------------------------------------------------------------------------------
+RUN_FORMAT = "large"
+"""Every card of a run deck is written in large field: ``NAME*``, 16-column fields, four to a
+line, implicit ``*`` continuations (no markers), an even number of lines. MYSTRAN 18 reads this
+exactly (docs/mystran.md, "Your own deck, as it is"), keeps 16 characters of every number (small
+field would truncate to 8), and the form leaves no room for its reading quirks: a ``GRID*`` with
+a bare ``+`` marker continued by a bare ``*``, or a ``+APEX``/``*APEX`` pair, loses X3 and CD
+silently."""
+
+UNMODELLED = ("error", "pass")
+"""What :class:`MystranAdapter` does with a card the reader does not model: ``"error"`` (the
+reader's own message, the default) or ``"pass"`` (handed to MYSTRAN, re-written field by field)."""
+
+_PASS_REFUSED = {
+    **{k: "loads are not part of the model: they come from the load cases (loads.csv); a load "
+          "set here would collide with the run deck's own" for k in
+       ("FORCE", "FORCE1", "FORCE2", "MOMENT", "MOMENT1", "MOMENT2", "LOAD", "GRAV", "PLOAD",
+        "PLOAD1", "PLOAD2", "PLOAD4", "TEMP", "TEMPD", "SPCD", "DEFORM", "RFORCE")},
+    **{k: "MPC sets apply only when the case control selects them, which the run deck does not: "
+          "the constraint would be dropped silently" for k in ("MPC", "MPCADD")},
+    **{k: "superelements are not supported" for k in ("SEBULK", "SECONCT", "SESET")},
+}
+"""Unmodelled cards that are not passed to MYSTRAN even with ``unmodelled="pass"``, and why."""
 
 
-def bulk_text(path: str | os.PathLike) -> str:
-    """The bulk data of a deck, verbatim, as one text: INCLUDEs inlined (paths relative to the
-    including file), anything before ``BEGIN BULK`` of the main file and from ``ENDDATA`` on
-    dropped. Read as latin-1 so every byte is copied unchanged."""
-    top = Path(path).resolve()
-    lines = top.read_text(encoding="latin-1").splitlines()
-    start = next((i + 1 for i, ln in enumerate(lines) if _BEGIN_BULK.match(ln)), 0)
-    out: list[str] = [f"$ ---- bulk data of {ascii_text(top)} (verbatim, INCLUDEs inlined)"]
-    _inline(top, lines[start:], out, (top,))
-    return "\n".join(out) + "\n"
+def _bulk_cards(path: Path):
+    """Every bulk-data card of the deck at ``path`` (INCLUDEs followed, executive and case
+    control skipped, nothing after ``ENDDATA``), as the reader splits them: ``name`` and
+    ``fields`` (``fields[0]`` the name, then NASTRAN fields 2, 3, ... with the continuation
+    markers left out). One reading of the text for both the model and the pass-through."""
+    from solver_adapters import bdf
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise DeckFormatError(f"cannot read the deck: {exc.strerror or exc}", file=str(p)) from None
+    reader = bdf._Reader()
+    reader.deck.files.append(str(p))
+    reader.stack.append(p.resolve())
+    return reader, reader.cards(reader.lines(text, str(p), p.parent))
 
 
-def _inline(path: Path, lines: list[str], out: list[str], stack: tuple[Path, ...]) -> bool:
-    """Append ``lines`` to ``out`` expanding INCLUDEs; False once ENDDATA is reached."""
-    for n, ln in enumerate(lines, 1):
-        if _ENDDATA.match(ln):
-            return False
-        m = _INCLUDE.match(ln)
-        if not m:
-            out.append(ln)
+def read_model(path: str | os.PathLike, unmodelled: str = "error"):
+    """The deck at ``path`` read by :mod:`solver_adapters.bdf`; with ``unmodelled="pass"`` the
+    cards it does not model are left out of the model (they reach MYSTRAN through
+    :func:`passthrough_cards`) instead of being an error. Cards of :data:`_PASS_REFUSED` stay
+    errors. Returns the validated :class:`~solver_adapters.deck.Deck`."""
+    from solver_adapters import bdf
+    if unmodelled not in UNMODELLED:
+        raise ValueError(f"unmodelled must be one of {UNMODELLED}, got {unmodelled!r}")
+    if unmodelled == "error":
+        return bdf.read_deck(path)
+    reader, cards = _bulk_cards(Path(path))
+    passed = 0
+    for card in cards:
+        if card.name in _PASS_REFUSED:
+            raise card.error(1, f"{card.name} cannot be handed to MYSTRAN: {_PASS_REFUSED[card.name]}")
+        if card.name in bdf._PARSERS or card.name in bdf.NO_EFFECT:
+            reader.add(card)
+        else:
+            passed += 1
+    reader.check_unsupported()
+    deck = reader.finish()
+    bdf.validate(deck)
+    deck.unmodelled_cards = passed    # read by needs_passthrough(): a plain attribute, not a field
+    return deck
+
+
+def needs_passthrough(model) -> bool:
+    """Whether the deck of ``model`` may have cards that are not written from the model, so the
+    run deck must scan the deck for them: cards accepted with no effect, RBE3/CBUSH/PBUSH,
+    unmodelled cards that :func:`read_model` let pass, or any card the reader models that this
+    writer does not know (the scan then names it: :func:`passthrough_cards`)."""
+    from solver_adapters import bdf
+    if set(bdf._PARSERS) - WRITTEN - RAW_MODELLED:
+        return True
+    if getattr(model, "no_effect", None) or any(getattr(model, f, None) for f in ("rbe3s", "bushes", "pbushes")):
+        return True
+    return getattr(model, "unmodelled_cards", 0) > 0
+
+
+@dataclass(frozen=True)
+class RawCard:
+    """A card MYSTRAN gets as the user wrote it, field by field: its ``name``, the ``fields``
+    (NASTRAN field 2 on, stripped, continuation markers left out) and where it was (``src``)."""
+    name: str
+    fields: tuple[str, ...]
+    src: str
+
+
+WRITTEN = frozenset({"GRID", "GRDSET", "CBAR", "CBEAM", "BAROR", "PBAR", "PBARL", "PBEAM", "PBEAML",
+                     "CROD", "PROD", "CONROD", "MAT1", "SPC1", "SPC", "SPCADD", "RBE2", "PELAS",
+                     "CELAS1", "CELAS2", "CORD1R", "CORD1C", "CORD1S", "CORD2R", "CORD2C", "CORD2S"})
+"""Cards :func:`model_cards` writes back from the parsed model: GRDSET and BAROR through the
+GRIDs and CBARs they complete, SPC as SPC1, every coordinate system as a CORD2x in basic, and a
+CBEAM with its PBEAM/PBEAML, or a PBARL, as the CBAR/PBAR the reference solver makes of them
+(MYSTRAN 18 has no CBEAM: "CODE NOT WRITTEN"; its own PBARL section constants may differ)."""
+
+RAW_MODELLED = frozenset({"RBE3", "CBUSH", "PBUSH"})
+"""Cards the reader models that reach MYSTRAN field by field (:func:`raw_card_text`): each is a
+card of its own in the model, and MYSTRAN reads it with the same meaning."""
+
+_KNOWN_FIELDS = frozenset({"grids", "cbars", "pbars", "mat1s", "spc1s", "rbe2s", "rbe3s", "bushes",
+                           "pbushes", "pelas", "springs", "spcadds", "prods", "rods", "coords", "files",
+                           "no_effect"})
+"""The parsed deck's collections of cards the run deck accounts for; a model with another non-empty
+collection cannot be written faithfully (a card the reader learnt after this writer): an error,
+not a dropped card. Scalar settings (PARAM values the reader keeps) reach MYSTRAN through the
+PARAM cards themselves, passed field by field."""
+
+
+def check_writable(model) -> None:
+    """:class:`DeckFormatError` when the model holds entities this writer does not know."""
+    unknown = [f.name for f in dataclasses.fields(model) if f.name not in _KNOWN_FIELDS
+               and isinstance(getattr(model, f.name), (dict, list, tuple, set)) and getattr(model, f.name)]
+    if unknown:
+        raise DeckFormatError(f"the MYSTRAN run deck cannot write the model's {', '.join(unknown)} "
+                              f"(cards the reader models but solver_adapters.nastran does not write yet)")
+
+
+def passthrough_cards(path: str | os.PathLike) -> list[RawCard]:
+    """The deck's cards that are not written back from the model, in the deck's order: cards
+    the reader does not model (with ``unmodelled="pass"``), those it accepts with no effect
+    (PARAM, CONM2, ...) and those of :data:`RAW_MODELLED`. A card the reader models that is in
+    neither :data:`WRITTEN` nor :data:`RAW_MODELLED` is an error (never dropped, never doubled)."""
+    from solver_adapters import bdf
+    _, cards = _bulk_cards(Path(path))
+    out = []
+    for c in cards:
+        if c.name in WRITTEN:
             continue
-        inc = (path.parent / (m.group(1) or m.group(2)).strip()).resolve()
-        if inc in stack:
-            raise DeckFormatError("INCLUDE cycle", file=str(path), line=n, card="INCLUDE", value=str(inc))
-        try:
-            text = inc.read_text(encoding="latin-1")
-        except OSError as exc:
-            raise DeckFormatError(f"cannot read included file: {exc}", file=str(path), line=n,
-                                  card="INCLUDE", value=str(inc)) from None
-        out.append(f"$ ---- INCLUDE {ascii_text(inc)}")
-        if not _inline(inc, text.splitlines(), out, stack + (inc,)):
-            return False
-    return True
+        if c.name in _PASS_REFUSED:
+            raise c.error(1, f"{c.name} cannot be handed to MYSTRAN: {_PASS_REFUSED[c.name]}")
+        if c.name in bdf._PARSERS and c.name not in RAW_MODELLED:
+            raise c.error(1, f"the MYSTRAN run deck does not write {c.name} yet (the reader models it; "
+                             f"passing it as written could duplicate what the model holds)")
+        out.append(RawCard(c.name, tuple(f.text for f in c.fields[1:]), c.src))
+    return out
 
 
-def load_cards(loads: LoadMatrix, first_sid: int = 1, idle_grid: int | None = None) -> list[str]:
+def raw_card_text(card: RawCard, fmt: str = RUN_FORMAT) -> str:
+    """A pass-through card in format ``fmt``: integers and words as written (upper case), every
+    real re-printed exactly (:func:`~solver_adapters.bdf_write.print_float_16`: the shortest
+    digits that round-trip, so nothing a 16-character field held is lost). A word longer than 16
+    characters cannot be written (MYSTRAN rejects such fields too): :class:`DeckFormatError`."""
+    from solver_adapters import bdf
+    from solver_adapters.bdf_write import format_card, print_float_16
+    out: list[str | None] = []
+    for i, text in enumerate(card.fields, start=2):
+        t = text.strip().upper()
+        if t and not bdf._INT.fullmatch(t):
+            value = bdf._real_or_none(t)
+            if value is not None and math.isfinite(value):
+                t = print_float_16(value)
+        if len(t) > FIELD_WIDTH:
+            file, _, line = card.src.rpartition(":")
+            raise DeckFormatError(f"field longer than {FIELD_WIDTH} characters cannot be handed to "
+                                  f"MYSTRAN", file=file, line=int(line) if line.isdigit() else None,
+                                  card=card.name, field=i, value=text)
+        out.append(t or None)
+    return format_card(card.name, out, fmt)
+
+
+def _int_or_zero(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        return 0
+
+
+@dataclass(frozen=True)
+class ModelIds:
+    """IDs the run deck adds to a model: the dummy grid that grounds springs and the first free
+    element ID (above every grid, SPOINT, element and property ID of the model and of the
+    pass-through cards, so nothing the deck holds is redefined)."""
+    ground_grid: int
+    first_eid: int
+
+
+def model_ids(model, raw: Sequence[RawCard] = ()) -> ModelIds:
+    points = [0, *model.grids]
+    for c in raw:
+        if c.name in ("SPOINT", "EPOINT"):
+            points += [_int_or_zero(t) for t in c.fields]
+    ids = [0, *model.cbars, *model.rbe2s, *model.springs, *model.rods]
+    ids += [_int_or_zero(c.fields[0]) for c in raw if c.fields]
+    return ModelIds(max(points) + 1, max(ids) + 1)
+
+
+def _grid_text(g, fmt: str) -> str:
+    """GRID with the position in the basic system (CP blank: the reader has already converted
+    it) and the displacement system CD as given."""
+    from solver_adapters.bdf_write import format_card
+    return format_card("GRID", [g.id, None, *g.xyz, getattr(g, "cd", 0) or None, g.ps or None], fmt)
+
+
+def ground_grid_text(gid: int, fmt: str = RUN_FORMAT) -> str:
+    """The dummy grid that grounded springs end on: at the origin, all six components
+    permanently constrained (PS = 123456). MYSTRAN rejects a CELAS with a blank second grid
+    (``*ERROR 1133``); a spring to a fixed grid is the same spring."""
+    from solver_adapters.bdf_write import format_card
+    return format_card("GRID", [gid, None, 0.0, 0.0, 0.0, None, "123456"], fmt)
+
+
+def model_cards(model, ground_grid: int, fmt: str = RUN_FORMAT) -> list[str]:
+    """Every card the reader modelled, written back from the parsed model in format ``fmt``
+    (one text per card): GRID (GRDSET applied), coordinate systems (as CORD2R/C/S in the basic
+    system), CBAR (BAROR applied), PBAR, CROD/CONROD, PROD, MAT1, SPC1 (SPC as SPC1), SPCADD,
+    RBE2, PELAS, CELAS1/CELAS2. A spring to ground ends on ``ground_grid`` (same component)."""
+    from solver_adapters import bdf_write as w
+    check_writable(model)
+    out = [_grid_text(model.grids[i], fmt) for i in sorted(model.grids)]
+    coords = getattr(model, "coords", None) or {}
+    out += [w.write_coord(coords[i], fmt) for i in sorted(coords)]
+    out += [w.write_cbar(_cbar_in_cd(model, model.cbars[i]), fmt) for i in sorted(model.cbars)]
+    out += [w.write_pbar(model.pbars[i], fmt) for i in sorted(model.pbars)]
+    out += [w.write_rod(model.rods[i], fmt) for i in sorted(model.rods)]
+    out += [w.write_prod(model.prods[i], fmt) for i in sorted(model.prods)]
+    out += [w.write_mat1(model.mat1s[i], fmt) for i in sorted(model.mat1s)]
+    out += [w.write_spc1(s, fmt) for s in model.spc1s]
+    out += [w.write_spcadd(model.spcadds[i], fmt) for i in sorted(model.spcadds)]
+    out += [w.write_rbe2(model.rbe2s[i], fmt) for i in sorted(model.rbe2s)]
+    # one property per PELAS: MYSTRAN 18 ignores the second (PID2 K2, "FIELD(s) 6 7 ... IGNORED")
+    out += [w.write_pelas(model.pelas[i], None, fmt=fmt) for i in sorted(model.pelas)]
+    for i in sorted(model.springs):
+        s = model.springs[i]
+        if s.g2 == 0:
+            s = replace(s, g2=ground_grid, c2=s.c1)
+        out.append(w.write_spring(s, fmt))
+    return out
+
+
+def _cbar_in_cd(model, b):
+    """The CBAR as the card says it (OFFT blank, GGG): the orientation vector in GA's
+    displacement system, the offsets in GA's and GB's; the model holds them in basic."""
+    cds = {g: getattr(model.grids[g], "cd", 0) for g in (b.ga, b.gb)}
+    if not any(cds.values()):
+        return b
+    frame = dict(zip((b.ga, b.gb), model.displacement_frames([b.ga, b.gb])))
+    to = lambda g, v: None if v is None else tuple(float(t) for t in frame[g] @ np.asarray(v, float))
+    return replace(b, x=to(b.ga, b.x), wa=to(b.ga, b.wa), wb=to(b.gb, b.wb))
+
+
+def has_grounded(model) -> bool:
+    return any(s.g2 == 0 for s in model.springs.values())
+
+
+def load_cards(loads: LoadMatrix, first_sid: int = 1, idle_grid: int | None = None,
+               cid: dict[int, int] | None = None, fmt: str = RUN_FORMAT) -> list[str]:
     """FORCE/MOMENT cards, load set ``first_sid + j`` for column ``j``: one card per grid and kind,
-    ``F = 1.0`` and the components in N1..N3 (free field, 16 characters each). An all-zero column
-    gets a zero FORCE on ``idle_grid`` (MYSTRAN needs every requested set to exist: ``*ERROR 1007``)."""
+    ``F = 1.0`` and the components in N1..N3 (16 characters each), in the grid's displacement
+    system ``cid[grid]`` (default basic). An all-zero column gets a zero FORCE on ``idle_grid``
+    (MYSTRAN needs every requested set to exist: ``*ERROR 1007``)."""
+    from solver_adapters.bdf_write import format_card
+    cid = cid or {}
     vals = loads.values.tocsc()
     cards: list[str] = []
     for j in range(loads.n_cases):
@@ -191,24 +416,23 @@ def load_cards(loads: LoadMatrix, first_sid: int = 1, idle_grid: int | None = No
         if not by_grid:
             if idle_grid is None:
                 raise ValueError("an all-zero load case needs idle_grid")
-            cards.append(f"FORCE,{sid},{idle_grid},,0.,1.,0.,0.")
+            cards.append(format_card("FORCE", [sid, idle_grid, None, 0.0, 1.0, 0.0, 0.0], fmt))
         for (g, kind), n in sorted(by_grid.items()):
-            cards.append(f"{kind},{sid},{g},,1.," + ",".join(format_real(v) for v in n))
+            cards.append(format_card(kind, [sid, g, cid.get(g) or None, 1.0, *map(float, n)], fmt))
     return cards
 
 
-def spring_cards(springs: Sequence[ScalarSpring], first_eid: int, ground_grid: int) -> list[str]:
-    """CELAS2 cards ``EID, K, G1, C1, G2, C2``; a grounded spring (``b`` None) goes to
-    ``ground_grid``, written as a GRID with PS = 123456 when any spring needs it."""
-    cards, grounded = [], False
+def spring_cards(springs: Sequence[ScalarSpring], first_eid: int, ground_grid: int,
+                 fmt: str = RUN_FORMAT) -> list[str]:
+    """One CELAS2 per spring, EIDs from ``first_eid``; a spring to ground (``b`` None) ends on
+    ``ground_grid`` (written by the caller, :func:`ground_grid_text`), same component."""
+    from solver_adapters.bdf_write import format_card
+    cards = []
     for n, s in enumerate(springs):
-        if s.b is not None and tuple(s.b) == tuple(s.a):
+        if s.b is not None and tuple(s.a) == tuple(s.b):
             raise ValueError(f"spring {s} connects a DOF to itself")
         g2, c2 = (ground_grid, s.a[1]) if s.b is None else s.b
-        grounded |= s.b is None
-        cards.append(f"CELAS2,{first_eid + n},{format_real(s.k)},{s.a[0]},{s.a[1]},{g2},{c2}")
-    if grounded:
-        cards.insert(0, f"GRID,{ground_grid},,0.,0.,0.,,123456")
+        cards.append(format_card("CELAS2", [first_eid + n, float(s.k), s.a[0], s.a[1], g2, c2], fmt))
     return cards
 
 
@@ -319,6 +543,22 @@ def unprocessed_cards(err_text: str) -> list[str]:
     return cards
 
 
+_IGNORED = re.compile(r"FIELD\(s\).*ARE IGNORED")
+
+
+def ignored_fields(err_text: str) -> list[str]:
+    """Warnings that MYSTRAN ignored fields of a bulk-data entry (only in the ERR file, e.g.
+    "FIELD(s) 67 ON PREVIOUS ENTRY SHOULD BE BLANK AND ARE IGNORED" for a PELAS with a second
+    property), prefixed by the entry's echo when the ERR file has one."""
+    lines, out = err_text.splitlines(), []
+    for i, ln in enumerate(lines):
+        if _IGNORED.search(ln):
+            echo = next((lines[k] for k in range(i - 1, max(i - 4, -1), -1) if "ECHO:" in lines[k]), None)
+            text = " ".join(ln.replace("*WARNING", "").lstrip(" :").split())
+            out.append(text if echo is None else " ".join(echo.replace("ECHO: loadb", "").split()) + ": " + text)
+    return out
+
+
 # --------------------------------------------------------------------------------------------
 # the dialect
 # --------------------------------------------------------------------------------------------
@@ -335,17 +575,48 @@ class NastranDialect:
         self.max_cases_per_run = int(max_cases_per_run)
         self.autospc = bool(autospc)
         self.strict_cards = bool(strict_cards)
-        self._bulk: dict[Path, tuple[tuple[int, int], str]] = {}
+        self._raw: dict[Path, tuple[list, list[RawCard]]] = {}
+        self._written: tuple | None = None
 
     # ---- writing ---------------------------------------------------------------------------
-    def _bulk_text(self, path: Path) -> str:
-        st = path.stat()
-        key = (st.st_mtime_ns, st.st_size)
-        hit = self._bulk.get(path)
+    def _passthrough(self, path: Path) -> list[RawCard]:
+        """:func:`passthrough_cards` of the deck, kept while its files are unchanged."""
+        from solver_adapters.cache import deck_files
+        key = []
+        for f in deck_files(path):
+            try:
+                st = f.stat()
+                key.append((str(f), st.st_mtime_ns, st.st_size))
+            except OSError:
+                key.append((str(f), None, None))
+        hit = self._raw.get(path)
         if hit is None or hit[0] != key:
-            hit = (key, bulk_text(path))
-            self._bulk[path] = hit
+            hit = (key, passthrough_cards(path))
+            self._raw[path] = hit
         return hit[1]
+
+    def bulk_lines(self, base: BaseDeck, springs: Sequence[ScalarSpring] = ()) -> tuple[list[str], ModelIds]:
+        """The run deck's bulk data before the loads: the model written back from ``base.model``
+        in :data:`RUN_FORMAT`, the pass-through cards re-written field by field, the dummy grid
+        when any spring is grounded, the extra ``springs``. Returns the lines and the IDs used."""
+        model = base.model
+        raw = self._passthrough(Path(base.path)) if needs_passthrough(model) else []
+        ids = model_ids(model, raw)
+        lines = [f"$ ---- bulk data of {ascii_text(base.path)} (re-written from the parsed model, "
+                 f"{RUN_FORMAT} field)"]
+        if self._written is None or self._written[0] is not model or self._written[1] != ids:
+            self._written = (model, ids, [t.rstrip("\n") for t in model_cards(model, ids.ground_grid)])
+        lines += self._written[2]     # the same model for every run of an adapter: written once
+        if raw:
+            lines.append("$ ---- blackbox: cards handed to MYSTRAN as written (fields re-formatted)")
+            lines += [raw_card_text(c).rstrip("\n") for c in raw]
+        if has_grounded(model) or any(s.b is None for s in springs):
+            lines.append("$ ---- blackbox: the fixed grid that grounded springs end on")
+            lines.append(ground_grid_text(ids.ground_grid).rstrip("\n"))
+        if springs:
+            lines.append("$ ---- blackbox: extra springs")
+            lines += [t.rstrip("\n") for t in spring_cards(springs, ids.first_eid, ids.ground_grid)]
+        return lines, ids
 
     def write_deck(self, workdir: Path, base: BaseDeck, loads: LoadMatrix, report: Sequence[DofLabel],
                    springs: Sequence[ScalarSpring]) -> Path:
@@ -354,20 +625,18 @@ class NastranDialect:
         spc_sid = sids[0] if len(sids) == 1 else (max(sids + list(model.spcadds)) + 1 if sids else None)
         lines = ["$ run deck written by blackbox (solver_adapters.nastran)"]
         lines += case_control(loads.n_cases, sorted({g for g, _ in report}), spc_sid)
-        lines += ["BEGIN BULK", self._bulk_text(Path(base.path)).rstrip("\n"), "$ ---- blackbox: loads"]
-        lines += load_cards(loads, 1, idle_grid=min(model.grids))
+        lines.append("BEGIN BULK")
+        body, _ = self.bulk_lines(base, springs)
+        lines += body
+        lines.append("$ ---- blackbox: loads")
+        cid = {g.id: getattr(g, "cd", 0) for g in model.grids.values() if getattr(g, "cd", 0)}
+        lines += [t.rstrip("\n") for t in load_cards(loads, 1, idle_grid=min(model.grids), cid=cid)]
         if len(sids) > 1:
-            fields = [str(spc_sid), *map(str, sids)]
-            rows = [fields[:8]] + [fields[k:k + 8] for k in range(8, len(fields), 8)]
-            lines.append("SPCADD," + ",".join(rows[0]))
-            lines += ["," + ",".join(r) for r in rows[1:]]
-        if springs:
-            eids = [0, *model.cbars, *model.rbe2s, *model.springs, *model.rods]
-            lines.append("$ ---- blackbox: extra springs")
-            lines += spring_cards(springs, max(eids) + 1, max(model.grids) + 1)
+            from solver_adapters.bdf_write import format_card
+            lines.append(format_card("SPCADD", [spc_sid, *sids], RUN_FORMAT).rstrip("\n"))
         lines += [f"PARAM,AUTOSPC,{'Y' if self.autospc else 'N'}", "ENDDATA"]
         deck = Path(workdir) / RUN_DECK
-        deck.write_text("\n".join(lines) + "\n", encoding="latin-1")
+        deck.write_text("\n".join(lines) + "\n", encoding="latin-1", errors="replace")
         return deck
 
     def command(self, deck_path: Path) -> list[str] | None:
@@ -412,7 +681,7 @@ class NastranDialect:
             shown = [f"  {e}" for e in errors[:20]] + ([f"  ... {len(errors) - 20} more"] if len(errors) > 20 else [])
             if singular:
                 raise fail("MYSTRAN could not factor the stiffness matrix: the model is a mechanism "
-                           "(singular; AUTOSPC is off, see MYSTRAN.md)", UnstableStructureError, shown)
+                           "(singular; AUTOSPC is off, see docs/mystran.md)", UnstableStructureError, shown)
             raise fail(f"MYSTRAN reported {len(errors)} error(s)", extra=shown)
         if record.returncode != 0:
             raise fail("MYSTRAN exited with a nonzero code")
@@ -424,6 +693,10 @@ class NastranDialect:
         if skipped:
             raise fail(f"MYSTRAN skipped {len(skipped)} bulk-data entr(y/ies) it does not support; the "
                        f"model would be changed: {skipped[:10]}")
+        ignored = ignored_fields(err) if self.strict_cards else []
+        if ignored:
+            raise fail(f"MYSTRAN ignored fields of {len(ignored)} bulk-data entr(y/ies); the model would "
+                       f"be changed: {ignored[:10]}")
         try:
             res = parse_f06(f06)
         except ValueError as exc:
@@ -494,11 +767,18 @@ class MystranAdapter(CommandAdapter):
 
     ``version`` is the version MYSTRAN reports. Dialect options (``epsilon_tol``,
     ``max_cases_per_run``, ``autospc``) and :class:`CommandAdapter` options pass through.
+    ``unmodelled="pass"`` runs decks with cards the reader does not model (shells, solids, ...):
+    the model (grids, bars, supports, ...) is read as usual, those cards go to MYSTRAN re-written
+    field by field (:func:`raw_card_text`); the default ``"error"`` rejects them as the reader does.
     """
 
     def __init__(self, deck_path: str | os.PathLike, timeout_s: float = 600.0, *,
                  binary: str | None = None, epsilon_tol: float = EPSILON_TOL,
-                 max_cases_per_run: int = MAX_CASES_PER_RUN, autospc: bool = False, **kw):
+                 max_cases_per_run: int = MAX_CASES_PER_RUN, autospc: bool = False,
+                 unmodelled: str = "error", **kw):
+        if unmodelled not in UNMODELLED:
+            raise ValueError(f"unmodelled must be one of {UNMODELLED}, got {unmodelled!r}")
+        self.unmodelled = unmodelled
         if binary is None and "command" not in kw:
             kw.setdefault("trusted", True)  # the installed package's own executable
         binary = binary or mystran_binary()
@@ -506,5 +786,12 @@ class MystranAdapter(CommandAdapter):
         kw.setdefault("command", [binary, "{deck_name}"])
         kw.setdefault("dialect", NastranDialect(epsilon_tol, max_cases_per_run, autospc))
         super().__init__(deck_path, timeout_s=timeout_s, **kw)
+        if getattr(self._base.model, "autospc", False) and isinstance(self.dialect, NastranDialect):
+            # the deck asks for NASTRAN's AUTOSPC (PARAM,AUTOSPC,YES): MYSTRAN applies it too, as the
+            # reference solver does, instead of failing on the components it constrains
+            self.dialect.autospc = True
         self.binary = binary
         self.version = mystran_version(binary)
+
+    def _read_model(self, path: Path):
+        return read_model(path, self.unmodelled)

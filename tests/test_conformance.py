@@ -74,7 +74,8 @@ def test_cli_conformance_passes(name, tmp_path, capsys):
     names = [c["name"] for c in rep["checks"]]
     for check in ("dof_labels", "unknown_labels", "linearity_superposition", "maxwell_betti",
                   "batch_equals_one_by_one", "determinism", "with_springs", "stats_counters",
-                  "reference_agreement[cube]", "reference_agreement[car]", "reference_agreement[generated]"):
+                  "reference_agreement[cube]", "reference_agreement[car]", "reference_agreement[generated]",
+                  "probe_loads", "field_formats", "grounded_springs", "deck_edits"):
         assert check in names
         assert f"PASS  {check}" in printed
     if name == "legacy":
@@ -369,3 +370,67 @@ def test_unit_loadmatrix_helpers_used_by_the_suite():
     s = cf.Suite(ReferenceAdapter, springs_deck, cf.read_loads_csv(FIXTURES / "cube" / "loads.csv"))
     springs, loads = cf.spring_dofs(s)
     assert len(springs) == 2 and springs[1].b is None and loads.n_cases == s.loads.n_cases + 2
+
+
+# --------------------------------------------------------------------------------------------
+# what the commands send: every spelling, grounded springs, diagnose's edited decks
+# --------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("style", cf.FIELD_STYLES)
+def test_every_field_style_reads_as_the_same_model(style):
+    """The spellings of ``field_formats`` are the same deck to our reader (each spelling with the
+    digits its field width holds), so any disagreement there is the adapter's."""
+    from solver_adapters.bdf import read_deck, read_deck_text
+    model = read_deck(FIXTURES / "car" / "model.bdf")
+    text = cf.deck_text(model, style)
+    again = read_deck_text(text)
+    same = "small" if style.startswith("small") else "free" if style == "free" else "large"
+    base = read_deck_text(cf.deck_text(model, same))        # same digits: small 8, free repr, large 16
+    strip = lambda d: {k: {i: repr(v).split(", src=")[0] for i, v in getattr(d, k).items()}
+                       for k in ("grids", "cbars", "pbars", "mat1s", "rbe2s", "springs")}
+    assert strip(again) == strip(base)
+    if style == "large_plus_star":
+        assert any(ln.rstrip().endswith("+") for ln in text.splitlines())
+        assert any(ln[:8].strip() == "*" for ln in text.splitlines()[1:])     # a bare * continues
+
+
+def test_edited_decks_are_what_diagnose_makes():
+    """The element and split decks of ``deck_edits``: every member alone with end a clamped; the
+    split deck cuts grids onto CELAS2 pairs and supports onto CELAS2 to ground (G2 blank)."""
+    from solver_adapters.bdf import read_deck
+    model = read_deck(FIXTURES / "cube" / "model.bdf")
+    e, ends = cf.element_deck_of(model)
+    assert len(e.cbars) == len(model.cbars) == len(ends) and len(e.grids) == 2 * len(model.cbars)
+    assert e.spc1s[0].components == "123456" and not set(e.spc1s[0].grids) & set(ends)
+    s, touched, grounded = cf.split_deck_of(model)
+    assert touched and grounded and not s.spc1s
+    assert sum(1 for sp in s.springs.values() if sp.g2 == 0) == len(grounded)
+    assert len(s.grids) > len(model.grids)
+
+
+class _VerbatimMystran:
+    """MYSTRAN as the adapter was: the user's bulk data copied into the run deck as written."""
+
+    def __new__(cls, deck):
+        from solver_adapters.nastran import MystranAdapter, NastranDialect
+
+        class Verbatim(NastranDialect):
+            def bulk_lines(self, base, springs=()):
+                lines, ids = super().bulk_lines(base, springs)
+                text = base.path.read_text().splitlines()
+                body = [ln for ln in text if ln.strip() not in ("BEGIN BULK", "ENDDATA")]
+                extra = [ln for ln in lines if "extra springs" in ln or ln.startswith("CELAS2*")][-2 * len(springs) - 1:] if springs else []
+                return body + extra, ids
+
+        return MystranAdapter(deck, dialect=Verbatim())
+
+
+@needs_mystran
+def test_verbatim_copy_fails_the_new_checks():
+    """The suite fails on the behaviour it was written against: the deck spelt with explicit
+    continuations, and springs to ground, break a verbatim copy (MYSTRAN misreads or rejects)."""
+    deck = FIXTURES / "cube" / "model.bdf"
+    suite = cf.Suite(_VerbatimMystran, deck, cf.read_loads_csv(FIXTURES / "cube" / "loads.csv"), deck_name="cube")
+    from solver_adapters.protocol import SolverError
+    for check in (cf.check_field_formats, cf.check_grounded_springs, cf.check_deck_edits):
+        with pytest.raises((CheckFailure, SolverError)):   # run_check reports either as FAIL
+            check(suite)

@@ -16,9 +16,9 @@ import math
 import numpy as np
 import pytest
 
-from solver_adapters.nastran import (MystranAdapter, NastranDialect, bulk_text, case_control, format_real,
-                                     grid_set_lines, load_cards, parse_f06, parse_real, spring_cards,
-                                     unprocessed_cards)
+from solver_adapters.bdf import read_deck_text
+from solver_adapters.nastran import (MystranAdapter, NastranDialect, case_control, format_real, grid_set_lines,
+                                     load_cards, parse_f06, parse_real, spring_cards, unprocessed_cards)
 from solver_adapters.protocol import (DeckFormatError, LoadMatrix, ModelError, ScalarSpring, SolverRunError,
                                       UnknownDofError, UnstableStructureError)
 from solver_adapters.subprocess import RunRecord, run_solver
@@ -252,35 +252,40 @@ def test_case_control_subcases():
     assert cc[-6:] == ["SUBCASE 1", "  LOAD = 1", "SUBCASE 2", "  LOAD = 2", "SUBCASE 3", "  LOAD = 3"]
 
 
+def _cards(texts):
+    """Card texts (large field) -> [(name, [field texts])] through our reader's line splitter."""
+    out = []
+    for t in texts:
+        lines = t.splitlines()
+        name = lines[0][:8].rstrip("* ").strip()
+        fields = []
+        for ln in lines:
+            ln = ln.ljust(72)
+            fields += [ln[8 + 16 * k: 24 + 16 * k].strip() for k in range(4)]
+        while fields and not fields[-1]:
+            fields.pop()
+        out.append((name, fields))
+    return out
+
+
 def test_load_cards_group_by_grid_and_kind():
     dofs = [(5, 1), (5, 3), (5, 5), (2, 6)]
     vals = np.array([[1.0, 0.0, 0.0], [2.5e-7, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, -4.0, 0.0]])
-    cards = load_cards(LoadMatrix.from_dense(dofs, vals, ["a", "b", "zero"]), idle_grid=1)
-    assert cards == ["FORCE,1,5,,1.,1.0,0.,2.5E-7",
-                     "MOMENT,2,2,,1.,0.,0.,-4.0", "MOMENT,2,5,,1.,0.,3.0,0.",
-                     "FORCE,3,1,,0.,1.,0.,0."]
+    cards = load_cards(LoadMatrix.from_dense(dofs, vals, ["a", "b", "zero"]), idle_grid=1, cid={2: 7})
+    assert _cards(cards) == [("FORCE", ["1", "5", "", "1.", "1.", "0.", "2.5-7"]),
+                             ("MOMENT", ["2", "2", "7", "1.", "0.", "0.", "-4."]),
+                             ("MOMENT", ["2", "5", "", "1.", "0.", "3.", "0."]),
+                             ("FORCE", ["3", "1", "", "0.", "1.", "0.", "0."])]
+    assert all(len(t.splitlines()) == 2 and t.startswith(("FORCE*", "MOMENT*")) for t in cards)
 
 
 def test_spring_cards_ground_to_fixed_dummy_grid():
     cards = spring_cards([ScalarSpring((5, 5), None, 2.0e4), ScalarSpring((5, 4), (6, 4), -1.5)],
                          first_eid=100, ground_grid=900)
-    assert cards == ["GRID,900,,0.,0.,0.,,123456", "CELAS2,100,20000.0,5,5,900,5", "CELAS2,101,-1.5,5,4,6,4"]
-    assert spring_cards([ScalarSpring((1, 1), (2, 1), 1.0)], 1, 9) == ["CELAS2,1,1.0,1,1,2,1"]
+    assert _cards(cards) == [("CELAS2", ["100", "2.+4", "5", "5", "900", "5"]),
+                             ("CELAS2", ["101", "-1.5", "5", "4", "6", "4"])]
     with pytest.raises(ValueError, match="itself"):
         spring_cards([ScalarSpring((1, 1), (1, 1), 1.0)], 1, 9)
-
-
-def test_bulk_text_inlines_includes_and_strips_control(tmp_path):
-    (tmp_path / "sub").mkdir()
-    (tmp_path / "sub" / "grids.bdf").write_text("GRID,1,,0.,0.,0.\nINCLUDE 'more.bdf'\n")
-    (tmp_path / "sub" / "more.bdf").write_text("GRID*,2,,1.0,0.0\n*,0.0\nENDDATA\nGRID,99\n")
-    (tmp_path / "top.bdf").write_text("SOL 101\nCEND\nBEGIN BULK\n$ comment\nINCLUDE 'sub/grids.bdf'\n"
-                                      "GRID,3,,2.,0.,0.\nENDDATA\nGRID,98\n")
-    body = [ln for ln in bulk_text(tmp_path / "top.bdf").splitlines() if not ln.startswith("$ ----")]
-    assert body == ["$ comment", "GRID,1,,0.,0.,0.", "GRID*,2,,1.0,0.0", "*,0.0"]
-    (tmp_path / "sub" / "more.bdf").write_text("INCLUDE 'grids.bdf'\n")
-    with pytest.raises(DeckFormatError, match="INCLUDE cycle"):
-        bulk_text(tmp_path / "top.bdf")
 
 
 # --------------------------------------------------------------------------------------------
