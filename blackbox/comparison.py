@@ -115,10 +115,17 @@ def assembly_flexibility(condensed: Condensed, K_J: np.ndarray, K_deck: np.ndarr
     nB = G.shape[0]
     dK = np.asarray(K_J, float) - (np.zeros((nB, nB)) if K_deck is None else np.asarray(K_deck, float))
     A = np.eye(nB) + G @ dK
-    if np.linalg.cond(A) > _COND_MAX:
+    # A = G (G^-1 + dK): with dK positive semidefinite (joints added, nothing taken out of the deck)
+    # it is never singular, however stiff a joint -- a large condition number then only says the
+    # joint is near rigid, and the solve stays accurate. Only a negative dK (a joint softer than
+    # springs already in the deck) can make a mechanism.
+    semidefinite = float(np.linalg.eigvalsh(0.5 * (dK + dK.T))[0]) >= -1e-12 * max(float(np.abs(dK).max()), 1e-300)
+    if not semidefinite and np.linalg.cond(A) > _COND_MAX:
         raise ComparisonError("the structure with these joint stiffnesses is a mechanism "
                               "((I + G_BB dK) is singular): no flexibility")
     C = np.linalg.solve(A, G)
+    if not np.all(np.isfinite(C)):
+        raise ComparisonError("the structure's flexibility with these joint stiffnesses is not finite")
     C = 0.5 * (C + C.T)
     if dofs is None:
         return C

@@ -387,12 +387,7 @@ def test_diagnose_through_mystran_agrees(name):
     _diagnose_agrees(name)
 
 
-KNOWN_DIFFERENCES = {
-    "member_bending": "the 'sections' variant of member_stiffness is never tried through MYSTRAN: "
-                      "blackbox.diagnosis.effects.member_stiffness.section_parts requires the parts "
-                      "to sum to K_e within 1e-8, and a K_e from 7-digit flexibilities misses that "
-                      "by ~1e-7 (same effect at the same place, the 'whole' variant)",
-}
+KNOWN_DIFFERENCES: dict[str, str] = {}
 """Folders where MYSTRAN's 7 printed digits change a decision of the diagnosis itself (not of
 the adapter), with the reason; they fail strictly, so a fix shows up."""
 
