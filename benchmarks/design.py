@@ -1,4 +1,4 @@
-"""Figures of ``blackbox design`` (``blackbox.design``) on the fixtures.
+"""Figures of ``blackbox design`` (``blackbox.experiment_design``) on the fixtures.
 
 Run ``python benchmarks/design.py`` from the repository root (~1 minute on 2 cores). It prints:
 
@@ -33,7 +33,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from blackbox import design as D                                      # noqa: E402
+from blackbox import experiment_design as D                                      # noqa: E402
 from blackbox.commands.common import study_adapter                    # noqa: E402
 from blackbox.declared import declared_model, read_truth, truth_joints  # noqa: E402
 from blackbox.joints import SimpleJoint, joint_dofs                   # noqa: E402

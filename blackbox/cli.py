@@ -358,7 +358,7 @@ def build_parser() -> argparse.ArgumentParser:
     s = _study_command(sub, "diagnose", "find what the declared model lacks, add it, report before/after",
                        cmd_diagnose)
     s.add_argument("--alpha", type=float, default=0.01,
-                   help="significance level after the Bonferroni correction (default 0.01)")
+                   help="significance level of the whole search (spent over its rounds; default 0.01)")
     s.add_argument("--max-steps", type=int, default=5, help="effects added at most (default 5)")
     s.add_argument("--refit-top", type=int, default=6, help="candidates refitted per round (default 6)")
     s.add_argument("--effects", default=None,

@@ -142,7 +142,7 @@ def headline(name: str) -> dict:
         shutil.rmtree(dst)
     dst.mkdir(parents=True)
     for f in out.iterdir():
-        if f.is_file():
+        if f.is_file() and f.name != ".blackbox-output":       # not the output folder's marker
             shutil.copy(f, dst / f.name)
     return json.loads((out / "comparison.json").read_text())
 

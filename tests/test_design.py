@@ -1,4 +1,4 @@
-"""``blackbox design`` (:mod:`blackbox.design`, :mod:`blackbox.commands.design`).
+"""``blackbox design`` (:mod:`blackbox.experiment_design`, :mod:`blackbox.commands.design`).
 
 Reference values: the fixtures' truths (``fixtures/*/truth.toml``: cube springs 1e4 N*m/rad, car
 springs 1e5 N*m/rad, car complex model Table 5.18) with their noise model (5 % of each reading,
@@ -14,7 +14,7 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from blackbox import design as D
+from blackbox import experiment_design as D
 from blackbox.commands import design as cmd
 from blackbox.commands.common import study_adapter
 from blackbox.commands.output import write_output

@@ -2,7 +2,7 @@
 
 :func:`run` condenses the study once with a unit load at every candidate load DOF (the joint
 boundary in the same batch, the candidate sensors as observed DOFs), then chooses the plan in
-the condensed space (:mod:`blackbox.design`) and returns a :class:`DesignResult`; its
+the condensed space (:mod:`blackbox.experiment_design`) and returns a :class:`DesignResult`; its
 :meth:`~DesignResult.write` puts ``design.json``, ``loads.csv``, ``measurements_template.csv``,
 ``report.md`` and the plot into a folder.
 
@@ -19,7 +19,7 @@ row and ``case`` of a sensor row.
 **The noise model of a blank sigma** (:func:`noise_model`), in this order: the ``noise`` of a
 simulated study's ``truth.json``; else the study's measurements: ``relative`` = the median of
 ``sigma / |value|`` over its rows, ``floor`` = 0.02 (``blackbox simulate``'s default); else
-``blackbox simulate``'s default (5 %, floor 0.02). :func:`blackbox.design.candidate_sigma` applies
+``blackbox simulate``'s default (5 %, floor 0.02). :func:`blackbox.experiment_design.candidate_sigma` applies
 it to the prior's predicted readings.
 
 **Prior**: the study's start values (``initial``), or ``--prior``: an earlier ``result.json`` (its
@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from blackbox import design as D
+from blackbox import experiment_design as D
 from blackbox.commands.common import as_study, study_adapter
 from blackbox.condensation import CondensedModel
 from blackbox.declared import DeclaredModel, SolverCost, declared_model, read_truth, read_truth_record, truth_joints
@@ -273,7 +273,7 @@ def run(study: Study | str | Path, candidates: str | Path | D.Candidates, *, n_l
         model: str | None = None, adapter: str | SolverAdapter | None = None, n_random: int = N_RANDOM,
         seed: int = 0) -> DesignResult:
     """Design a test of ``n_loads`` cases and ``n_sensors`` sensors (default: every candidate
-    sensor) on ``study`` from ``candidates`` (a file or :class:`~blackbox.design.Candidates`).
+    sensor) on ``study`` from ``candidates`` (a file or :class:`~blackbox.experiment_design.Candidates`).
     One solver run; everything else in the condensed space."""
     study = as_study(study)
     if not study.config.joints:
