@@ -424,7 +424,8 @@ def energy_uncertainty(condensed: Condensed, fits: ModelFits, comps: Sequence[Jo
     says how much. The loading itself is held fixed (it was chosen to maximise the difference on
     these very estimates, so ``R`` is if anything biased upward). Per joint:
     ``{"isolated"|"assembly": {"relative_difference_std", "relative_difference_interval",
-    "energy_std": {...}, "draws"}}`` or None where a parameter is not identifiable."""
+    "energy_std": {...}, "energy_interval": {...}, "draws"}}`` or None where a parameter is not
+    identifiable."""
     rng = np.random.default_rng(seed)
     sj, cj = fits.simple_model.assembly.joints, fits.complex_model.assembly.joints
     Xs, Xc = _draws(fits.simple, sj, n, rng), _draws(fits.complex, cj, n, rng)
@@ -455,6 +456,9 @@ def energy_uncertainty(condensed: Condensed, fits: ModelFits, comps: Sequence[Jo
                         "relative_difference_interval": [float(x) for x in np.percentile(R, [a, 100 - a])],
                         "energy_std": {"complex": float(np.std(E[:, 0], ddof=1)),
                                        "simple": float(np.std(E[:, 1], ddof=1))},
+                        # the energies' spread is skewed (E ~ 1/k): percentiles, not +- std, bound it
+                        "energy_interval": {"complex": [float(x) for x in np.percentile(E[:, 0], [a, 100 - a])],
+                                            "simple": [float(x) for x in np.percentile(E[:, 1], [a, 100 - a])]},
                         "confidence": confidence, "draws": int(m)}
         out.append(res)
     return out

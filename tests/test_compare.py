@@ -297,3 +297,27 @@ def test_cli_compare_bad_input_exits_2(tmp_path, capsys):
     assert "measurements.csv" in err and "Traceback" not in err
     assert main(["compare", str(tmp_path / "nope"), "--out", str(tmp_path / "o")]) == 2
     assert "not found" in capsys.readouterr().err
+
+
+def test_energy_error_bars_come_from_the_interval_not_the_std():
+    """A weakly determined fit's energies have a long tail (E ~ 1/k): the bar of a 7.4e-5 energy
+    whose draws reach 2 must not be drawn as +-0.98 (below zero); it spans the interval."""
+    from blackbox.reports.compare import energy_error_bars
+
+    err = energy_error_bars([7.4e-5, 1.0e-4, 3.0e-5], [[6.0e-5, 2.0], [9.0e-5, 1.2e-4], None])
+    np.testing.assert_allclose(err[:, 0], [7.4e-5 - 6.0e-5, 2.0 - 7.4e-5])
+    np.testing.assert_allclose(err[:, 1], [1.0e-5, 2.0e-5])
+    assert np.all(err[:, 2] == 0) and np.all(err >= 0)
+    assert 7.4e-5 - err[0, 0] > 0                       # never below zero for a positive energy
+
+
+def test_energy_uncertainty_reports_intervals(cube_study):
+    fits, jc = fit_and_compare(cube_study, np.full(9, K_HALF), cube_study["simple"], 1)
+    unc = cmp.energy_uncertainty(cube_study["cond"], fits, [jc], n=200)
+    for key in ("isolated", "assembly"):
+        u = unc[0][key]
+        if u is None:
+            continue
+        for model in ("complex", "simple"):
+            lo, hi = u["energy_interval"][model]
+            assert 0 < lo <= hi

@@ -92,3 +92,26 @@ def test_solver_cost_counts_one_batch(rigid_study):
     total = res.solver + SolverCost("mystran", 2, 10, 1.0, 1)
     assert (total.adapter, total.runs, total.right_hand_sides, total.cached_batches) == ("reference+mystran", 3,
                                                                                         res.solver.right_hand_sides + 10, 1)
+
+
+@pytest.mark.slow
+def test_diagnose_uses_the_same_declared_model(rigid_study):
+    """diagnose builds its declared model (joints, start, rigid-pair penalty) through the same
+    builder: the same parameters and the same K_deck as identify, so its declared fit on the
+    study's deck is identify's (tests/test_diagnose.py checks the fit and the split deck's
+    nesting)."""
+    from blackbox.commands import diagnose
+
+    study = load_study(rigid_study, need_measurements=True)
+    ident = identify.run(study, adapter="reference", profile=False)
+    d = diagnose.run(study, adapter="reference", effects=["load_scale"], plots=False)
+    pr = d.prepared
+    assert [j.param_names for j in pr.declared.joints] == [j.param_names for j in ident.declared.joints]
+    np.testing.assert_array_equal(pr.declared.k0, ident.declared.k0)
+    # the rigid-pair penalty in K_deck: the same matrix (same condensation, same formula)
+    np.testing.assert_allclose(pr.K_deck, ident.model.K_deck, rtol=SAME_RESPONSE_RTOL,
+                               atol=SAME_RESPONSE_RTOL * np.abs(ident.model.K_deck).max())
+    k = _k(6)
+    r_diag = pr.declared.condensed_model(ident.model.c).response(k).U_B
+    np.testing.assert_allclose(r_diag, ident.model.response(k).U_B, rtol=0, atol=SAME_RESPONSE_RTOL *
+                               np.abs(ident.model.response(k).U_B).max())

@@ -191,10 +191,15 @@ def _energy_bars(plt, comps: list[cmp.JointComparison], unc: list[dict], which: 
     for ax, jc, u in zip(axes[0], comps, unc):
         m = getattr(jc, which)
         vals = [m.energies[k] for k in keys]
-        std = (u.get(which) or {}).get("energy_std", {})
-        err = [std.get(k, 0.0) for k in keys]
+        lo_hi = (u.get(which) or {}).get("energy_interval", {})
+        err = energy_error_bars(vals, [lo_hi.get(k) for k in keys])
         bars = ax.bar(range(len(keys)), vals, color=[colors[k] for k in keys], yerr=err, capsize=4,
                       error_kw={"elinewidth": 1})
+        top = max(vals) * 3.0 if max(vals) > 0 else 1.0
+        if np.any(np.asarray(vals) + err[1] > top):
+            ax.set_ylim(0.0, top)                  # an interval far above the bars is cut, and said
+            ax.text(0.02, 0.97, "interval cut at 3x the largest bar", transform=ax.transAxes,
+                    fontsize=7, va="top")
         for b, v in zip(bars, vals):
             ax.annotate(f"{v:.3g}", (b.get_x() + b.get_width() / 2, v), ha="center", va="bottom", fontsize=8)
         ax.set_xticks(range(len(keys)), [k.replace("infinitely_flexible", "infinitely\nflexible") for k in keys],
@@ -203,11 +208,25 @@ def _energy_bars(plt, comps: list[cmp.JointComparison], unc: list[dict], which: 
         if which == "assembly":
             sub += f", simple err / inf.-flex. err = {100 * m.error_ratio():.2g} %"
         ax.set_title(f"{jc.name}: {sub}\nMDSE load mostly {m.names[m.dominant]}", fontsize=9)
-        ax.set_ylabel("strain energy 1/2 F^T C F (N*m)\nbars: +-1 std from the fits' covariances", fontsize=8)
+        ax.set_ylabel("strain energy 1/2 F^T C F (N*m)\nbars: interval from the fits' covariances", fontsize=8)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def energy_error_bars(values, intervals) -> np.ndarray:
+    """Asymmetric error bars ``(2, n)`` from each bar's interval ``[low, high]`` of the energies
+    drawn from the fits' covariances (``None``: no bar). The interval, not +-1 std, because the
+    energy of a weakly determined joint has a long tail towards the flexible side: a symmetric
+    bar of its std reaches far below zero and says nothing about the likely values."""
+    err = np.zeros((2, len(values)))
+    for i, (v, iv) in enumerate(zip(values, intervals)):
+        if iv is None or not np.all(np.isfinite(iv)):
+            continue
+        err[0, i] = max(v - float(iv[0]), 0.0)
+        err[1, i] = max(float(iv[1]) - v, 0.0)
+    return err
 
 
 def comparison_plots(first: Stage, second: Stage | None, out: Path) -> list[str]:
