@@ -247,3 +247,10 @@ def test_joint_grids_in_different_displacement_systems_are_bad_input(cube, tmp_p
     assert main(["identify", str(cube), "--out", str(tmp_path / "o"), "--no-cache"]) == 2
     err = capsys.readouterr().err
     assert "study.toml" in err and "different displacement systems" in err
+
+
+def test_out_with_missing_parent_folders_is_made(cube, tmp_path):
+    """``--out out/cube`` on a fresh checkout (the README's quick start): the parents are made."""
+    out = tmp_path / "new" / "deeper" / "cube"
+    assert main(["identify", str(cube), "--out", str(out), "--no-cache"]) == 0
+    assert (out / "result.json").is_file()

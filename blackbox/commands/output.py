@@ -61,11 +61,13 @@ def check_out(out: str | Path, command: str, *, protect: tuple[Path, ...] = ()) 
                 what = f"the output of 'blackbox {found}'" if found else "files this command did not write"
                 raise StudyError(f"--out is not empty: it holds {what}. Give a new or empty folder "
                                  f"(an earlier output of 'blackbox {command}' may be replaced)", file=str(out))
-    parent = out.parent
+    parent = out.parent                      # missing parents are created (nothing is replaced)
+    while not parent.exists():
+        parent = parent.parent
     if not parent.is_dir():
-        raise StudyError("the parent folder of --out does not exist", file=str(out))
+        raise StudyError(f"{parent} is a file, not a folder, so --out cannot be made there", file=str(out))
     if not os.access(parent, os.W_OK | os.X_OK):
-        raise StudyError("cannot write in the parent folder of --out (permission denied)", file=str(out))
+        raise StudyError(f"cannot write in {parent}, the parent folder of --out (permission denied)", file=str(out))
     return out
 
 
@@ -75,6 +77,7 @@ def write_output(out: str | Path, command: str, write: Callable[[Path], list[str
     An earlier output of the same command at ``out`` is replaced only after the new one is
     complete. Returns the file names ``write`` reported."""
     out = check_out(out, command)
+    out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
     umask = os.umask(0)
     os.umask(umask)
