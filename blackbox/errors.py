@@ -7,7 +7,7 @@ a bad argument or option are also ``ValueError`` so that callers catching ``Valu
 working. This module imports nothing of ``blackbox`` (every other module may import it).
 """
 
-from solver_adapters.protocol import (DeckFormatError, FactorizationError, ModelError, OptionError,
+from solver_adapters.protocol import (located, DeckFormatError, FactorizationError, ModelError, OptionError,
                                       PluginConflictError, PluginLoadError, RegistryError, SolverError,
                                       SolverRunError, SolverTimeoutError, UnknownDofError,
                                       UnknownPluginError, UnstableStructureError)
@@ -23,12 +23,7 @@ class StudyError(BlackboxError):
     def __init__(self, message: str, *, file: str | None = None, line: int | None = None,
                  column: str | None = None):
         self.file, self.line, self.column = file, line, column
-        where = ""
-        if file:
-            where = str(file) + (f":{line}" if line is not None else "")
-            if column:
-                where += f" column '{column}'"
-        super().__init__(f"{where}: {message}" if where else message)
+        super().__init__(located(message, file, line, column))
 
 
 class IdentificationError(BlackboxError):

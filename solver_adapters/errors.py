@@ -162,18 +162,23 @@ class NumberFieldError(ValueError):
     reader, which re-raises it as :class:`DeckFormatError` with the file, line and card."""
 
 
+def located(message: str, file: str | None = None, line: int | None = None, column: str | None = None) -> str:
+    """``file:line column 'c': message`` (the parts that are known), for errors about an input file."""
+    where = ""
+    if file:
+        where = str(file) + (f":{line}" if line is not None else "")
+        if column:
+            where += f" column '{column}'"
+    return f"{where}: {message}" if where else message
+
+
 class TableFormatError(ValueError):
     """A CSV table that cannot be used: says file, line, column and what was given."""
 
     def __init__(self, message: str, *, file: str | None = None, line: int | None = None,
                  column: str | None = None):
         self.message, self.file, self.line, self.column = message, file, line, column
-        where = ""
-        if file:
-            where = str(file) + (f":{line}" if line is not None else "")
-            if column:
-                where += f" column '{column}'"
-        super().__init__(f"{where}: {message}" if where else message)
+        super().__init__(located(message, file, line, column))
 
 
 class InsecureFileError(PermissionError):
@@ -181,7 +186,7 @@ class InsecureFileError(PermissionError):
     how to fix it. A ``PermissionError`` (so an ``OSError``): the file cannot be used."""
 
 
-__all__ = ["COMPONENT_NAMES", "SolverError", "DeckFormatError", "ModelError", "UnstableStructureError",
+__all__ = ["located", "COMPONENT_NAMES", "SolverError", "DeckFormatError", "ModelError", "UnstableStructureError",
            "UnknownDofError", "SolverRunError", "SolverTimeoutError", "FactorizationError",
            "RegistryError", "UnknownPluginError", "PluginLoadError", "PluginConflictError",
            "OptionError", "AdapterNotFound", "CorruptEntry", "UnauthenticEntry", "CheckFailure", "NumberFieldError",

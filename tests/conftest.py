@@ -51,6 +51,12 @@ def copy_fixture(name: str, dest: Path, *ignore: str) -> Path:
 
 
 @pytest.fixture
+def cube(tmp_path) -> Path:
+    """A copy of the cube fixture study that a test may edit (``tmp_path/cube``, no plots, no cache)."""
+    return copy_fixture("cube", tmp_path / "cube", "*.png")
+
+
+@pytest.fixture
 def runs_under_tmp_path(tmp_path, monkeypatch):
     """Run directories of external codes (kept on failure) go below the test's tmp_path, not the
     system temporary folder. Modules that run external codes use it for every test:

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 from pathlib import Path
 
 import pytest
@@ -19,14 +18,6 @@ from blackbox.cli import main
 from blackbox.commands.output import MARKER, check_out, write_output
 from blackbox.errors import StudyError
 
-FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
-
-
-@pytest.fixture
-def cube(tmp_path) -> Path:
-    dst = tmp_path / "cube"
-    shutil.copytree(FIXTURES / "cube", dst, ignore=shutil.ignore_patterns(".blackbox_cache", "*.png"))
-    return dst
 
 
 # --------------------------------------------------------------------------------------------

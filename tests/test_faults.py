@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -22,14 +21,6 @@ import pytest
 from blackbox.cli import main
 from blackbox.commands.output import MARKER
 
-FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
-
-
-@pytest.fixture
-def cube(tmp_path) -> Path:
-    dst = tmp_path / "cube"
-    shutil.copytree(FIXTURES / "cube", dst, ignore=shutil.ignore_patterns(".blackbox_cache", "*.png"))
-    return dst
 
 
 def _legacy(study: Path, misbehave: str, timeout_s: float = 60.0) -> None:
