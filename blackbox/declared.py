@@ -100,7 +100,7 @@ class SolverCost:
 class FitOptions:
     """The study's ``[identification]`` options that the estimator takes."""
     fixed_point: bool = True
-    max_iterations: int = 50
+    max_iterations: int = 30                 # as [identification] max_iterations
     confidence: float = 0.95
     bootstrap: int = 0
     profile: bool = True
