@@ -11,8 +11,8 @@ the cluster's start):
   set-up of the coverage test in ``tests/test_identification.py``: 31 load cases, the joint's 12
   DOFs measured in L1 + R1..R10, R10 held out, 5 % noise, profile-likelihood intervals);
 * ``batch diagnose`` of 4 studies with undeclared effects (``fixtures/undeclared``, reference
-  solver): the edited-deck runs of one diagnosis are not mapped through the executor, so the
-  diagnoses themselves are the tasks;
+  solver): the diagnoses themselves are the tasks (one diagnosis's own runs on the cluster:
+  ``benchmarks/diagnose_parallel.py``);
 * one MYSTRAN batch of unit loads on a generated car-body-like frame, as one run against
   column chunks run side by side (``CommandAdapter.executor``), each chunk a MYSTRAN process.
 

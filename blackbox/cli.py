@@ -143,8 +143,10 @@ def cmd_diagnose(args) -> int:
 
     out = _out_for(args, "diagnose")
     effects = tuple(e.strip() for e in args.effects.split(",") if e.strip()) if args.effects else None
-    res = diagnose.run(args.study, adapter=args.adapter, alpha=args.alpha, max_steps=args.max_steps,
-                       refit_top=args.refit_top, effects=effects, progress=lambda s: print(s, flush=True))
+    with _executor(args, "diagnose runs") as ex:
+        res = diagnose.run(args.study, adapter=args.adapter, alpha=args.alpha, max_steps=args.max_steps,
+                           refit_top=args.refit_top, effects=effects, progress=lambda s: print(s, flush=True),
+                           executor=ex)
     write_output(out, "diagnose", res.write)
     d = res.document
     b, a = d["before"], d["after"]
@@ -357,6 +359,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = _study_command(sub, "diagnose", "find what the declared model lacks, add it, report before/after",
                        cmd_diagnose)
+    add_parallel_options(s)
     s.add_argument("--alpha", type=float, default=0.01,
                    help="significance level of the whole search (spent over its rounds; default 0.01)")
     s.add_argument("--max-steps", type=int, default=5, help="effects added at most (default 5)")

@@ -250,6 +250,69 @@ def test_bench_rows_on_cluster_are_the_serial_rows(cluster):
     assert {r["case"] for r in dist} == set(cases) and all(r["wall_s"] > 0 for r in dist)
 
 
+def _diagnosis_numbers(res) -> dict:
+    """What a diagnosis concluded, without its timings: the effects added with their
+    parameters, the fit before and after, the final joint parameters, the solver runs."""
+    d = res.document
+    return {"added": [(e["effect"], tuple(e["where"]), e["variant"], [(p["name"], p["value"], p["std"])
+                                                                       for p in e["parameters"]])
+                      for e in d["added"]],
+            "before": (d["before"]["reduced_chi2"], d["before"]["chi2"]),
+            "after": (d["after"]["reduced_chi2"], d["after"]["chi2"]),
+            "final": [(j, n, p["value"], p["std"]) for j, rec in d["joint_parameters"]["final"].items()
+                      for n, p in rec["parameters"].items()],
+            "verdict": d["verdict"],
+            "runs": [(r.purpose, r.deck, r.right_hand_sides) for r in res.diagnosis.runs],
+            "cost": (res.solver.runs, res.solver.right_hand_sides, res.solver.cached_batches)}
+
+
+def _diagnose_serial_and_on_cluster(study, cluster) -> tuple[dict, dict]:
+    """The same diagnosis serially and with ``executor=cluster``; the conclusions compared (the
+    parameters to 1e-9: the tasks' arithmetic may be split differently by BLAS threads)."""
+    from blackbox.commands import diagnose
+
+    serial = _diagnosis_numbers(diagnose.run(study, plots=False))
+    on_cluster = _diagnosis_numbers(diagnose.run(study, plots=False, executor=cluster))
+    assert serial["added"] and serial["added"][0][0] == "support_flexibility"
+    assert [a[:3] for a in on_cluster["added"]] == [a[:3] for a in serial["added"]]
+    for a, b in zip(on_cluster["added"], serial["added"]):
+        np.testing.assert_allclose([v for p in a[3] for v in p[1:]], [v for p in b[3] for v in p[1:]], rtol=1e-9)
+    for key in ("before", "after"):
+        np.testing.assert_allclose(on_cluster[key], serial[key], rtol=1e-9)
+    assert [f[:2] for f in on_cluster["final"]] == [f[:2] for f in serial["final"]]
+    np.testing.assert_allclose([f[2:] for f in on_cluster["final"]], [f[2:] for f in serial["final"]], rtol=1e-9)
+    assert on_cluster["verdict"] == serial["verdict"]
+    # the same batched runs, in the same order (the condensation's record first, as serially)
+    assert on_cluster["runs"] == serial["runs"]
+    return serial, on_cluster
+
+
+def test_diagnose_runs_on_cluster_equal_serial(cluster, tmp_path):
+    """``diagnose.run(..., executor=cluster)``, reference solver: the declared condensation and
+    the element run are tasks on the workers (from the study packed in memory), the split run
+    and the loop run here; the same effects, fit, parameters and solver runs as serially."""
+    from blackbox.cli import build_parser
+
+    study = copy_fixture("undeclared/support_flexibility", tmp_path / "study")
+    serial, on_cluster = _diagnose_serial_and_on_cluster(study, cluster)
+    assert on_cluster["cost"] == serial["cost"]
+    # the command line takes --workers / --scheduler for diagnose
+    args = build_parser().parse_args(["diagnose", str(study), "--out", str(tmp_path / "o"), "--workers", "2"])
+    assert args.workers == 2
+
+
+@needs_mystran
+def test_diagnose_through_mystran_on_cluster_equals_serial(cluster, tmp_path):
+    """The same through MYSTRAN: the condensation a task, the element and split runs cut into
+    column chunks over the workers; the same conclusions, and every chunk a solver run of its own
+    (more runs than serially, the same right-hand sides)."""
+    study = copy_fixture("undeclared/support_flexibility", tmp_path / "study")
+    toml = (study / "study.toml").read_text()
+    (study / "study.toml").write_text(toml.replace('adapter = "reference"', 'adapter = "mystran"'))
+    serial, on_cluster = _diagnose_serial_and_on_cluster(study, cluster)
+    assert on_cluster["cost"][1:] == serial["cost"][1:] and on_cluster["cost"][0] > serial["cost"][0]
+
+
 @needs_mystran
 def test_mystran_batch_in_chunks_side_by_side_equals_one_run(cluster, tmp_path, monkeypatch):
     """A MYSTRAN batch cut into column chunks, each a separate MYSTRAN process on a worker,

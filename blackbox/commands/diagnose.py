@@ -12,13 +12,28 @@
    the measured DOFs, unit pair loads and the study's load cases.
 
 The edited decks are run from a temporary folder, removed afterwards; their text is kept. Then
-the loop of :mod:`blackbox.diagnosis.search`. :func:`run` returns a :class:`DiagnosisResult`; its
+the loop of :mod:`blackbox.diagnosis.search`.
+
+With an executor of more than one worker (``run(..., executor=...)``, ``--workers N``), run 1 is
+a task on the cluster (it carries the study folder in memory, :func:`blackbox.parallel.pack_study`,
+and builds its adapter where it runs: no shared file system is needed) and runs while run 2 goes:
+through an external solver cut into column chunks over the workers
+(:func:`blackbox.parallel.use_executor`; each chunk carries the deck's text), with the in-process
+reference solver as one task carrying the element deck's text. Run 3 is not independent of them:
+the split deck's ``K0`` springs come from run 2's ``K_e``, and with more undeclared-joint grids
+than ``max_joint_candidates`` its cuts are chosen by run 1's residuals. It runs here, on the
+client (whose adapter the loop keeps using for later columns), as soon as its inputs are in --
+while run 1 is still on its worker when the cuts do not need the declared fit -- an external
+solver's runs again in column chunks. The solver's answers are the serial run's; the declared
+fit, the candidates and the loop (its refits included) run here as they do
+serially. :func:`run` returns a :class:`DiagnosisResult`; its
 :meth:`~DiagnosisResult.write` puts ``diagnosis.json``, ``report.md``, the plots and the edited
 decks (``decks/elements.bdf``, ``decks/split.bdf``) into a folder.
 """
 
 from __future__ import annotations
 
+import concurrent.futures
 import dataclasses
 import functools
 import json
@@ -37,18 +52,21 @@ from blackbox.declared import DeclaredModel, SolverCost, declared_model
 from blackbox.diagnosis.decks import SplitDeck, element_deck, split_deck
 from blackbox.diagnosis.document import diagnosis_document, verdict_detail
 from blackbox.diagnosis.effects import CandidateContext, Effect, families
+from blackbox.diagnosis.effects.undeclared_joint import UndeclaredJoint, joint_candidate_grids
 from blackbox.diagnosis.residuals import default_holdout
 from blackbox.diagnosis.runs import RunRecord, element_stiffness
 from blackbox.diagnosis.search import Diagnosis, diagnose
 from blackbox.diagnosis.split import SplitBase
 from blackbox.errors import DiagnosisError
 from blackbox.identification import IdentificationResult, Observations, identify
+from blackbox.parallel import Executor, StudyPackage, pack_study, use_executor
 from blackbox.study import Study, read_load_groups
 from solver_adapters.bdf_write import write_deck
 from solver_adapters.deck import Deck
 from solver_adapters.protocol import DofLabel, SolverAdapter
 
-__all__ = ["DiagnosisResult", "Prepared", "run", "prepare", "prepare_study", "check_options"]
+__all__ = ["DiagnosisResult", "Prepared", "PrepareTask", "Remote", "run", "prepare", "prepare_study",
+           "prepare_run", "check_options"]
 
 
 # --------------------------------------------------------------------------------------------
@@ -75,7 +93,9 @@ class Prepared:
     decks: tuple[tuple[str, str], ...]
     log: list[RunRecord]
     declared_cost: SolverCost
-    element_adapter: SolverAdapter
+    element_adapter: SolverAdapter | None
+    element_cost: SolverCost | None = None
+    """The element run's cost when it ran on a worker (``element_adapter`` is then None)."""
 
     @property
     def deck(self) -> Deck:
@@ -97,7 +117,8 @@ class Prepared:
         """What the three decks' runs cost so far (the declared condensation, the element run,
         the split runs). Right-hand sides count every batch, solved or read back from the cache
         (as :meth:`SolverCost.of_batch` counts the condensation's)."""
-        cost = self.declared_cost + SolverCost.of(self.element_adapter) + SolverCost.of(self.base.adapter)
+        element = self.element_cost if self.element_cost is not None else SolverCost.of(self.element_adapter)
+        cost = self.declared_cost + element + SolverCost.of(self.base.adapter)
         return dataclasses.replace(cost, right_hand_sides=sum(r.right_hand_sides for r in self.log))
 
 
@@ -108,12 +129,111 @@ def _residual_rms(obs: Observations, r: np.ndarray) -> dict[int, float]:
     return {g: math.sqrt(v) for g, v in acc.items()}
 
 
+# --------------------------------------------------------------------------------------------
+# runs 1 and 2 on a cluster
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PrepareTask:
+    """What travels to a worker for run 1 (``kind="declared"``: the declared model's
+    condensation on the study's deck) or run 2 (``"elements"``: the element deck, as text, and
+    its members): the study folder in memory, the adapter's name, the client's cache folder
+    (None: no cache) and the consent for an external command."""
+    kind: str
+    package: StudyPackage
+    adapter: str | None
+    cache: str | None
+    trust_command: bool
+    deck_name: str = ""
+    deck_text: str = ""
+    members: tuple[tuple[int, int, int], ...] = ()      # (eid, grid_a, grid_b), in the deck's order
+
+
+def prepare_run(task: PrepareTask):
+    """One of runs 1 and 2 where the task runs (a worker): rebuild the study folder, build the
+    adapter there, run it. Returns run 1's ``(Condensed, SolverCost)`` (the identification stays
+    on the client, as serially) or run 2's ``(K_e, asymmetry, [RunRecord], SolverCost)``."""
+    from blackbox.adapters import ADAPTER_CACHE, TRUST_COMMAND
+    from blackbox.commands.batch import _cache_for_worker
+    from blackbox.parallel import scratch, unpack_study
+    from blackbox.study import load_study
+
+    cache, _ = _cache_for_worker(task.cache)
+    tokens = (ADAPTER_CACHE.set(cache), TRUST_COMMAND.set(bool(task.trust_command)))
+    try:
+        with scratch() as tmp:
+            study = load_study(unpack_study(task.package, tmp / "study"), need_measurements=True)
+            if task.kind == "declared":
+                adapter = make_adapter_for(study, task.adapter)
+                before = SolverCost.of(adapter)
+                # the same boundary and observed DOFs as the client's: both come from the study's files
+                cm = declared_model(study).condense(adapter)
+                return cm.c, SolverCost.of_batch(cm.c, adapter, before)
+            if task.kind == "elements":
+                path = tmp / task.deck_name
+                path.write_text(task.deck_text)
+                adapter = make_adapter_for(study, task.adapter, deck=path)
+                log: list[RunRecord] = []
+                members = {eid: (a, b) for eid, a, b in task.members}
+                K_e, asym = element_stiffness(adapter, members, log, deck=task.deck_name)
+                return K_e, asym, log, SolverCost.of(adapter)
+            raise ValueError(f"unknown prepare task {task.kind!r}")
+    finally:
+        ADAPTER_CACHE.reset(tokens[0])
+        TRUST_COMMAND.reset(tokens[1])
+
+
+@dataclass(frozen=True)
+class Remote:
+    """How :func:`prepare_study` sends runs 1 and 2 to a cluster: the executor and what each
+    task carries besides its deck (see :class:`PrepareTask`)."""
+    executor: Executor
+    package: StudyPackage
+    adapter: str | None
+    cache: str | None
+    trust_command: bool
+
+    @classmethod
+    def of(cls, study: Study, executor: Executor, adapter: str | None) -> "Remote":
+        """The study packed once, the cache and consent the command would use here
+        (:data:`blackbox.adapters.ADAPTER_CACHE`, :data:`~blackbox.adapters.TRUST_COMMAND`), the
+        cache as an absolute folder of the client (a worker uses it when it sees it)."""
+        from blackbox.adapters import ADAPTER_CACHE, TRUST_COMMAND
+        from solver_adapters.cache import CACHE_DIRNAME
+
+        c = ADAPTER_CACHE.get()
+        cache = str(Path(study.root).absolute() / CACHE_DIRNAME) if c is True else (
+            str(Path(c).absolute()) if c else None)
+        return cls(executor, pack_study(study.root), adapter, cache, TRUST_COMMAND.get())
+
+    def task(self, kind: str, **kw) -> PrepareTask:
+        return PrepareTask(kind, self.package, self.adapter, self.cache, self.trust_command, **kw)
+
+
+def _chunked(adapter: SolverAdapter) -> bool:
+    """Whether :func:`use_executor` gave ``adapter`` (or the adapter in its cache wrapper) an
+    executor: its batches are then cut into column chunks over the workers."""
+    while not hasattr(adapter, "executor") and hasattr(adapter, "inner"):
+        adapter = adapter.inner
+    return getattr(adapter, "executor", None) is not None
+
+
+def _split_needs_declared_fit(deck: Deck, dm: DeclaredModel, fams, max_joint_candidates: int) -> bool:
+    """Whether the split deck's cuts depend on the declared fit: only the undeclared-joint
+    family's, when it has more grids than ``max_joint_candidates`` and there is a declared fit
+    (its residuals then choose the grids; :meth:`UndeclaredJoint.cut`)."""
+    if not dm.joints or UndeclaredJoint not in fams:
+        return False
+    declared = {g for j in dm.joints for g in j.grids}
+    return len(joint_candidate_grids(deck, declared)) > max_joint_candidates
+
+
 def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapter], deck_dir: Path, *,
                   max_joint_candidates: int = 300, effects: Sequence[str] | None = None,
-                  say: Callable[[str], None] | None = None) -> Prepared:
+                  say: Callable[[str], None] | None = None, remote: Remote | None = None) -> Prepared:
     """Fit the declared model, run the element and the split deck (written into ``deck_dir``),
     list the candidates of the families ``effects`` (default: all). ``adapter_for(path)``: the
-    adapter for the deck at ``path`` (``None``: the study's own deck)."""
+    adapter for the deck at ``path`` (``None``: the study's own deck). ``remote``: runs 1 and 2
+    as tasks of its executor (module docstring); the split run stays on ``adapter_for``."""
     say = say or (lambda msg: None)
     fams = families(effects)
     if study.measurements is None:
@@ -133,52 +253,102 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
     dm = dm.with_holdout(declared_holdout or default_holdout(measured_cases))
     fit_obs, hold_obs = dm.observations(study.loads.cases)
 
-    # ---- 1. the declared model on the study's deck ---------------------------------------------
-    adapter = adapter_for(None)
-    cost = SolverCost(adapter.name)
-    ident, K_deck = None, None
-    if dm.joints:
-        before = SolverCost.of(adapter)
-        cm = dm.condense(adapter)
-        cost = SolverCost.of_batch(cm.c, adapter, before)
-        log.append(RunRecord("declared model: condensation", study.deck_path.name,
-                             cost.right_hand_sides, cm.c.wall_s))
-        K_deck = dm.K_deck(cm.c)                 # deck springs minus the rigid-pair penalty
-        ident = identify(cm, fit_obs, dm.k0, holdout=hold_obs,
-                         **dm.options.kwargs(profile=False, bootstrap=0))
-        say(f"declared model: reduced chi2 = {ident.reduced_chi2:.4g} ({ident.n_obs} rows, "
-            f"{ident.n_params} parameters)")
-
-    # ---- 2. member stiffness from the element deck ---------------------------------------------
     decks = []
     edeck, emembers = element_deck(deck)
     epath = deck_dir / "elements.bdf"
     decks.append((epath.name, write_deck(edeck, "large")))
     epath.write_text(decks[-1][1])
-    eadapter = adapter_for(epath)
-    K_e, e_asym = element_stiffness(eadapter, emembers, log, deck=epath.name)
 
-    # ---- 3. the split deck ---------------------------------------------------------------------
-    ctx = CandidateContext(deck, tuple(dm.joints), K_e, fit_obs, tuple(study.loads.cases),
-                           _residual_rms(fit_obs, ident.residuals) if ident is not None else None,
-                           max_joint_candidates, read_load_groups(study.root / "loads.csv"))
-    sd = split_deck(deck, K_e, fams, ctx)
-    spath = deck_dir / "split.bdf"
-    decks.append((spath.name, write_deck(sd.deck, "large")))
-    spath.write_text(decks[-1][1])
-    boundary = dm.boundary
-    o_dofs = list(dict.fromkeys(list(study.measurements.all_dofs)))
-    member_ends = [d for dofs in sd.member_dofs.values() for d in dofs]
-    say(f"split deck: {len(sd.pairs)} cut DOF pairs, {len(sd.connections)} connection candidates")
-    base = SplitBase(adapter_for(spath), study.loads, sd.pairs, list(dict.fromkeys(boundary + o_dofs)),
-                     list(dict.fromkeys(boundary + o_dofs + member_ends)), log, deck=spath.name)
+    def fit_declared(c) -> tuple[np.ndarray, IdentificationResult, RunRecord]:
+        """The declared model's identification on run 1's condensation (here, as serially)."""
+        cm = dm.condensed_model(c)
+        rec = RunRecord("declared model: condensation", study.deck_path.name, cost.right_hand_sides, c.wall_s)
+        ident = identify(cm, fit_obs, dm.k0, holdout=hold_obs, **dm.options.kwargs(profile=False, bootstrap=0))
+        say(f"declared model: reduced chi2 = {ident.reduced_chi2:.4g} ({ident.n_obs} rows, "
+            f"{ident.n_params} parameters)")
+        return dm.K_deck(c), ident, rec       # deck springs minus the rigid-pair penalty
 
-    # ---- candidates ----------------------------------------------------------------------------
+    ident, K_deck = None, None
+    eadapter, ecost = None, None
+    with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="diagnose-declared") as pool:
+        pending = None
+        if remote is None:
+            # ---- 1. the declared model on the study's deck ---------------------------------------
+            adapter = adapter_for(None)
+            cost = SolverCost(adapter.name)
+            if dm.joints:
+                before = SolverCost.of(adapter)
+                cm = dm.condense(adapter)
+                cost = SolverCost.of_batch(cm.c, adapter, before)
+                K_deck, ident, rec = fit_declared(cm.c)
+                log.append(rec)
+            # ---- 2. member stiffness from the element deck ---------------------------------------
+            eadapter = adapter_for(epath)
+            K_e, e_asym = element_stiffness(eadapter, emembers, log, deck=epath.name)
+        else:
+            # runs 1 and 2 side by side on the cluster: run 1 waited for in a thread of this
+            # process (executor.map blocks), so that run 3 can start here while it is still going
+            ex = remote.executor
+            if dm.joints:
+                pending = pool.submit(ex.map, prepare_run, [remote.task("declared")])
+            eadapter = use_executor(adapter_for(epath), ex)
+            if _chunked(eadapter):
+                # an external solver: the element run's many unit loads (six per member) in column
+                # chunks over the workers, the solver processes fed with the deck's text
+                K_e, e_asym = element_stiffness(eadapter, emembers, log, deck=epath.name)
+                cost = SolverCost(eadapter.name)
+            else:
+                # no chunk hook (the in-process reference solver): the run is one task
+                eadapter = None
+                etask = remote.task("elements", deck_name=epath.name, deck_text=decks[-1][1],
+                                    members=tuple((eid, a, b) for eid, (a, b) in emembers.items()))
+                K_e, e_asym, erecs, ecost = ex.map(prepare_run, [etask])[0]
+                log.extend(erecs)
+                cost = SolverCost(ecost.adapter)
+
+        def collect_declared() -> None:
+            """Run 1's answer in (remote): the fit, its record first in the log as serially."""
+            nonlocal pending, K_deck, ident, cost
+            if pending is None:
+                return
+            c, cost = pending.result()[0]
+            pending = None
+            K_deck, ident, rec = fit_declared(c)
+            log.insert(0, rec)
+
+        if _split_needs_declared_fit(deck, dm, fams, max_joint_candidates):
+            collect_declared()
+
+        # ---- 3. the split deck -----------------------------------------------------------------
+        def context() -> CandidateContext:
+            return CandidateContext(deck, tuple(dm.joints), K_e, fit_obs, tuple(study.loads.cases),
+                                    _residual_rms(fit_obs, ident.residuals) if ident is not None else None,
+                                    max_joint_candidates, read_load_groups(study.root / "loads.csv"))
+        # without the fit yet, the cuts do not read the residuals (checked above)
+        sd = split_deck(deck, K_e, fams, context())
+        spath = deck_dir / "split.bdf"
+        decks.append((spath.name, write_deck(sd.deck, "large")))
+        spath.write_text(decks[-1][1])
+        boundary = dm.boundary
+        o_dofs = list(dict.fromkeys(list(study.measurements.all_dofs)))
+        member_ends = [d for dofs in sd.member_dofs.values() for d in dofs]
+        say(f"split deck: {len(sd.pairs)} cut DOF pairs, {len(sd.connections)} connection candidates")
+        sadapter = adapter_for(spath)
+        if remote is not None:
+            # an external solver's split runs (this one and the loop's later columns) cut into
+            # column chunks, one solver process per worker (blackbox.parallel.use_executor)
+            sadapter = use_executor(sadapter, remote.executor)
+        base = SplitBase(sadapter, study.loads, sd.pairs, list(dict.fromkeys(boundary + o_dofs)),
+                         list(dict.fromkeys(boundary + o_dofs + member_ends)), log, deck=spath.name)
+        collect_declared()
+
+    # ---- candidates (with the declared fit's residuals, as serially) ----------------------------
+    ctx = context()
     cands = list(sd.connections)
     for fam in fams:
         cands += fam.candidates(ctx, sd)
     return Prepared(study, dm, fit_obs, hold_obs, tuple(dm.holdout), bool(declared_holdout), K_deck, ident,
-                    K_e, e_asym, sd, base, tuple(cands), tuple(decks), log, cost, eadapter)
+                    K_e, e_asym, sd, base, tuple(cands), tuple(decks), log, cost, eadapter, ecost)
 
 
 # --------------------------------------------------------------------------------------------
@@ -247,25 +417,30 @@ def check_options(alpha: float, max_steps: int, refit_top: int, max_joint_candid
 
 def prepare(study: Study | str | Path, deck_dir: Path, *, adapter: str | None = None,
             max_joint_candidates: int = 300, effects: Sequence[str] | None = None,
-            say: Callable[[str], None] | None = None) -> Prepared:
-    """:func:`blackbox.diagnosis.prepare.prepare` with the study's adapter (or the one named) on
-    each deck; the edited decks are written into ``deck_dir``, which must exist while the
-    result's split run is used (member refits run it again)."""
+            say: Callable[[str], None] | None = None, executor: Executor | None = None) -> Prepared:
+    """:func:`prepare_study` with the study's adapter (or the one named) on each deck; the edited
+    decks are written into ``deck_dir``, which must exist while the result's split run is used
+    (member refits run it again). ``executor`` with more than one worker: runs 1 and 2 on it
+    (module docstring); otherwise everything here, one run after the other."""
     study = as_study(study, need_measurements=True)
+    remote = Remote.of(study, executor, adapter) if executor is not None and executor.workers > 1 else None
     return prepare_study(study, lambda path: make_adapter_for(study, adapter, deck=path), deck_dir,
-                           max_joint_candidates=max_joint_candidates, effects=effects, say=say)
+                         max_joint_candidates=max_joint_candidates, effects=effects, say=say, remote=remote)
 
 
 def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float = 0.01, max_steps: int = 5,
         refit_top: int = 6, max_joint_candidates: int = 300, effects: Sequence[str] | None = None,
-        plots: bool = True, progress: Callable[[str], None] | None = None) -> DiagnosisResult:
+        plots: bool = True, progress: Callable[[str], None] | None = None,
+        executor: Executor | None = None) -> DiagnosisResult:
     """Diagnose the study (module docstring). ``alpha``: the family-wise significance level of
     the whole search (alpha spending over rounds, Bonferroni within a round over the candidates
     and their variant upgrades; :mod:`blackbox.diagnosis.search`); ``max_steps``: effects added
     at most; ``refit_top``: candidates refitted per round; ``max_joint_candidates``:
     undeclared-joint grids considered at most (those nearest the residual beyond); ``effects``:
     the families to consider (default: every registered one); ``plots``: whether
-    :meth:`DiagnosisResult.write` draws the plots; ``progress(message)``."""
+    :meth:`DiagnosisResult.write` draws the plots; ``progress(message)``; ``executor``: where
+    the declared condensation and the element run go (default: serially here; see
+    :func:`prepare`), the search loop runs here either way."""
     t0 = time.perf_counter()
     check_options(alpha, max_steps, refit_top, max_joint_candidates, effects)
     say = progress or (lambda msg: None)
@@ -278,7 +453,7 @@ def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float =
 
     with tempfile.TemporaryDirectory(prefix="blackbox-diagnose-") as tmp:
         pr = prepare(study, Path(tmp), adapter=adapter, max_joint_candidates=max_joint_candidates,
-                     effects=effects, say=say)
+                     effects=effects, say=say, executor=executor)
         xyz = {int(g): tuple(v) for g, v in pr.base.adapter.grid_xyz().items()}
         ident = pr.ident
         diag = diagnose(pr.base, pr.boundary, pr.K_deck, pr.joints,
