@@ -744,22 +744,8 @@ def _pbeaml(r: _Reader, c: _Card) -> None:
     """PBEAML: PID MID GROUP TYPE / DIM1(A) .. DIMn(A) NSM(A) [SO X/XB DIM1 .. DIMn NSM] ... as
     a prismatic beam: every station's dimensions (blank: end A's) must equal end A's (a
     different one is a tapered beam: error). Section constants as for PBARL."""
-    pid, mid = _int(c, 2), _int(c, 3)
-    group = c.text(4)
-    if group not in ("", "MSCBML0"):
-        raise c.error(4, f"GROUP {group} not supported: only the standard library MSCBML0 (blank)")
-    kind = c.text(5)
-    if kind not in _PBARL_DIMS:
-        raise c.error(5, f"section TYPE {kind or '(blank)'} not supported; supported: "
-                         f"{', '.join(_PBARL_DIMS)}")
-    for i in (6, 7, 8, 9):
-        _blank(c, i, f"field {i}")
-    n = _PBARL_DIMS[kind]
-    dims = tuple(_real(c, 10 + k) for k in range(n))
-    for k, v in enumerate(dims):
-        if v <= 0.0:
-            raise c.error(10 + k, f"dimension DIM{k + 1} must be > 0")
-    _real(c, 10 + n, 0.0)                                          # NSM(A)
+    pid, mid, kind, dims = _library_section(c, max_fields=False)
+    n = len(dims)
     f = 11 + n
     while f <= len(c.fields):
         if not any(c.text(i) for i in range(f, len(c.fields) + 1)):
@@ -776,12 +762,7 @@ def _pbeaml(r: _Reader, c: _Card) -> None:
                                          f"{xxb:g} is {value:g}, at end A {dims[k]:g}")
         _real(c, f + 2 + n, 0.0)                                   # NSM
         f += n + 3
-    try:
-        a, i1, i2, j, k1, k2 = pbarl_section(kind, dims)
-    except ValueError as exc:
-        raise c.error(10 + exc.args[0], f"{kind} section: {exc.args[1]}") from None
-    r.claim("property", pid, c, 2)
-    r.deck.pbars[pid] = PBar(pid, mid, a, i1, i2, j, c.src, k1, k2, 0.0, card="PBEAML")
+    _library_pbar(r, c, pid, mid, kind, dims)
 
 
 def _baror(r: _Reader, c: _Card) -> None:
@@ -929,6 +910,13 @@ def pbarl_section(kind: str, d: tuple[float, ...]) -> tuple[float, float, float,
 def _pbarl(r: _Reader, c: _Card) -> None:
     """PBARL: PID MID GROUP TYPE / DIM1 ... DIMn NSM (MSC QRG). The section's A, I1, I2, J, K1,
     K2 (:func:`pbarl_section`) make an equivalent PBAR; NSM has no effect on the stiffness."""
+    pid, mid, kind, dims = _library_section(c, max_fields=True)
+    _library_pbar(r, c, pid, mid, kind, dims)
+
+
+def _library_section(c: _Card, *, max_fields: bool) -> tuple[int, int, str, tuple[float, ...]]:
+    """The common head of PBARL and PBEAML: PID MID GROUP TYPE, fields 6-9 blank, then the
+    section's DIM1..DIMn (> 0) and NSM; ``max_fields``: nothing may follow NSM (PBARL)."""
     pid, mid = _int(c, 2), _int(c, 3)
     group = c.text(4)
     if group not in ("", "MSCBML0"):
@@ -940,18 +928,24 @@ def _pbarl(r: _Reader, c: _Card) -> None:
     for i in (6, 7, 8, 9):
         _blank(c, i, f"field {i}")
     n = _PBARL_DIMS[kind]
-    _max_fields(c, 10 + n)
+    if max_fields:
+        _max_fields(c, 10 + n)
     dims = tuple(_real(c, 10 + k) for k in range(n))
     for k, v in enumerate(dims):
         if v <= 0.0:
             raise c.error(10 + k, f"dimension DIM{k + 1} must be > 0")
-    _real(c, 10 + n, 0.0)                   # NSM
+    _real(c, 10 + n, 0.0)                   # NSM (of end A for PBEAML)
+    return pid, mid, kind, dims
+
+
+def _library_pbar(r: _Reader, c: _Card, pid: int, mid: int, kind: str, dims: tuple[float, ...]) -> None:
+    """The equivalent PBAR of a library section (:func:`pbarl_section`), under the card's name."""
     try:
         a, i1, i2, j, k1, k2 = pbarl_section(kind, dims)
     except ValueError as exc:
         raise c.error(10 + exc.args[0], f"{kind} section: {exc.args[1]}") from None
     r.claim("property", pid, c, 2)
-    r.deck.pbars[pid] = PBar(pid, mid, a, i1, i2, j, c.src, k1, k2, 0.0, card="PBARL")
+    r.deck.pbars[pid] = PBar(pid, mid, a, i1, i2, j, c.src, k1, k2, 0.0, card=c.name)
 
 
 def _mat1(r: _Reader, c: _Card) -> None:
