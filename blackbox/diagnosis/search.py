@@ -149,16 +149,7 @@ def refit_candidate(base: SplitBase, fit: Fit, e: Effect, om: ObsMap, hold: ObsM
     m2 = AugmentedModel(base, spec2, boundary, K_deck, o_dofs)
     first = spec2.n_params - e.n_params          # the effect's own parameters: x[first:]
     _, lo, hi = spec2.transforms()
-    best = None
-    for xs in e.refit_starts(x2, step, lo, hi, first):
-        try:
-            f = fit_model(m2, om, hold, xs)
-        except (np.linalg.LinAlgError, IdentificationError):
-            continue
-        if best is None or f.chi2 < best.chi2:
-            best = f
-    if best is None:
-        raise IdentificationError(f"refit of {e.label()} failed")
+    best = _best_of(m2, om, hold, e.refit_starts(x2, step, lo, hi, first), e)
     e2 = e.trimmed(best.x[first:])
     if e2 is not None:
         spec3 = ModelSpec(spec2.joints, spec2.effects[:-1] + (e2,))
@@ -168,6 +159,22 @@ def refit_candidate(base: SplitBase, fit: Fit, e: Effect, om: ObsMap, hold: ObsM
         best = fit_model(m3, om, hold, x3)
         e = e2
     return best, e
+
+
+def _best_of(model: AugmentedModel, om: ObsMap, hold, starts, e: Effect) -> Fit:
+    """The lowest-chi2 refit of ``model`` over ``starts``; starts whose refit is singular are
+    skipped, and none left is an :class:`IdentificationError` naming the effect ``e``."""
+    best = None
+    for xs in starts:
+        try:
+            f = fit_model(model, om, hold, xs)
+        except (np.linalg.LinAlgError, IdentificationError):
+            continue
+        if best is None or f.chi2 < best.chi2:
+            best = f
+    if best is None:
+        raise IdentificationError(f"refit of {e.label()} failed")
+    return best
 
 
 def _judge(fit: Fit, f2: Fit, multiplier: float, alpha: float, hold) -> tuple[float, float, float, float,
@@ -210,16 +217,7 @@ def _refit_variant(base: SplitBase, fit: Fit, i: int, e: Effect, x_e: np.ndarray
         xs = x2.copy()
         xs[sl.start:sl.start + e.n_params] = np.where(one, np.maximum(x_e, 1e-3), x_e)
         starts.append(xs)
-    best = None
-    for xs in starts:
-        try:
-            f = fit_model(m2, om, hold, xs)
-        except (np.linalg.LinAlgError, IdentificationError):
-            continue
-        if best is None or f.chi2 < best.chi2:
-            best = f
-    if best is None:
-        raise IdentificationError(f"refit of {e.label()} failed")
+    best = _best_of(m2, om, hold, starts, e)
     xe = best.x[sl.start:sl.start + e.n_params]
     e2 = e.trimmed(xe)
     if e2 is not None:
