@@ -7,14 +7,17 @@ just a deck plus a description of its flexible joints: exactly what a user bring
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from blackbox.joints import frame_element_stiffness, make_joint, spring_network
 from blackbox.reference_tables import TABLE_3_1
 from solver_adapters.bdf_write import print_float_free
+from solver_adapters.deck import Deck, Spring
 
 
 @dataclass
@@ -206,3 +209,45 @@ def random_loads(builder: FrameBuilder, n_cases: int, seed: int = 1, per_case: i
             mag = force if comp <= 3 else moment
             rows.append((f"L{c + 1}", int(g), comp, float(mag * rng.uniform(-1, 1))))
     return rows
+
+
+class TruthDeck:
+    """A truth deck under construction: a copy of the declared deck with effects planted in it
+    (springs, joints), new grid and element ids above the deck's own. Used by the generators of
+    studies with undeclared effects (``fixtures/undeclared/generate.py``, ``benchmarks/blind``)."""
+
+    def __init__(self, deck: Deck):
+        self.deck = copy.deepcopy(deck)
+        self.next_grid = max(self.deck.grids) + 1
+        ids = list(self.deck.cbars) + list(self.deck.rbe2s) + list(self.deck.springs)
+        self.next_eid = max(ids) + 1
+
+    def eid(self) -> int:
+        self.next_eid += 1
+        return self.next_eid - 1
+
+    def spring(self, k: float, g1: int, c1: int, g2: int = 0, c2: int = 0) -> None:
+        e = self.eid()
+        self.deck.springs[e] = Spring(e, g1, c1, g2, c2, k=float(k), card="CELAS2")
+
+    def members_at(self, grid: int) -> list[int]:
+        return sorted(e for e, b in self.deck.cbars.items() if grid in (b.ga, b.gb))
+
+    def k_diag(self, eid: int, grid: int) -> np.ndarray:
+        """The diagonal (6) of member ``eid``'s global stiffness at its end ``grid``."""
+        d = self.deck
+        b = d.cbars[eid]
+        p = d.pbars[b.pid]
+        m = d.mat1s[p.mid]
+        K = frame_element_stiffness(d.grids[b.ga].xyz, d.grids[b.gb].xyz, m.e, m.g, p.a, p.i2, p.i1, p.j, b.x)
+        end = 0 if b.ga == grid else 1
+        return np.diag(K)[6 * end:6 * end + 6]
+
+    def joint(self, name: str, grids, model: str, params) -> None:
+        for s in spring_network(make_joint(name, grids, model), params):
+            self.spring(s.k, s.a[0], s.a[1], *(s.b if s.b is not None else (0, 0)))
+
+
+def coupled_kc(grids, simple_values, rho: np.ndarray, t: float) -> np.ndarray:
+    """``K_C = S^1/2 (I + t rho) S^1/2``: the simple model's ``K_C`` (``S``) coupled by the
+    symmetric zero-diagonal ``rho`` of spectral norm 1; positive definite for ``t < 1``."""

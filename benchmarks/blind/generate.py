@@ -45,7 +45,6 @@ for the diagnosis, ``OUT/hidden/sNNNN`` with ``planted.json`` and the truth).
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import math
 import shutil
@@ -63,13 +62,13 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from blackbox.commands import simulate as simulate_cmd                    # noqa: E402
-from blackbox.joints import (complex_params_from_kc, frame_element_stiffness,  # noqa: E402
-                             make_joint, spring_network)
+from blackbox.joints import complex_params_from_kc, make_joint             # noqa: E402
 from blackbox.simulation import NoiseConfig, noise_sigma                    # noqa: E402
-from blackbox.structures import FrameBuilder, random_loads, star_joint_frame, tube_body, write_study  # noqa: E402
+from blackbox.structures import (FrameBuilder, TruthDeck, random_loads, star_joint_frame,  # noqa: E402
+                                 tube_body, write_study)
 from solver_adapters.bdf import read_deck_text                            # noqa: E402
 from solver_adapters.bdf_write import write_deck                          # noqa: E402
-from solver_adapters.deck import Deck, Grid, Mat1, PBar, Rbe2, Spring     # noqa: E402
+from solver_adapters.deck import Deck, Grid, Mat1, PBar, Rbe2             # noqa: E402
 from solver_adapters.protocol import LoadMatrix                           # noqa: E402
 from solver_adapters.reference import ReferenceAdapter                   # noqa: E402
 
@@ -252,39 +251,6 @@ def build_structure(rng: np.random.Generator, shape: str) -> tuple[FrameBuilder,
 # --------------------------------------------------------------------------------------------
 # deck edits of the truth
 # --------------------------------------------------------------------------------------------
-class TruthDeck:
-    """A truth deck under construction: a copy of the declared deck, new ids above its own."""
-
-    def __init__(self, deck: Deck):
-        self.deck = copy.deepcopy(deck)
-        self.next_grid = max(self.deck.grids) + 1
-        ids = list(self.deck.cbars) + list(self.deck.rbe2s) + list(self.deck.springs)
-        self.next_eid = max(ids) + 1
-
-    def eid(self) -> int:
-        self.next_eid += 1
-        return self.next_eid - 1
-
-    def spring(self, k: float, g1: int, c1: int, g2: int = 0, c2: int = 0) -> None:
-        e = self.eid()
-        self.deck.springs[e] = Spring(e, g1, c1, g2, c2, k=float(k), card="CELAS2")
-
-    def members_at(self, grid: int) -> list[int]:
-        return sorted(e for e, b in self.deck.cbars.items() if grid in (b.ga, b.gb))
-
-    def k_diag(self, eid: int, grid: int) -> np.ndarray:
-        """The diagonal (6) of member ``eid``'s global stiffness at its end ``grid``."""
-        d = self.deck
-        b = d.cbars[eid]
-        p = d.pbars[b.pid]
-        m = d.mat1s[p.mid]
-        K = frame_element_stiffness(d.grids[b.ga].xyz, d.grids[b.gb].xyz, m.e, m.g, p.a, p.i2, p.i1, p.j, b.x)
-        end = 0 if b.ga == grid else 1
-        return np.diag(K)[6 * end:6 * end + 6]
-
-    def joint(self, name: str, grids, model: str, params) -> None:
-        for s in spring_network(make_joint(name, grids, model), params):
-            self.spring(s.k, s.a[0], s.a[1], *(s.b if s.b is not None else (0, 0)))
 
 
 def coupled_kc(grids, simple_values, rho: np.ndarray, t: float) -> np.ndarray:
