@@ -151,10 +151,15 @@ def cmd_diagnose(args) -> int:
     d = res.document
     b, a = d["before"], d["after"]
     added = ", ".join(f"{e['effect']} @ {', '.join(map(str, e['where']))[:40]}" for e in d["added"]) or "nothing"
+    val = d.get("validation") or {}
+    if "k" in val:
+        check = f"{val['k']}-fold chi2 {val['cv_chi2_before']:.5g} -> {val['cv_chi2_after']:.5g}"
+    elif b["holdout_rms"] is not None and a["holdout_rms"] is not None:
+        check = f"hold-out RMS {b['holdout_rms']:.4g} -> {a['holdout_rms']:.4g}"
+    else:
+        check = "no check against unfitted data (one case)"
     print(f"added {added}; reduced chi2 {b['reduced_chi2']:.4g} -> {a['reduced_chi2']:.4g} "
-          f"(99% band {a['band_99'][0]:.3g}..{a['band_99'][1]:.3g}), hold-out RMS "
-          f"{b['holdout_rms'] if b['holdout_rms'] is not None else float('nan'):.4g} -> "
-          f"{a['holdout_rms'] if a['holdout_rms'] is not None else float('nan'):.4g}; verdict {d['verdict']}; "
+          f"(99% band {a['band_99'][0]:.3g}..{a['band_99'][1]:.3g}), {check}; verdict {d['verdict']}; "
           f"{d['solver']['runs']} solver runs, {d['wall_s']:.1f} s -> {out}")
     if d["verdict"] == "unexplained":
         print(f"blackbox diagnose: unexplained (exit {EXIT_UNUSABLE}): {d['verdict_detail']}", file=sys.stderr)

@@ -195,3 +195,21 @@ def test_run_one_records_and_cleans_up(tmp_path):
     rec = run_one(3, SEED, tmp_path)
     assert rec["study"] == "s0003" and "diagnose_s" in rec and not rec.get("error")
     assert not (tmp_path / "studies" / "s0003").exists() and (tmp_path / "hidden" / "s0003" / "planted.json").is_file()
+
+
+def test_explanations_the_data_hardly_tell_apart_are_named(tmp_path):
+    """Blind study 118 of seed 1: a flexible support at grid 1, whose data a factor on member 1
+    (ending at that support) explains almost as well. Whichever the diagnosis adds, the other is
+    named beside it as an alternative (evidence within 10: not a "very strong" difference)."""
+    from blackbox.commands.diagnose import run as diagnose
+
+    st = gen.generate_study(118, 1, tmp_path)
+    assert st.planted["kind"] == "support_flexibility" and st.planted["where"] == 1
+    d = diagnose(st.folder, adapter="reference", plots=False).document
+    first = d["added"][0]
+    pair = {("support_flexibility", (1,)), ("member_stiffness", (1,))}
+    assert (first["effect"], tuple(first["where"])) in pair
+    other = pair - {(first["effect"], tuple(first["where"]))}
+    named = {(a["effect"], tuple(a["where"])) for a in first["alternatives"]}
+    assert other <= named, first["alternatives"]
+    assert all(0 <= a["evidence_gap"] < 10 for a in first["alternatives"])

@@ -15,13 +15,19 @@ One study (:func:`generate_study`):
   ``FrameBuilder.flexible_joint``); two joints never share a member (a member between two
   free-rotation ends would spin about its axis in the declared deck); the truth of each is the
   simple model, every spring a random factor of the branch members' bending stiffness 4EI/L;
-* 8-20 load cases (``random_loads``), about a fifth of them hold-out cases;
+* 8-20 load cases (``random_loads``); in two studies of three about a fifth of them are hold-out
+  cases, in the third none are declared (every case fitted; the diagnosis then checks additions by
+  K-fold cross-validation over the load cases);
 * sensors: every joint DOF and all six components of 3-8 random grids;
 * noise: 1-5 % of each value, floored at 2-10 % of the case's largest value of the same kind;
 * the planted effect, written into the truth deck ``truth/truth.bdf`` (deck effects) or applied
   to the simulated values (``sensor_gain``: a factor on one grid's values; ``sensor_offset``: a
-  constant added to one channel, grid and component, in every case; ``load_scale`` of one case;
-  ``load_scale`` of all cases is the truth's ``force_scale``).
+  constant added to one channel, grid and component, in every case; ``load_scale`` of one case,
+  or of a *test day*: a run of consecutive cases, a third to two thirds of them, whose loads were
+  all off by one factor; ``load_scale`` of all cases is the truth's ``force_scale``). A study with
+  a test day names the days in a ``group`` column of ``loads.csv`` half of the time (the planted
+  day one group, the other cases another); otherwise the diagnosis must find the group from the
+  data.
 
 Detection threshold of a planted effect (computed from the noise-free responses, without the
 diagnosis): the effect changes the noise-free measured values of the fitted cases by ``d``; the
@@ -465,11 +471,30 @@ def candidate_places(deck: Deck, joints: list[dict], measured_grids: list[int], 
         "undeclared_joint": [g for g in sorted(at) if len(at[g]) >= 2 and g not in declared
                              and g not in constrained and g not in in_rbe2],
         "support_flexibility": [g for g in sorted(constrained) if g in at and g not in in_rbe2],
-        "load_scale": [tuple(all_labels)] + [(c,) for c in fit_labels],
+        "load_scale": [tuple(all_labels)] + [(c,) for c in fit_labels] + test_days(all_labels, fit_labels),
         "sensor_gain": list(measured_grids),
         "sensor_offset": list(channels),
         "member_stiffness": sorted(deck.cbars),
     }
+
+
+def test_days(all_labels: list[str], fit_labels: list[str]) -> list[tuple[str, ...]]:
+    """The runs of consecutive cases that can be a planted test day: a third to two thirds of the
+    cases, with at least two fitted cases."""
+    n = len(all_labels)
+    out = []
+    for k in range(max(2, math.ceil(n / 3)), max(2, (2 * n) // 3) + 1):
+        for i in range(0, n - k + 1):
+            day = tuple(all_labels[i:i + k])
+            if sum(c in fit_labels for c in day) >= 2:
+                out.append(day)
+    return out
+
+
+def found_group_candidates(n_fit: int) -> int:
+    """How many load-scale groups the diagnosis finds from the data for ``n_fit`` fitted cases
+    (``blackbox.diagnosis.effects.load_scale``): 2 (n - 2)."""
+    return max(0, 2 * (n_fit - 2))
 
 
 def _solve_size(lam: Callable[[float], float], target: float, s_max: float, s0: float) -> tuple[float, float] | None:
@@ -528,6 +553,12 @@ def generate_study(index: int, seed: int, out: Path, kind: str | None = None, sh
     write_study(folder, builder, loads, f"blind-{name}", model="simple", initial=float(f"{initial:.3g}"))
     with (folder / "study.toml").open("a") as fh:
         fh.write(f"[identification]\nholdout_cases = {json.dumps(holdout)}\n")
+    if plan.get("group_column"):
+        day = set(plan["where"])
+        with (folder / "loads.csv").open("w") as fh:
+            fh.write("case,grid,component,value,group\n")
+            for case, g, c, v in loads:
+                fh.write(f"{case},{g},{c},{v!r},{'day2' if case in day else 'day1'}\n")
     declared = read_deck_text((folder / "model.bdf").read_text(), str(folder / "model.bdf"))
     truth = truth_deck(declared, joints, plan["kind"], plan.get("where"), plan.get("size", 0.0),
                        plan.get("sign", 1.0), plan.get("extra"))
@@ -548,7 +579,7 @@ def generate_study(index: int, seed: int, out: Path, kind: str | None = None, sh
         rows = [(c, g, comp, v + plan["offset"] if (g, comp) == (plan["where"], plan["component"]) else v, s_, r)
                 for c, g, comp, v, s_, r in rows]
     elif plan["kind"] == "load_scale" and plan["group"] != "all":
-        rows = [(c, g, comp, v * plan["factor"] if c == plan["where"][0] else v, s_, r)
+        rows = [(c, g, comp, v * plan["factor"] if c in plan["where"] else v, s_, r)
                 for c, g, comp, v, s_, r in rows]
     (folder / "measurements.csv").write_text(replace(sim, rows=rows).measurements_csv())
     (hidden / "truth.json").write_text(json.dumps({**sim.record, "truth_file": "truth/truth.toml"}, indent=2))
@@ -579,7 +610,7 @@ def _try_study(rng: np.random.Generator, index: int, kind: str, shape: str, forc
     n_cases = int(rng.integers(8, 21))
     loads = random_loads(builder, n_cases, seed=int(rng.integers(2**31)), per_case=int(rng.integers(1, 4)))
     labels = list(dict.fromkeys(r[0] for r in loads))
-    n_hold = max(2, round(0.2 * len(labels)))
+    n_hold = max(2, round(0.2 * len(labels))) if rng.random() < 2.0 / 3.0 else 0
     holdout = sorted(rng.choice(labels, size=n_hold, replace=False).tolist(), key=labels.index)
     fit_labels = [c for c in labels if c not in holdout]
     joint_grids = {g for j in joints for g in j["grids"]}
@@ -602,18 +633,28 @@ def _try_study(rng: np.random.Generator, index: int, kind: str, shape: str, forc
     except Exception:           # a mechanism, or a case that moves no measured DOF of one kind
         return None
     places = candidate_places(declared, joints, measured, fit_labels, labels, dofs)
-    n_candidates = sum(len(v) for v in places.values())
+    group_column = bool(rng.random() < 0.5)
+    # the candidates the diagnosis offers (its Bonferroni M): not the test days (places to plant),
+    # but two groups from a group column, or the groups it finds from the data
+    n_candidates = (sum(len(v) for k, v in places.items() if k != "load_scale") + 1 + len(fit_labels)
+                    + (2 if group_column else found_group_candidates(len(fit_labels))))
     plan: dict = {"kind": kind, "shape": shape, "n_candidates": n_candidates,
-                  "n_joints": len(joints), "branches": [len(j["grids"]) for j in joints]}
+                  "n_joints": len(joints), "branches": [len(j["grids"]) for j in joints],
+                  "holdout": bool(holdout)}
     if kind == NONE:
         return builder, joints, loads, holdout, measured, noise, plan
     multiple = float(math.exp(rng.uniform(*np.log(MULTIPLE_RANGE))))
     if forced_multiple is not None:
         multiple = float(forced_multiple)
     constrained = {g: c for g, c in builder.spcs.items()}
-    order = list(rng.permutation(len(places[kind])))
+    pool = places[kind]
+    if kind == "load_scale":        # all cases, one case or a test day, a third of the studies each
+        which = str(rng.choice(["all", "case", "day"]))
+        pool = [w for w in pool if (len(w) == len(labels)) == (which == "all")
+                and (len(w) == 1) == (which == "case")]
+    order = list(rng.permutation(len(pool)))
     for pi in order[:12]:
-        where = places[kind][pi]
+        where = pool[pi]
         sign = float(rng.choice([-1.0, 1.0]))
         extra: dict = {}
         if kind in ("joint_coupling", "joint_translation"):
@@ -648,6 +689,8 @@ def _try_study(rng: np.random.Generator, index: int, kind: str, shape: str, forc
         plan.update(_describe(kind, where, size, sign, labels, resp))
         if kind == "load_scale" and plan["group"] != "all":
             plan["where"] = list(where)
+            if plan["group"] == "day":
+                plan["group_column"] = group_column
         return builder, joints, loads, holdout, measured, noise, plan
     return None
 
@@ -659,7 +702,7 @@ def _describe(kind: str, where, size: float, sign: float, labels: list[str], res
     if kind in ("load_scale", "sensor_gain"):
         out = {"factor": 1.0 + sign * size}
         if kind == "load_scale":
-            out["group"] = "all" if len(where) == len(labels) else "case"
+            out["group"] = "all" if len(where) == len(labels) else ("case" if len(where) == 1 else "day")
         return out
     if kind == "member_stiffness":
         return {"factor": math.exp(sign * size)}

@@ -17,7 +17,9 @@ Scoring of one study (:func:`score`):
   per kind: ``joint_coupling`` and ``joint_translation`` the declared joint's name;
   ``undeclared_joint`` and ``support_flexibility`` the grid; ``sensor_gain`` the grid;
   ``sensor_offset`` the grid and component (the channel);
-  ``member_stiffness`` the element; ``load_scale`` the case group (every case, or the one case);
+  ``member_stiffness`` the element; ``load_scale`` the scaled cases that were fitted (every case,
+  one case, or a test day: the day's fitted cases, since a group found from the data holds only
+  fitted cases);
 * **first correct**: the first effect added is the right one; **extra**: effects added besides
   the right one (or every added effect of a none-study: a false alarm);
 * chi2 back in band (``after.in_band``), hold-out RMS before and after, whether every added
@@ -33,6 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import shutil
 import sys
 import time
@@ -46,6 +49,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from benchmarks.blind.generate import KINDS, NONE, generate_study   # noqa: E402
+from blackbox.parallel import SerialExecutor, make_executor         # noqa: E402
 
 BINS = ((0.5, 1.0), (1.0, 2.0), (2.0, 5.0 + 1e-9))
 BIN_NAMES = ("0.5-1x", "1-2x", "2-5x")
@@ -73,7 +77,14 @@ def is_match(planted: dict, effect: dict) -> bool:
     """The added ``effect`` (an entry of the document's ``added``) is the planted one: same kind,
     same place (:func:`_norm_where` compares joint names, grid and element ids, case groups; a
     sensor offset's component too, from its parameter name ``o_G_C``)."""
-    if effect.get("effect") != planted["kind"] or _norm_where(effect.get("where")) != _norm_where(planted.get("where")):
+    if effect.get("effect") != planted["kind"]:
+        return False
+    if planted["kind"] == "load_scale":
+        # the scaled cases that were fitted: a group found from the data holds only fitted cases,
+        # a group named in loads.csv (and the all-cases factor) its hold-out cases too
+        hold = {str(c) for c in planted.get("holdout_cases") or ()}
+        return ({str(c) for c in effect.get("where") or ()} - hold) == ({str(c) for c in planted["where"]} - hold)
+    if _norm_where(effect.get("where")) != _norm_where(planted.get("where")):
         return False
     if planted["kind"] == "sensor_offset" and effect.get("parameters"):
         names = {p.get("name") for p in effect["parameters"]}
@@ -115,6 +126,9 @@ def score(planted: dict, doc: dict) -> dict:
         "holdout_rms_before": before.get("holdout_rms"),
         "holdout_rms_after": after.get("holdout_rms"),
         "verdict": doc.get("verdict"),
+        "validation": (doc.get("validation") or {}).get("method"),
+        "load_group": planted.get("group") if kind == "load_scale" else None,
+        "group_column": planted.get("group_column"),
     }
 
 
@@ -203,6 +217,23 @@ def summarize(results: list[dict]) -> dict:
             conf.setdefault(r["kind"], {}).setdefault(label, 0)
             conf[r["kind"]][label] += 1
     out["confusions"] = conf
+    out["by_validation"] = {}
+    for method in sorted({r.get("validation") for r in ok if r.get("validation")}):
+        rs = [r for r in ok if r.get("validation") == method]
+        out["by_validation"][method] = {
+            "n": len(rs), "correct_at_2x": _rate([r for r in rs if r["bin"] == "2-5x"], "correct"),
+            "false_alarm": _rate([r for r in rs if r["kind"] == NONE], "false_alarm")}
+    out["load_scale_groups"] = {}
+    for label, pick in (("all cases", lambda r: r.get("load_group") == "all"),
+                        ("one case", lambda r: r.get("load_group") == "case"),
+                        ("test day, group column", lambda r: r.get("load_group") == "day" and r.get("group_column")),
+                        ("test day, found from the data",
+                         lambda r: r.get("load_group") == "day" and not r.get("group_column"))):
+        rs = [r for r in ok if r["kind"] == "load_scale" and pick(r)]
+        if rs:
+            out["load_scale_groups"][label] = {"n": len(rs), "correct": _rate(rs, "correct"),
+                                               "correct_at_2x": _rate([r for r in rs if r["bin"] == "2-5x"],
+                                                                      "correct")}
     out["by_shape"] = {}
     for shape in sorted({r["shape"] for r in ok if r.get("shape")}):
         rs = [r for r in ok if r.get("shape") == shape]
@@ -253,12 +284,17 @@ def markdown(summary: dict, settings: dict) -> str:
         f"{', '.join(settings.get('diagnosis_families') or ['?'])}. Reproduce with",
         "",
         "```",
-        f"python -m benchmarks.blind.run --n {settings['n']} --seed {settings['seed']} --out out/blind --docs",
+        f"python -m benchmarks.blind.run --n {settings['n']} --seed {settings['seed']} --out out/blind --docs"
+        + (f" --workers {settings['workers']}" if settings.get("workers", 1) > 1 else ""),
         "```",
         "",
+        *([f"(`--workers {settings['workers']}`: the studies side by side on a local Dask cluster; each study "
+           "is diagnosed as serially, but a worker runs BLAS single-threaded, so a serial run can differ "
+           "in rounding.)"] if settings.get("workers", 1) > 1 else []),
+        "",
         "Each study is a random frame (portal, ladder, space-frame box, tube body, star frame) with "
-        "1-2 flexible joints of 2-5 branches (2-3 each when there are two), 8-20 load cases (a fifth "
-        "of them hold-out), the joints' "
+        "1-2 flexible joints of 2-5 branches (2-3 each when there are two), 8-20 load cases (in two "
+        "studies of three a fifth of them hold-out, in the third none: K-fold over the cases), the joints' "
         "DOFs and 3-8 further grids measured with 1-5 % proportional noise and a 2-10 % floor, and "
         "one planted effect of random kind and place (or none) of 0.5-5 times its detection "
         "threshold (`benchmarks/blind/generate.py`). The threshold is the size at which the chi2 excess "
@@ -269,8 +305,9 @@ def markdown(summary: dict, settings: dict) -> str:
         "",
         "Right place, per kind: `joint_coupling`, `joint_translation` the declared joint; "
         "`undeclared_joint`, `support_flexibility`, `sensor_gain` the grid; `sensor_offset` the grid "
-        "and component; `member_stiffness` the element; `load_scale` the case group (all cases, or "
-        "the one case). A study counts as correct when one of the effects added is the planted kind "
+        "and component; `member_stiffness` the element; `load_scale` the scaled cases that were fitted "
+        "(all cases, one case, or a test day: a run of consecutive cases, named by a `group` column of "
+        "`loads.csv` in half of those studies, else to be found from the data). A study counts as correct when one of the effects added is the planted kind "
         "at the planted place; effects added besides it are counted as extra.",
         "",
         "## Goals",
@@ -341,6 +378,18 @@ def markdown(summary: dict, settings: dict) -> str:
         for kind, c in summary["confusions"].items():
             for label, k in sorted(c.items(), key=lambda kv: -kv[1]):
                 lines.append(f"| {kind} | {label} | {k} |")
+    if summary.get("by_validation"):
+        lines += ["", "## Per check against unfitted data", "",
+                  "`holdout`: the study declares hold-out cases; `kfold`: it declares none, every case is "
+                  "fitted and additions are checked by K-fold cross-validation over the load cases.", "",
+                  "| check | studies | correct at >= 2x | false alarms |", "|---|---|---|---|"]
+        for m, b in summary["by_validation"].items():
+            lines.append(f"| {m} | {b['n']} | {_frac(b['correct_at_2x'])} | {_frac(b['false_alarm'])} |")
+    if summary.get("load_scale_groups"):
+        lines += ["", "## Load scale by the cases scaled", "",
+                  "| scaled | studies | correct (all sizes) | correct at >= 2x |", "|---|---|---|---|"]
+        for m, b in summary["load_scale_groups"].items():
+            lines.append(f"| {m} | {b['n']} | {_frac(b['correct'])} | {_frac(b['correct_at_2x'])} |")
     if summary.get("by_shape"):
         lines += ["", "## Per structure", "", "| structure | studies | correct at >= 2x | false alarms |",
                   "|---|---|---|---|"]
@@ -405,6 +454,25 @@ def load_results(path: Path) -> dict[int, dict]:
     return done
 
 
+def _run_task(item: tuple[int, int, str, bool]) -> dict:
+    i, seed, out, keep = item
+    return {**run_one(i, seed, Path(out), keep=keep), "seed": seed, "families": _families()}
+
+
+def _record(fh, rec: dict, done: dict, args, t0: float) -> None:
+    fh.write(json.dumps(rec, default=float) + "\n")
+    fh.flush()
+    done[rec["index"]] = rec
+    mark = ("ERROR " + rec["error"][:60]) if rec.get("error") else (
+        "false alarm" if rec["false_alarm"] else
+        ("ok" if rec["kind"] == NONE or rec["correct"] else ("wrong" if rec["detected"] else "missed")))
+    added = ", ".join(f"{a['effect']}@{a['where']}" for a in rec.get("added", [])) or "-"
+    mult = f" x{rec['multiple']:.2f}" if rec.get("multiple") else ""
+    print(f"[{len(done):4d}/{args.n}] {rec['study']} {rec['kind']}{mult} @ {rec.get('where')}: "
+          f"{added} -> {mark} ({rec['diagnose_s']:.1f} s, {time.perf_counter() - t0:.0f} s so far)",
+          flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description="blind benchmark of blackbox diagnose")
     ap.add_argument("--n", type=int, default=200)
@@ -412,6 +480,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=Path("out/blind"))
     ap.add_argument("--docs", action="store_true", help="also write docs/blind.md and docs/blind.json")
     ap.add_argument("--keep", action="store_true", help="keep the study folders (default: only hidden/)")
+    ap.add_argument("--workers", type=int, default=1,
+                    help="studies side by side on a local Dask cluster of this many workers (results as serial)")
     ap.add_argument("--report-only", action="store_true",
                     help="write the summary of the studies already in OUT/results.jsonl, run nothing")
     args = ap.parse_args(argv)
@@ -420,25 +490,21 @@ def main(argv: list[str] | None = None) -> int:
     path = out / "results.jsonl"
     done = {i: r for i, r in load_results(path).items() if r.get("seed", args.seed) == args.seed}
     t0 = time.perf_counter()
-    with path.open("a") as fh:
-        for i in range(args.n):
-            if i in done or args.report_only:
-                continue
-            rec = {**run_one(i, args.seed, out, keep=args.keep), "seed": args.seed, "families": _families()}
-            fh.write(json.dumps(rec, default=float) + "\n")
-            fh.flush()
-            done[i] = rec
-            mark = ("ERROR " + rec["error"][:60]) if rec.get("error") else (
-                "false alarm" if rec["false_alarm"] else
-                ("ok" if rec["kind"] == NONE or rec["correct"] else ("wrong" if rec["detected"] else "missed")))
-            added = ", ".join(f"{a['effect']}@{a['where']}" for a in rec.get("added", [])) or "-"
-            mult = f" x{rec['multiple']:.2f}" if rec.get("multiple") else ""
-            print(f"[{len(done):4d}/{args.n}] {rec['study']} {rec['kind']}{mult} @ {rec.get('where')}: "
-                  f"{added} -> {mark} ({rec['diagnose_s']:.1f} s, {time.perf_counter() - t0:.0f} s so far)",
-                  flush=True)
+    todo = [] if args.report_only else [i for i in range(args.n) if i not in done]
+    # worker processes import this module by name: they need the project on their path
+    os.environ["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    executor = make_executor(workers=args.workers) if args.workers > 1 and todo else SerialExecutor()
+    with path.open("a") as fh, executor:
+        # blocks of studies, each block mapped over the workers and appended as it comes back
+        block = max(1, 2 * executor.workers)
+        for b0 in range(0, len(todo), block):
+            recs = executor.map(_run_task, [(i, args.seed, str(out), args.keep) for i in todo[b0:b0 + block]])
+            for rec in recs:
+                _record(fh, rec, done, args, t0)
+
     results = [done[i] for i in sorted(done) if i < args.n]
     summary = summarize(results)
-    settings = {"n": args.n, "seed": args.seed,
+    settings = {"n": args.n, "seed": args.seed, "workers": args.workers,
                 "diagnosis_families": sorted({f for r in results for f in r.get("families", [])})}
     doc = {"settings": settings, "summary": summary, "studies": results}
     (out / "blind.json").write_text(json.dumps(doc, indent=1, default=float))

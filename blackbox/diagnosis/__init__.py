@@ -27,7 +27,7 @@ from blackbox.diagnosis.effects import (CandidateContext, Connection, Effect, Jo
                                         UndeclaredJoint, families, get, kinds, register)
 from blackbox.diagnosis.fit import Fit, chi2_band, fit_model
 from blackbox.diagnosis.model import AugmentedModel, ModelSpec, ObsMap, State
-from blackbox.diagnosis.residuals import default_holdout, residual_structure
+from blackbox.diagnosis.residuals import residual_structure
 from blackbox.diagnosis.runs import RunRecord, element_stiffness
 from blackbox.diagnosis.scoring import CandidateScore, score_candidates, score_test
 from blackbox.diagnosis.search import Diagnosis, Step, diagnose
@@ -37,6 +37,6 @@ __all__ = ["SplitDeck", "SplitEditor", "constrained_grids", "element_deck", "mem
            "CandidateContext", "Connection", "Effect", "JointCoupling", "JointTranslation", "LoadScale",
            "MemberStiffness", "SensorGain", "SensorOffset", "SupportFlexibility", "UndeclaredJoint", "families", "get", "kinds",
            "register", "Fit", "chi2_band", "fit_model", "AugmentedModel", "ModelSpec", "ObsMap", "State",
-           "default_holdout", "residual_structure", "RunRecord", "element_stiffness",
+           "residual_structure", "RunRecord", "element_stiffness",
            "CandidateScore", "score_candidates", "score_test", "Diagnosis", "Step", "diagnose", "Pair",
            "SplitBase"]

@@ -3,7 +3,7 @@
 Keys: ``study``, ``before`` / ``after`` (fit statistics with the 99 % band), ``candidates`` (the
 first round's, best first), ``added`` (each effect with its parameters), ``steps`` (every round:
 statistics, the 25 best candidates, joint parameters and residual structure before and after),
-``stop_reason``, ``joint_parameters``, ``holdout``, ``settings``, ``identify_check``, ``solver``,
+``stop_reason``, ``joint_parameters``, ``holdout``, ``validation`` (hold-out cases or K-fold over the load cases, :mod:`blackbox.diagnosis.validation`), ``settings``, ``identify_check``, ``solver``,
 ``warnings``, ``method_wall_s`` (and ``wall_s``, the whole command, added by the command);
 ``verdict`` (``adequate`` / ``explained`` / ``unexplained``, :func:`blackbox.diagnosis.search.verdict`)
 with ``verdict_detail`` (one sentence), ``hotspots`` (``[{"grid", "share", "n", "excess"}]``: each
@@ -19,7 +19,7 @@ from blackbox.diagnosis.fit import Fit, chi2_band
 from blackbox.diagnosis.scoring import CandidateScore
 from blackbox.diagnosis.search import Diagnosis
 
-__all__ = ["diagnosis_document", "verdict_detail", "misfit_location"]
+__all__ = ["diagnosis_document", "verdict_detail", "misfit_location", "alternatives", "AMBIGUOUS"]
 
 
 def _num(v):
@@ -46,7 +46,8 @@ def _candidate(c: CandidateScore) -> dict:
     if c.refit is not None:
         out.update({"refit": True, "lr": _num(c.lr), "lr_p_value": _num(c.lr_p_value),
                     "lr_p_value_bonferroni": _num(c.lr_p_adjusted), "reduced_chi2": _num(c.refit.reduced_chi2),
-                    "holdout_delta_chi2": _num(c.holdout_delta_chi2), "decision": c.reason})
+                    "holdout_delta_chi2": _num(c.holdout_delta_chi2),
+                    "kfold_delta_chi2": _num(c.kfold_delta_chi2), "decision": c.reason})
     out["variants_tried"] = [_trial(t) for t in c.variants]
     return out
 
@@ -57,6 +58,7 @@ def _trial(t) -> dict:
             "reduced_chi2": None if t.refit is None else _num(t.refit.reduced_chi2),
             "lr": _num(t.lr), "lr_p_value": _num(t.lr_p_value), "lr_p_value_adjusted": _num(t.lr_p_adjusted),
             "delta_bic": _num(t.delta_bic), "holdout_delta_chi2": _num(t.holdout_delta_chi2),
+            "kfold_delta_chi2": _num(t.kfold_delta_chi2),
             "accepted": bool(t.accepted), "decision": t.reason}
 
 
@@ -67,6 +69,27 @@ def _joint_params(fit: Fit) -> dict:
                        "parameters": {n: {"value": _num(v), "std": _num(s)}
                                       for n, v, s in zip(j.param_names, fit.x[sl], fit.std[sl])}}
     return out
+
+
+AMBIGUOUS = 10.0            # evidence (delta BIC + hold-out chi2, ~ -2 ln Bayes factor) within which
+                            # another accepted candidate is named beside the one added: below 10 the
+                            # data do not decide "very strongly" between them (Kass & Raftery 1995)
+
+
+def alternatives(step) -> list[dict]:
+    """The accepted candidates of ``step`` whose evidence is within :data:`AMBIGUOUS` of the one
+    added: explanations the data hardly tell apart from it (a support spring and the member
+    that ends there), best first."""
+    a = step.added
+    out = []
+    for c in step.scores:
+        if c is a or not c.accepted or c.refit is None or c.effect.key == a.effect.key:
+            continue
+        gap = c.evidence - a.evidence
+        if gap < AMBIGUOUS:
+            out.append({"effect": c.effect.kind, "where": c.effect.where_json(), **c.effect.details_json(),
+                        "evidence_gap": _num(gap)})
+    return sorted(out, key=lambda d: d["evidence_gap"])
 
 
 def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: list[str],
@@ -80,7 +103,8 @@ def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: li
         added.append({"effect": e.kind, "where": e.where_json(), **e.details_json(),
                       "parameters": e.parameters(s.after),
                       "delta_bic": _num(s.added.delta_bic), "lr_p_value": _num(s.added.lr_p_value),
-                      "variants_tried": [_trial(t) for t in s.added.variants]})
+                      "variants_tried": [_trial(t) for t in s.added.variants],
+                      "alternatives": alternatives(s)})
     steps = []
     for i, s in enumerate(diag.steps):
         steps.append({
@@ -110,12 +134,17 @@ def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: li
         "stop_reason": diag.stop_reason,
         "joint_parameters": {"declared": _joint_params(diag.declared), "final": _joint_params(diag.final)},
         "holdout": {"cases": list(holdout), "declared_in_study": declared_holdout},
+        "validation": {"method": diag.validation.kind, "description": diag.validation.describe(),
+                       **({} if diag.kfold is None else
+                          {"k": diag.kfold["k"], "folds": diag.kfold["folds"],
+                           "cv_chi2_before": _num(diag.kfold["cv_chi2_before"]),
+                           "cv_chi2_after": _num(diag.kfold["cv_chi2_after"])})},
         "settings": {"alpha": diag.alpha,
                      "multiplicity": "alpha spending over rounds (round r spends alpha / 2^r), Bonferroni "
                                      "within a round over its candidates and their variant upgrades; "
                                      "the *_bonferroni p-values are p x 2^r x M_r, compared with alpha",
                      "variants": "each accepted candidate refined through its family's richer variants "
-                                 "(LR at the round's level, BIC and hold-out chi2 must improve)",
+                                 "(the same tests as a candidate, against the variant it extends)",
                      "band": "99% band of chi2(n - p) / (n - p)", "candidates_by_effect": diag.n_candidates},
         "identify_check": None if ident is None else {
             "reduced_chi2": _num(ident.reduced_chi2), "converged": bool(ident.converged),

@@ -11,7 +11,7 @@ from scipy import stats
 
 from blackbox.identification import Observations
 
-__all__ = ["residual_structure", "hotspots", "default_holdout"]
+__all__ = ["residual_structure", "hotspots"]
 
 
 def residual_structure(obs: Observations, r: np.ndarray, xyz: dict | None = None, top: int = 10) -> dict:
@@ -66,10 +66,3 @@ def hotspots(obs: Observations, r: np.ndarray, top: int = 10) -> dict[str, list[
     return {"grids": shares([int(d[0]) for d in obs.dofs], "grid"),
             "cases": shares([labels[c] if labels else str(c) for c in obs.case_index], "case"),
             "components": shares([int(d[1]) for d in obs.dofs], "component")}
-
-
-def default_holdout(case_labels: Sequence[str], every: int = 5) -> list[str]:
-    """A deterministic hold-out when the study declares none: every ``every``-th measured case
-    (the 5th, 10th, ...), none when there are fewer than ``every`` cases."""
-    cases = list(case_labels)
-    return [c for i, c in enumerate(cases) if i % every == every - 1] if len(cases) >= every else []

@@ -50,6 +50,13 @@ class CandidateScore:
     accepted: bool = False
     reason: str = ""
     variants: tuple = ()                # search.VariantTrial: richer variants tried after acceptance
+    kfold_delta_chi2: float | None = None
+
+    @property
+    def evidence(self) -> float:
+        """``delta_bic`` plus the hold-out chi2 change (when there are hold-out cases): what ranks
+        and admits an addition (:mod:`blackbox.diagnosis.validation`)."""
+        return self.delta_bic + (self.holdout_delta_chi2 or 0.0)
 
 
 class Projector:

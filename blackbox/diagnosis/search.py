@@ -6,19 +6,23 @@ per case / grid / component); score every candidate effect against the residual
 (:mod:`blackbox.diagnosis.scoring`; each candidate at its family's simplest variant); refit the
 ``refit_top`` best by ``p`` (bounded Levenberg-Marquardt from the starts each effect offers;
 parameters that end at their nested bound are dropped). A candidate is *accepted* when its
-likelihood-ratio p-value passes the round's multiplicity-controlled level, BIC improves, and the
-hold-out chi2 decreases (the effect must improve prediction of cases it was not fitted to, not
-only the fit). The ``refine_top`` accepted candidates with the lowest BIC are then *refined*
-(:func:`refine`): its richer variants
+likelihood-ratio p-value passes the round's multiplicity-controlled level, BIC improves, and it
+passes the check against data it was not fitted to (:mod:`blackbox.diagnosis.validation`): with
+hold-out cases, ``delta BIC + hold-out chi2 change < 0`` (the hold-out's evidence weighed with the
+fit's, so a hold-out that barely sees the effect cannot veto it by chance and one the effect
+predicts clearly worse does); without them, the K-fold chi2 over the load cases must decrease
+(an effect confined to one case, which no fold can predict, rests on the LR test and BIC, and its
+decision says so). The ``refine_top`` candidates whose refit lowers BIC (accepted or not: a joint
+loose about one axis may fail as one equal spring and pass as one spring per axis) with the lowest
+``delta BIC + hold-out chi2`` are then *refined* (:func:`refine`): its richer variants
 (:meth:`blackbox.diagnosis.effects.Effect.richer`, nested: per-axis springs, per-branch springs,
 a member's separate EA / EI1 / EI2 / GJ factors) are refitted from their nested point and one
-is kept only when its LR test against the variant it extends passes the same level, BIC
-improves and the hold-out chi2 decreases; this repeats from the kept variant. The accepted
-candidate with the lowest BIC *at its refined variant* is added, so a mis-specified simple
-variant never stays in the model for a further effect to patch. Repeat until no candidate is
-accepted: a candidate that is significant after the correction is still added when the overall
-reduced chi2 is already inside its 99 % band (the band is a weak omnibus test; a localised effect
-is found by the targeted score first).
+is kept only when it passes the same tests against the variant it extends; this repeats from the
+kept variant. The accepted candidate with the lowest ``delta BIC + hold-out chi2`` *at its refined
+variant* is added, so a mis-specified simple variant never stays in the model for a further
+effect to patch. Repeat until no candidate is accepted: a candidate that is significant after the
+correction is still added when the overall reduced chi2 is already inside its 99 % band (the band
+is a weak omnibus test; a localised effect is found by the targeted score first).
 
 *Multiplicity* (alpha spending, :func:`round_level`): round ``r`` (1, 2, ...) spends
 ``alpha / 2^r``, split evenly (Bonferroni) over its hypotheses: every candidate scored in the
@@ -26,8 +30,7 @@ round plus the variant upgrades each could be refined through (:attr:`Effect.var
 Each LR test of the round (a candidate's, a variant's) is made at ``alpha / (2^r M_r)``; the
 reported adjusted p-value is ``p 2^r M_r``, compared with ``alpha``. Over the whole search, with
 no effect present, the chance of any false addition is at most ``sum_r alpha / 2^r < alpha``,
-however many rounds run. Without hold-out cases an addition rests on the LR test and BIC only
-(a warning says so).
+however many rounds run.
 
 The verdict (:func:`verdict`) compares the final reduced chi2 with its 99 % band: *adequate*
 (nothing added, within or below the band), *explained* (effects added, back within or below the
@@ -54,18 +57,21 @@ from blackbox.diagnosis.residuals import hotspots, residual_structure
 from blackbox.diagnosis.runs import RunRecord
 from blackbox.diagnosis.scoring import CandidateScore, log10_sf, score_candidates
 from blackbox.diagnosis.split import SplitBase
+from blackbox.diagnosis.validation import Validation, cv_chi2, kfold
 from blackbox.errors import IdentificationError
 from blackbox.identification import Observations
 from blackbox.joints import ComplexJoint, JointModel
 from solver_adapters.protocol import DofLabel
 
-__all__ = ["Step", "Diagnosis", "VariantTrial", "VERDICTS", "verdict", "refit_candidate", "refine",
+__all__ = ["Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "VERDICTS", "verdict",
+           "refit_candidate", "refine",
            "round_level", "diagnose"]
 
 
-REFINE_TOP = 3              # accepted candidates refined per round, best delta BIC first: a richer
-                            # variant can overtake the runner-ups (an EI-only member against an
-                            # undeclared joint at its end); refining all six refits costs 2x the round
+REFINE_TOP = 3              # candidates refined per round (those whose refit lowers BIC, strongest
+                            # evidence first): a richer variant can overtake the runner-ups (an EI-only
+                            # member against an undeclared joint at its end); refining all six refits
+                            # costs 2x the round
 
 
 def round_level(alpha: float, round_no: int, n_hypotheses: int) -> float:
@@ -87,6 +93,7 @@ class VariantTrial:
     holdout_delta_chi2: float | None
     accepted: bool
     reason: str
+    kfold_delta_chi2: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,6 +126,8 @@ class Diagnosis:
     stop_reason: str
     warnings: tuple[str, ...] = ()
     hotspots: dict = field(default_factory=dict)
+    validation: Validation = Validation("holdout")
+    kfold: dict | None = None           # K-fold: the folds' case labels and the cv chi2 before / after
 
     @property
     def added(self) -> list[CandidateScore]:
@@ -177,25 +186,87 @@ def _best_of(model: AugmentedModel, om: ObsMap, hold, starts, e: Effect) -> Fit:
     return best
 
 
-def _judge(fit: Fit, f2: Fit, multiplier: float, alpha: float, hold) -> tuple[float, float, float, float,
-                                                                               float | None, list[str]]:
-    """``(lr, lr_p, lr_p_adjusted, delta_bic, holdout_delta_chi2, reasons)`` of ``f2`` against
-    ``fit`` (``multiplier``: ``2^r M_r``, module docstring); no reason: accepted."""
-    dp = f2.n_params - fit.n_params
-    lr = max(fit.chi2 - f2.chi2, 0.0)
-    lr_p = float(stats.chi2.sf(lr, dp)) if dp > 0 else 1.0
-    lr_adj = min(1.0, multiplier * lr_p)
-    dbic = f2.bic - fit.bic
-    dh = (f2.holdout_chi2 - fit.holdout_chi2) if (hold is not None and fit.holdout_chi2 is not None
-                                                  and f2.holdout_chi2 is not None) else None
-    reasons = []
-    if not lr_adj < alpha:
-        reasons.append(f"not significant (LR p x {multiplier:.4g} = {lr_adj:.3g} >= {alpha:g})")
-    if not dbic < 0:
-        reasons.append(f"BIC does not improve ({dbic:+.4g})")
-    if dh is not None and not dh < 0:
-        reasons.append(f"hold-out prediction not better (chi2 {dh:+.4g})")
-    return lr, lr_p, lr_adj, dbic, dh, reasons
+@dataclass(frozen=True)
+class Judgement:
+    """An addition (or a richer variant) against the model it extends (module docstring)."""
+    lr: float
+    lr_p: float
+    lr_p_adjusted: float
+    delta_bic: float
+    holdout_delta_chi2: float | None
+    kfold_delta_chi2: float | None
+    reasons: tuple[str, ...]
+    note: str = ""
+
+    @property
+    def accepted(self) -> bool:
+        return not self.reasons
+
+    @property
+    def decision(self) -> str:
+        return "; ".join(self.reasons) or ("accepted" + (f" ({self.note})" if self.note else ""))
+
+
+def evidence(delta_bic: float, holdout_delta_chi2: float | None) -> float:
+    """What ranks and admits an addition: ``delta BIC`` plus the hold-out chi2 change when there
+    are hold-out cases (:mod:`blackbox.diagnosis.validation`)."""
+    return delta_bic + (holdout_delta_chi2 or 0.0)
+
+
+class Checks:
+    """The tests an addition must pass (module docstring), with the K-fold chi2 of each fit
+    computed once."""
+
+    def __init__(self, om: ObsMap, hold: ObsMap | None, val: Validation):
+        self.om, self.hold, self.val = om, hold, val
+        self._cv: dict[int, tuple[Fit, float, list[bool]]] = {}
+
+    def cv(self, fit: Fit) -> tuple[float, list[bool]]:
+        hit = self._cv.get(id(fit))
+        if hit is None or hit[0] is not fit:
+            _, lo, hi = fit.spec.transforms()
+            owners = fit.spec.effect_slices()
+            nominal = np.full(fit.spec.n_params, np.nan)
+            for e, sl in zip(fit.spec.effects, owners):
+                nominal[sl] = e.nominal
+            hit = (fit, *cv_chi2(fit.J, fit.residuals, fit.x, lo, hi, nominal, self.om.case, self.val.folds, owners))
+            self._cv[id(fit)] = hit
+        return hit[1], hit[2]
+
+    def judge(self, fit: Fit, f2: Fit, multiplier: float, alpha: float, effect: int) -> Judgement:
+        """``f2`` against ``fit``; ``multiplier``: ``2^r M_r``; ``effect``: the index in
+        ``f2.spec.effects`` of the effect added or enriched."""
+        dp = f2.n_params - fit.n_params
+        lr = max(fit.chi2 - f2.chi2, 0.0)
+        lr_p = float(stats.chi2.sf(lr, dp)) if dp > 0 else 1.0
+        lr_adj = min(1.0, multiplier * lr_p)
+        dbic = f2.bic - fit.bic
+        reasons, note = [], ""
+        if not lr_adj < alpha:
+            reasons.append(f"not significant (LR p x {multiplier:.4g} = {lr_adj:.3g} >= {alpha:g})")
+        if not dbic < 0:
+            reasons.append(f"BIC does not improve ({dbic:+.4g})")
+        dh = dcv = None
+        if self.val.kind == "holdout" and fit.holdout_chi2 is not None and f2.holdout_chi2 is not None:
+            dh = f2.holdout_chi2 - fit.holdout_chi2
+            if dbic < 0 and not evidence(dbic, dh) < 0:
+                reasons.append(f"the hold-out prediction gets worse by more than the fit improves "
+                               f"(delta BIC {dbic:+.4g}, hold-out chi2 {dh:+.4g})")
+        elif self.val.kind == "kfold":
+            cv0, _ = self.cv(fit)
+            cv1, checkable = self.cv(f2)
+            dcv = cv1 - cv0
+            if not checkable[effect]:
+                note = "confined to cases no other fold predicts: LR test and BIC only"
+            elif not dcv < 0:
+                reasons.append(f"the {self.val.k}-fold prediction over load cases is not better (chi2 {dcv:+.4g})")
+        return Judgement(lr, lr_p, lr_adj, dbic, dh, dcv, tuple(reasons), note)
+
+
+def _judged(c: CandidateScore, j: Judgement, **kw) -> CandidateScore:
+    return replace(c, lr=j.lr, lr_p_value=j.lr_p, lr_p_adjusted=j.lr_p_adjusted, delta_bic=j.delta_bic,
+                   holdout_delta_chi2=j.holdout_delta_chi2, kfold_delta_chi2=j.kfold_delta_chi2,
+                   accepted=j.accepted, reason=j.decision, **kw)
 
 
 def _refit_variant(base: SplitBase, fit: Fit, i: int, e: Effect, x_e: np.ndarray, om: ObsMap, hold,
@@ -231,10 +302,11 @@ def _refit_variant(base: SplitBase, fit: Fit, i: int, e: Effect, x_e: np.ndarray
 
 
 def refine(base: SplitBase, fit: Fit, i: int, om: ObsMap, hold: ObsMap | None, boundary, K_deck, o_dofs,
-           alpha: float, multiplier: float) -> tuple[Fit, tuple[VariantTrial, ...]]:
+           alpha: float, multiplier: float, checks: Checks | None = None) -> tuple[Fit, tuple[VariantTrial, ...]]:
     """Climb effect ``i`` of ``fit`` up its richer variants (module docstring): refit each richer
     variant from its nested point, keep the accepted one with the lowest BIC, repeat from it.
     Returns the final fit and every variant tried."""
+    checks = checks or Checks(om, hold, Validation("holdout" if hold is not None else "none"))
     trials: list[VariantTrial] = []
     while True:
         e = fit.spec.effects[i]
@@ -247,16 +319,16 @@ def refine(base: SplitBase, fit: Fit, i: int, om: ObsMap, hold: ObsMap | None, b
                 trials.append(VariantTrial(r, e.variant, None, None, None, None, None, None, False,
                                            f"refit failed: {exc}"))
                 continue
-            lr, lr_p, lr_adj, dbic, dh, reasons = _judge(fit, f2, multiplier, alpha, hold)
+            j = checks.judge(fit, f2, multiplier, alpha, i)
             if f2.n_params <= fit.n_params:
-                reasons.append("no parameter added after dropping those at their bound")
-            trials.append(VariantTrial(r2, e.variant, f2, lr, lr_p, lr_adj, dbic, dh, not reasons,
-                                       "; ".join(reasons) or "accepted"))
-            if not reasons and (best is None or f2.bic < best.bic):
-                best = f2
+                j = replace(j, reasons=j.reasons + ("no parameter added after dropping those at their bound",))
+            trials.append(VariantTrial(r2, e.variant, f2, j.lr, j.lr_p, j.lr_p_adjusted, j.delta_bic,
+                                       j.holdout_delta_chi2, j.accepted, j.decision, j.kfold_delta_chi2))
+            if j.accepted and (best is None or evidence(j.delta_bic, j.holdout_delta_chi2) < best[1]):
+                best = (f2, evidence(j.delta_bic, j.holdout_delta_chi2))
         if best is None:
             return fit, tuple(trials)
-        fit = best
+        fit = best[0]
 
 
 def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray | None,
@@ -290,6 +362,8 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
                             "(rigid-state nesting); scores may be inaccurate")
     fit = fit_model(model, om, hold, x0)
     declared = fit
+    val = Validation("holdout") if hold is not None else kfold(np.unique(om.case))
+    checks = Checks(om, hold, val)
     steps: list[Step] = []
     counts: dict = {}
     for e in candidates:
@@ -323,26 +397,24 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
             except IdentificationError as exc:
                 refits.append(replace(c, reason=f"refit failed: {exc}"))
                 continue
-            lr, lr_p, lr_adj, dbic, dh, reasons = _judge(fit, f2, mult, alpha, hold)
-            refits.append(replace(c, effect=e2, refit=f2, lr=lr, lr_p_value=lr_p, lr_p_adjusted=lr_adj,
-                                  delta_bic=dbic, delta_bic_method="refit", holdout_delta_chi2=dh,
-                                  accepted=not reasons, reason="; ".join(reasons) or "accepted"))
-        # the best accepted candidates at the variant their data support, before they compete
-        order = sorted((k for k, c in enumerate(refits) if c.accepted), key=lambda k: refits[k].delta_bic)
+            refits.append(_judged(c, checks.judge(fit, f2, mult, alpha, len(f2.spec.effects) - 1),
+                                  effect=e2, refit=f2, delta_bic_method="refit"))
+        # the strongest candidates at the variant their data support, before they compete: every
+        # refit that lowers BIC, not only the accepted ones (a joint loose about one axis is not
+        # significant as one equal spring, but is as one spring per axis)
+        order = sorted((k for k, c in enumerate(refits) if c.refit is not None and c.delta_bic < 0),
+                       key=lambda k: refits[k].evidence)
         for k in order[:refine_top]:
             c = refits[k]
-            f3, trials = refine(base, c.refit, len(c.refit.spec.effects) - 1, om, hold, boundary, K_deck,
-                                o_dofs, alpha, mult)
+            i = len(c.refit.spec.effects) - 1
+            f3, trials = refine(base, c.refit, i, om, hold, boundary, K_deck, o_dofs, alpha, mult, checks)
             if f3 is not c.refit:
-                lr, lr_p, lr_adj, dbic, dh, reasons = _judge(fit, f3, mult, alpha, hold)
-                c = replace(c, effect=f3.spec.effects[-1], refit=f3, lr=lr, lr_p_value=lr_p, lr_p_adjusted=lr_adj,
-                            delta_bic=dbic, holdout_delta_chi2=dh, accepted=not reasons,
-                            reason="; ".join(reasons) or "accepted")
+                c = _judged(c, checks.judge(fit, f3, mult, alpha, i), effect=f3.spec.effects[-1], refit=f3)
             refits[k] = replace(c, variants=trials)
         ok = [c for c in refits if c.accepted]
-        best = min(ok, key=lambda c: c.delta_bic) if ok else None
+        best = min(ok, key=lambda c: c.evidence) if ok else None
         if best is not None:
-            refits = [replace(c, reason="significant, but another candidate improves BIC more")
+            refits = [replace(c, reason="accepted, but another candidate has stronger evidence (lower delta BIC + hold-out chi2)")
                       if (c.accepted and c is not best) else c for c in refits]
             best = next(c for c in refits if c.effect is best.effect)
         by_key = {c.effect.key: c for c in refits}
@@ -352,7 +424,8 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
             steps.append(Step(fit, tuple(ranked), None, fit, sb, sb, len(base.log) - runs0,
                               round_level(alpha, it + 1, M), M))
             stop = ("no candidate is significant at the round's level (alpha spending, Bonferroni within "
-                    "the round), improves BIC and improves the hold-out prediction")
+                    "the round), improves BIC and passes the check against data it was not fitted to: "
+                    + val.describe() + ")")
             break
         new = best.refit
         steps.append(Step(fit, tuple(ranked), best, new, sb, residual_structure(obs_fit, new.residuals, xyz),
@@ -362,9 +435,9 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         fit = new
         model = AugmentedModel(base, fit.spec, boundary, K_deck, o_dofs)
     lo, hi = chi2_band(fit.n_obs - fit.n_params, band_level)
-    if hold is None:
-        warnings.append("no hold-out cases: effects were added on the LR test and BIC alone, "
-                        "without a check of their prediction")
+    if val.kind == "none":
+        warnings.append("one fitted case and no hold-out cases: effects were added on the LR test and BIC "
+                        "alone, without a check of their prediction")
     if fit.reduced_chi2 > hi:
         warnings.append(f"the final reduced chi2 {fit.reduced_chi2:.4g} is above the {band_level:.0%} "
                         f"band [{lo:.4g}, {hi:.4g}] of the declared noise: the misfit is unexplained")
@@ -374,7 +447,11 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
     for j, sl in zip(fit.spec.joints, fit.spec.joint_slices()):
         if isinstance(j, ComplexJoint) and not j.is_admissible(fit.x[sl]):
             warnings.append(f"joint {j.name}: the fitted K_C is not positive semi-definite")
+    kf = None
+    if val.kind == "kfold":
+        kf = {"k": val.k, "folds": [[obs_fit.case_labels[c] for c in f] for f in val.folds],
+              "cv_chi2_before": checks.cv(declared)[0], "cv_chi2_after": checks.cv(fit)[0]}
     return Diagnosis(declared, fit, tuple(steps), counts, alpha, (lo, hi),
                      tuple(obs_hold.case_labels[c] for c in obs_hold.cases) if obs_hold is not None else (),
                      nest, tuple(base.log), time.perf_counter() - t0, stop, tuple(warnings),
-                     hotspots(obs_fit, fit.residuals))
+                     hotspots(obs_fit, fit.residuals), val, kf)

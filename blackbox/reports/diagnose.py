@@ -28,18 +28,21 @@ def diagnosis_report(study: Study, doc: dict, files: list[str]) -> str:
            "Declared model fitted, standardized residuals tested against the declared noise, candidate "
            "effects scored against the residual (score test), the best few refitted (likelihood ratio, "
            f"BIC); an effect is added when its LR p-value x 2^round x the round's hypotheses is below "
-           f"{doc['settings']['alpha']:g} (alpha spending), BIC improves and hold-out prediction improves; "
+           f"{doc['settings']['alpha']:g} (alpha spending), BIC improves and it passes the check against data it was not fitted to (hold-out cases: "
+           "delta BIC + hold-out chi2 change < 0; without them: the K-fold chi2 over the load cases decreases); "
            "an accepted effect is first refined through its richer variants (per-axis, per-branch "
-           "springs; a member's EA, EI1, EI2, GJ), each kept only on the same three conditions.", "",
+           "springs; a member's EA, EI1, EI2, GJ), each kept only on the same conditions.", "",
            "## Before and after", "",
            "| | reduced chi2 | 99% band | RMS residual | hold-out RMS | BIC | parameters |",
            "|---|---|---|---|---|---|---|"]
     for name, s in (("declared", b), ("final", a)):
         out.append(f"| {name} | {_g(s['reduced_chi2'])} | [{_g(s['band_99'][0])}, {_g(s['band_99'][1])}] | "
                    f"{_g(s['rms_residual'])} | {_g(s['holdout_rms'])} | {_g(s['bic'], 7)} | {s['n_params']} |")
-    out += ["", f"Hold-out cases: {', '.join(doc['holdout']['cases']) or 'none'}"
-            + ("" if doc["holdout"]["declared_in_study"] else " (chosen here: every 5th measured case)") + ".",
-            f"Stopped: {doc['stop_reason']}.", ""]
+    val = doc.get("validation", {})
+    out += ["", f"Hold-out cases: {', '.join(doc['holdout']['cases']) or 'none'}. "
+                f"Check against data not fitted: {val.get('description', 'hold-out cases')}"
+            + (f"; K-fold chi2 {_g(val['cv_chi2_before'])} -> {_g(val['cv_chi2_after'])}" if "k" in val else "")
+            + ".", f"Stopped: {doc['stop_reason']}.", ""]
     verdict = doc.get("verdict")
     if verdict is not None:
         out += ["## Verdict", "", f"**{verdict}**: {doc.get('verdict_detail', '')}.", ""]
@@ -59,19 +62,26 @@ def diagnosis_report(study: Study, doc: dict, files: list[str]) -> str:
     if not doc["added"]:
         out.append("None: the residuals are explained by the declared model and noise." if verdict != "unexplained"
                    else "None: no candidate effect is significant at its round's level, improves BIC and "
-                        "improves the hold-out prediction.")
+                        "passes the check against data it was not fitted to.")
     for i, e in enumerate(doc["added"], 1):
         extra = "".join(f", {k} {e[k]}" for k in ("component", "group", "variant") if k in e)
         out += [f"### {i}. {e['effect']} at {', '.join(map(str, e['where']))}{extra}", "",
-                f"delta BIC {_g(e['delta_bic'])}, LR p-value {_g(e['lr_p_value'], 3)}", "",
+                f"delta BIC {_g(e['delta_bic'])}, LR p-value {_g(e['lr_p_value'], 3)}", ""]
+        if e.get("alternatives"):
+            out += ["The data hardly tell this effect from (evidence, delta BIC + hold-out chi2, within "
+                    f"{_g(10.0)} of it): " + "; ".join(
+                        f"{x['effect']} at {', '.join(map(str, x['where']))} (+{_g(x['evidence_gap'])})"
+                        for x in e["alternatives"]) + ": loads and sensors near both would separate them.", ""]
+        out += [
                 "| parameter | value | std |", "|---|---|---|"]
         out += [f"| {p['name']} | {_g(p['value'])} | {_g(p['std'], 3)} |" for p in e["parameters"]]
         out.append("")
         if e.get("variants_tried"):
             out += ["Richer variants tried:", "", "| variant | from | reduced chi2 | delta BIC | hold-out delta chi2 | "
-                    "decision |", "|---|---|---|---|---|---|"]
+                    "K-fold delta chi2 | decision |", "|---|---|---|---|---|---|---|"]
             out += [f"| {t['variant']} | {t['from_variant']} | {_g(t['reduced_chi2'])} | {_g(t['delta_bic'])} | "
-                    f"{_g(t['holdout_delta_chi2'])} | {t['decision']} |" for t in e["variants_tried"]]
+                    f"{_g(t['holdout_delta_chi2'])} | {_g(t.get('kfold_delta_chi2'))} | {t['decision']} |"
+                    for t in e["variants_tried"]]
             out.append("")
     out += ["## Steps", "", "| step | added | reduced chi2 before -> after | hold-out RMS before -> after | "
             "BIC before -> after | runs |", "|---|---|---|---|---|---|"]

@@ -54,8 +54,9 @@ class CandidateContext:
     """What families list their candidates from: the study's deck, the declared joints (in the
     study's order), each member's black-box stiffness ``K_e``, the fitted rows, the load cases,
     the per-grid RMS of the declared fit's whitened residuals (``None`` without a declared fit),
-    the cap on undeclared-joint candidates and each case's group from the optional ``group``
-    column of ``loads.csv`` (empty without it)."""
+    the cap on undeclared-joint candidates, each case's group from the optional ``group``
+    column of ``loads.csv`` (empty without it) and, from the declared fit, each fitted case's
+    least-squares scale of its predicted responses (``None`` without a declared fit)."""
     deck: "Deck"
     joints: tuple["JointModel", ...]
     K_e: dict[int, np.ndarray]
@@ -64,6 +65,8 @@ class CandidateContext:
     residual_rms: dict[int, float] | None
     max_joint_candidates: int
     groups: dict[str, str] = field(default_factory=dict)
+    case_scales: dict[str, tuple[float, float]] | None = None   # fitted case -> (scale - 1, std) of
+                                                                # its responses in the declared fit
 
 
 def finite_or_none(v) -> float | None:

@@ -5,6 +5,17 @@ for all cases (``s_all``); when ``loads.csv`` names groups (the set-up a case wa
 day, a rig, a load cell) and there are at least two, one factor per group with a fitted case
 (``s_group_G``, a miscalibrated load cell of one set-up); with more than one fitted case, one
 per fitted case (``s_L``). ``where`` lists the cases scaled.
+
+Without a ``group`` column, groups are *found from the data*: each fitted case's own scale of its
+responses in the declared fit (``1 + sum(u r / sigma^2) / sum(u^2 / sigma^2)``, ``u`` the
+predicted responses, ``r`` the residuals) orders the fitted cases, and every run of ``k`` cases at
+either end of that order (``2 <= k <= n - 1``: the ``k`` most over- or under-scaled) is a
+candidate ``s_found_<first>_<k>`` -- the cases of a test day whose load cell read low share one
+factor and sit together at one end. The order is read from the same data the candidates are
+then tested on, so every such group is a hypothesis of its own round and counted in its
+Bonferroni correction (2 (n - 2) of them for n fitted cases); one case's own factor stays a
+candidate beside them. Hold-out cases are never in a found group (their residuals are not
+looked at).
 """
 
 from __future__ import annotations
@@ -51,6 +62,26 @@ class LoadScale(Effect):
                                    group=g))
         if len(fitted) > 1:
             out += [cls((c,), (f"s_{c}",), cases=(cases.index(c),)) for c in fitted]
+        if len(names) <= 1 and ctx.case_scales:
+            out += cls.found_groups(cases, ctx.case_scales)
+        return out
+
+    @classmethod
+    def found_groups(cls, cases: list[str], case_scales: dict[str, tuple[float, float]]) -> list["LoadScale"]:
+        """The groups found from the data (module docstring): the ``k`` fitted cases with the
+        largest, and those with the smallest, own scale, ``2 <= k <= n - 1``."""
+        order = sorted((c for c in cases if c in case_scales), key=lambda c: (case_scales[c][0], cases.index(c)))
+        n = len(order)
+        out, seen = [], set()
+        for k in range(2, n):
+            for members in (order[:k], order[n - k:]):
+                idx = tuple(sorted(cases.index(c) for c in members))
+                if idx in seen:
+                    continue
+                seen.add(idx)
+                first = cases[idx[0]]
+                out.append(cls(tuple(cases[i] for i in idx), (f"s_found_{first}_{k}",), cases=idx,
+                               group=f"found from the data ({k} cases)"))
         return out
 
     @property

@@ -1,0 +1,105 @@
+"""How a diagnosis checks an addition against data it was not fitted to.
+
+Two ways, chosen by the study:
+
+* **hold-out cases** (the study's ``holdout_cases``): predicted, never fitted. The hold-out
+  chi2 change ``dh`` of an addition is weighed with the fit's own evidence: the addition must
+  lower ``delta BIC + dh`` (BIC of the fit rows plus the hold-out rows' chi2, i.e. -2 log of the
+  fit's Bayes factor times the hold-out's predictive likelihood ratio). A hold-out that barely
+  sees an effect (two cases against a sensor offset, or a scale confined to one fitted case) then
+  cannot veto strong evidence by the chance sign of a small change, while a hold-out that the
+  effect predicts clearly worse (a member factor standing in for a joint) vetoes it; the same
+  sum ranks the accepted candidates.
+* **K-fold over load cases** (no hold-out declared: every case is fitted): the fitted cases in
+  study order are dealt into ``K = min(5, n_cases)`` folds (case ``i`` in fold ``i mod K``); each
+  fold is predicted from the others and the chi2 of those predictions summed (``cv_chi2``). An
+  addition must lower ``cv_chi2``. Each fold's fit is *one Gauss-Newton step* from the full fit
+  (approximate cross-validation: the leave-fold-out optimum of the model linearised at the full
+  optimum), so a K-fold check costs K small least-squares solves, no refits and no solver runs.
+  Parameters at a bound stay there; an effect parameter that only the left-out fold informs
+  (one case's load scale when that case is left out) goes back to its nested value, since nothing
+  else can tell it. An effect whose parameters no fold can both learn and predict (confined to
+  one case) cannot be checked by prediction at all: it rests on the LR test and BIC, and the
+  search says so in its decision.
+
+With one fitted case neither is possible and additions rest on the LR test and BIC (a warning).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+__all__ = ["Validation", "KFOLD_MAX", "kfold", "cv_chi2"]
+
+KFOLD_MAX = 5               # folds at most: each fold's fit keeps >= 80 % of the cases
+
+
+@dataclass(frozen=True)
+class Validation:
+    """``kind``: ``"holdout"``, ``"kfold"`` or ``"none"``; ``folds``: for K-fold, the case
+    indices of each fold."""
+    kind: str
+    folds: tuple[tuple[int, ...], ...] = ()
+
+    @property
+    def k(self) -> int:
+        return len(self.folds)
+
+    def describe(self) -> str:
+        if self.kind == "holdout":
+            return "hold-out cases (predicted, never fitted)"
+        if self.kind == "kfold":
+            return (f"{self.k}-fold cross-validation over the load cases (each fold predicted from a "
+                    "one-step refit on the others)")
+        return "none (one fitted case): additions rest on the LR test and BIC"
+
+
+def kfold(cases: Sequence[int], k_max: int = KFOLD_MAX) -> Validation:
+    """K-fold over the fitted ``cases`` (indices, in study order): case ``i`` of the list in fold
+    ``i mod K``, ``K = min(k_max, len(cases))``; fewer than two cases: ``kind="none"``."""
+    cases = list(dict.fromkeys(int(c) for c in cases))
+    k = min(k_max, len(cases))
+    if k < 2:
+        return Validation("none")
+    return Validation("kfold", tuple(tuple(cases[g::k]) for g in range(k)))
+
+
+def cv_chi2(J: np.ndarray, r: np.ndarray, x: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+            nominal: np.ndarray, case: np.ndarray, folds: Sequence[Sequence[int]],
+            owners: Sequence[slice] = ()) -> tuple[float, list[bool]]:
+    """Approximate K-fold chi2 of a fit (module docstring) and, per effect slice of ``owners``,
+    whether some fold both learns its parameters and predicts with them.
+
+    ``J``, ``r``: the whitened Jacobian and residuals (``y - f``) at the optimum ``x``;
+    ``lo``, ``hi``: the bounds; ``nominal``: each parameter's nested value (``nan`` for a joint
+    parameter: never reset); ``case``: each row's case index."""
+    x = np.asarray(x, float)
+    p = len(x)
+    tol = 1e-9 * np.maximum(np.abs(x), 1.0)
+    free = (x > lo + tol) & (x < hi - tol)
+    scale = np.linalg.norm(J, axis=0)
+    tiny = 1e-12 * np.maximum(scale, 1e-300)
+    resettable = np.isfinite(nominal)
+    seen = np.zeros(p, bool)
+    total = 0.0
+    for fold in folds:
+        out = np.isin(case, np.asarray(fold, int))
+        if not out.any():
+            continue
+        Jt, Jg = J[~out], J[out]
+        informed = np.linalg.norm(Jt, axis=0) > tiny
+        learn = free & informed
+        d = np.zeros(p)
+        reset = resettable & ~informed
+        d[reset] = nominal[reset] - x[reset]
+        if learn.any():
+            s = np.linalg.norm(Jt[:, learn], axis=0)
+            sol = np.linalg.lstsq(Jt[:, learn] / s, r[~out], rcond=1e-10)[0]
+            d[learn] = sol / s
+        e = r[out] - Jg @ d
+        total += float(e @ e)
+        seen |= learn & (np.linalg.norm(Jg, axis=0) > tiny)
+    return total, [bool(seen[sl].any()) for sl in owners]
