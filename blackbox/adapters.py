@@ -56,6 +56,11 @@ def make_adapter_for(study: Study, name: str | None = None, deck: Path | None = 
         opts = {"timeout_s": cfg.timeout_s} if _accepts(name, "timeout_s") else {}
     if "trusted" not in opts and _accepts(name, "trusted"):      # any adapter that starts programs
         opts["trusted"] = TRUST_COMMAND.get()
+    if name != "reference" and "unmodelled" not in cfg.options and _accepts(name, "unmodelled"):
+        # an external adapter needs only the grids, joints and loads from the deck: cards the
+        # reader does not model (shells, solids) go to its solver (its dialect says whether it
+        # can); the reference adapter refuses them with the reader's message listing them all
+        opts["unmodelled"] = "pass"
     clash = sorted(set(cfg.options) & set(opts))
     if clash:
         raise StudyError(f"[solver.options] {clash} are set by the [solver] table itself; set them there",

@@ -181,8 +181,36 @@ class DeclaredModel:
         return out
 
     def condensed_model(self, c: Condensed) -> CondensedModel:
-        """The declared model on a condensation whose boundary holds the joints' DOFs."""
+        """The declared model on a condensation whose boundary holds the joints' DOFs (checked
+        first: :meth:`check_boundary_held`)."""
+        self.check_boundary_held(c)
         return CondensedModel(c, list(self.joints), self.K_deck(c))
+
+    def check_boundary_held(self, c: Condensed) -> None:
+        """:class:`StudyError` when a joint DOF did not move under its own unit load although the
+        deck does not constrain it: the solver removed it. That is AUTOSPC (NASTRAN's SOL 101
+        default, in the reference solver and MYSTRAN too): it constrains a component no element
+        of the deck gives stiffness, which is right for the deck alone but not for the structure,
+        where the joint's springs would hold it. The condensation would then take the joint DOF
+        as fixed and every estimate would be wrong without a sign; the structure must hold each
+        joint DOF by its own members (a branch member pinned at the joint, for example, does not
+        hold the branch's rotation). A DOF the deck's SPC or GRID PS constrains is fixed on
+        purpose and passes."""
+        index = {d: i for i, d in enumerate(c.boundary)}
+        fixed = _deck_constrained(self.study.deck)
+        scale = float(np.max(np.abs(np.diag(c.G_BB)), initial=0.0))
+        for j in self.joints:
+            gone = [d for d in j.dofs if d in index and d not in fixed
+                    and not abs(c.G_BB[index[d], index[d]]) > 0.0]
+            if gone and scale > 0.0:
+                raise StudyError(
+                    f"joint {j.name!r}: DOF(s) {gone[:8]} (grid, component) do not move under a load "
+                    f"there although the deck does not constrain them: the solver removed them, as "
+                    f"AUTOSPC (NASTRAN's default) does with a component no element of the deck gives "
+                    f"stiffness. Only the joint's springs would hold them, which the deck alone does not "
+                    f"have; the black-box condensation needs every joint DOF held by the structure's own "
+                    f"members (e.g. no pin flag on a branch member's end at the joint)",
+                    file=str(self.study.deck_path))
 
     def condense(self, adapter: SolverAdapter, observed: Sequence[DofLabel] | None = None,
                  loads: LoadMatrix | None = None) -> CondensedModel:
@@ -204,6 +232,13 @@ class DeclaredModel:
 
     def with_holdout(self, holdout: Sequence[str]) -> "DeclaredModel":
         return DeclaredModel(self.study, self.joints, self.k0, self.options, tuple(holdout), self.deck_stiffness)
+
+
+def _deck_constrained(deck) -> set[DofLabel]:
+    """Every (grid, component) an SPC/SPC1 set of the deck or a GRID PS constrains."""
+    out = {(g, int(c)) for s in deck.spc1s for g in s.grids for c in s.components}
+    out |= {(g.id, int(c)) for g in deck.grids.values() for c in g.ps}
+    return out
 
 
 def joint_model(study: Study, name: str, model: str) -> JointModel:

@@ -219,8 +219,7 @@ class TruthDeck:
     def __init__(self, deck: Deck):
         self.deck = copy.deepcopy(deck)
         self.next_grid = max(self.deck.grids) + 1
-        ids = list(self.deck.cbars) + list(self.deck.rbe2s) + list(self.deck.springs)
-        self.next_eid = max(ids) + 1
+        self.next_eid = self.deck.max_element_id() + 1
 
     def eid(self) -> int:
         self.next_eid += 1

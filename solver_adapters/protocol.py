@@ -33,7 +33,7 @@ import scipy.sparse as sp
 # every error class lives in solver_adapters.errors; re-exported here because this is the one
 # module of solver_adapters that blackbox's method layers may import
 from solver_adapters.deck import (Bush, CBar, Coord, Deck, Grid, Mat1, PBar, PBush, Pelas, Prod,  # noqa: F401
-                                  Rbe2, Rbe3, Rod, Spc1, SpcAdd, Spring)
+                                  Rbe2, Rbe3, Rod, Spc1, SpcAdd, Spring, Unmodelled)
 from solver_adapters.errors import (COMPONENT_NAMES, located, AdapterNotFound, CheckFailure,  # noqa: F401
                                     ConsentError, CorruptEntry, DeckFormatError, FactorizationError,
                                     InsecureFileError, ModelError, OptionError, PluginConflictError,

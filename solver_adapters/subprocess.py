@@ -707,6 +707,12 @@ def _run_chunk(args) -> tuple[np.ndarray, SolverStats]:
         return own._run(loads, report), own.stats
 
 
+UNMODELLED = ("error", "pass")
+"""What a :class:`CommandAdapter` does with a card the reader does not model: ``"error"`` (the
+reader's own message, the default) or ``"pass"`` (kept apart and handed to the solver by a
+dialect that can, re-written field by field; ``blackbox`` builds external adapters this way)."""
+
+
 class CommandAdapter:
     """:class:`SolverAdapter` for any external code: a command line plus a :class:`Dialect`.
 
@@ -728,6 +734,10 @@ class CommandAdapter:
     dialect's own default command (``command=None`` or equal to it) is installed code and needs
     no consent.
 
+    ``unmodelled`` (:data:`UNMODELLED`): ``"pass"`` reads the deck keeping the cards the reader
+    does not model (shells, solids) for a dialect that hands them to its solver
+    (``carries_unmodelled``, the nastran dialect); the default ``"error"`` is the reader's verdict.
+
     ``progress``: an optional ``progress(elapsed_s, last_line)`` callback called about every
     ``progress_every_s`` seconds while the solver runs (:func:`run_solver`); an attribute, so a
     caller can set it after construction.
@@ -737,7 +747,11 @@ class CommandAdapter:
                  dialect: str | Dialect = "nastran", timeout_s: float = 600.0, keep_failed: bool = False,
                  workdir_root: str | os.PathLike | None = None, name: str = "command",
                  springs: Sequence[ScalarSpring] = (), *, trusted: bool = False,
-                 progress: ProgressCallback | None = None, progress_every_s: float = HEARTBEAT_S):
+                 progress: ProgressCallback | None = None, progress_every_s: float = HEARTBEAT_S,
+                 unmodelled: str = "error"):
+        if unmodelled not in UNMODELLED:
+            raise ValueError(f"unmodelled must be one of {UNMODELLED}, got {unmodelled!r}")
+        self.unmodelled = unmodelled
         self.deck_path = Path(deck_path).resolve()
         self.dialect = get_dialect(dialect) if isinstance(dialect, str) else dialect
         default = self.dialect.command(self.deck_path)
@@ -774,10 +788,18 @@ class CommandAdapter:
         self.springs = self._checked_springs(springs)
 
     def _read_model(self, path: Path) -> Any:
-        """The parsed model of the deck (``bdf.read_deck``); an adapter whose solver reads cards
-        the reader does not model overrides this (:class:`solver_adapters.nastran.MystranAdapter`)."""
-        from solver_adapters.bdf import read_deck  # the reader is only needed here
-        return read_deck(path)
+        """The parsed model of the deck (``bdf.read_deck``). With ``unmodelled="pass"`` the cards
+        the reader does not model (shells, solids) are kept apart for a dialect that hands them
+        to its solver (``carries_unmodelled``, the NASTRAN dialect); a dialect that writes its
+        decks from the model alone (FRAMESOLVE) cannot, and such a deck is the reader's error."""
+        from solver_adapters.bdf import read_deck, unsupported_error  # the reader is only needed here
+        model = read_deck(path, unmodelled="keep" if self.unmodelled == "pass" else "error")
+        if model.unmodelled and not getattr(self.dialect, "carries_unmodelled", False):
+            raise unsupported_error([(n, k, src) for n, (k, src) in model.unmodelled_counts().items()],
+                                    external_hint=False,
+                                    lead=f"the {self.dialect.name!r} dialect writes its decks from the "
+                                         f"modelled cards alone and cannot hand these to its solver; ")
+        return model
 
     # ---- protocol ------------------------------------------------------------------------
     def dofs(self) -> tuple[DofLabel, ...]:

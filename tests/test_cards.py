@@ -30,7 +30,7 @@ import numpy as np
 import pytest
 
 from solver_adapters.bdf import NO_EFFECT, SUPPORTED, read_deck, read_deck_text
-from solver_adapters.bdf_write import write_deck
+from solver_adapters.bdf_write import print_float_free, write_deck
 from solver_adapters.deck import Grid, PBar
 from solver_adapters.protocol import DeckFormatError, LoadMatrix
 from solver_adapters.reference import ReferenceAdapter
@@ -594,10 +594,11 @@ def rectangles(kind, d):
         return [(-b / 2, b / 2, h - tf, h), (-tw / 2, tw / 2, 0, h - tf)]
 
 
-def raster_properties(rects, h=1.25e-4):
-    """A, I1 = int (y - yc)^2 dA, I2 = int (z - zc)^2 dA by the midpoint rule on a grid of step
-    ``h`` over the bounding box, the rectangles' edges on grid lines (independent of the closed
-    forms; A exact, the inertias within h^2 / (12 t^2) of a wall of thickness t)."""
+def raster_properties(rects, h=1.25e-4, product: bool = False):
+    """A, I1 = int (y - yc)^2 dA, I2 = int (z - zc)^2 dA (and with ``product`` I12 = int
+    (y - yc)(z - zc) dA) by the midpoint rule on a grid of step ``h`` over the bounding box, the
+    rectangles' edges on grid lines (independent of the closed forms; A exact, the inertias
+    within h^2 / (12 t^2) of a wall of thickness t)."""
     r = np.array(rects, float)
     z = r[:, 0].min() + h * np.arange(round((r[:, 1].max() - r[:, 0].min()) / h) + 1)
     y = r[:, 2].min() + h * np.arange(round((r[:, 3].max() - r[:, 2].min()) / h) + 1)
@@ -609,7 +610,8 @@ def raster_properties(rects, h=1.25e-4):
     da = (z[1] - z[0]) * (y[1] - y[0])
     a = inside.sum() * da
     zm, ym = (Z * inside).sum() * da / a, (Y * inside).sum() * da / a
-    return a, (((Y - ym) ** 2) * inside).sum() * da, (((Z - zm) ** 2) * inside).sum() * da
+    out = (a, (((Y - ym) ** 2) * inside).sum() * da, (((Z - zm) ** 2) * inside).sum() * da)
+    return out + ((((Y - ym) * (Z - zm)) * inside).sum() * da,) if product else out
 
 
 @pytest.mark.parametrize("k", [3, 4, 5, 6, 7])
@@ -670,6 +672,124 @@ def test_pbarl_mystran(tmp_path, k):
         assert 1 - mys[3, 3] / u[3, 3] == pytest.approx(0.0844, abs=0.0005)
         u[3, 3] = mys[3, 3]
     assert_close_to_mystran(u, mys)
+
+
+# --------------------------------------------------------------------------------------------
+# PBARL TYPE L: an angle, unsymmetric (I12 != 0)
+# --------------------------------------------------------------------------------------------
+ANGLE_DECK = DATA / "pbarl_angle.bdf"
+ANGLE = (0.05, 0.08, 0.005, 0.006)     # DIM1 width (z), DIM2 height (y), DIM3, DIM4 thicknesses
+
+
+def angle_by_hand(b, h, t1, t2):
+    """A, I1, I2, I12 of an angle about its centroid, as the outer rectangle b x h minus the
+    notch (b - t2) x (h - t1) cut from its +y/+z corner (a different split from the reader's two
+    legs), each by the parallel-axis (Steiner) theorem: I = sum (I_own + A d^2), I12 = sum A dz dy
+    (a rectangle's own product of inertia about its centre is 0). Origin: the outer corner."""
+    parts = [(+1, b * h, b / 2, h / 2, b, h), (-1, (b - t2) * (h - t1), (b + t2) / 2, (h + t1) / 2, b - t2, h - t1)]
+    a = sum(s * ar for s, ar, *_ in parts)
+    zc = sum(s * ar * z for s, ar, z, *_ in parts) / a
+    yc = sum(s * ar * y for s, ar, _, y, *_ in parts) / a
+    i1 = sum(s * (w * d**3 / 12 + ar * (y - yc) ** 2) for s, ar, _, y, w, d in parts)
+    i2 = sum(s * (d * w**3 / 12 + ar * (z - zc) ** 2) for s, ar, z, _, w, d in parts)
+    i12 = sum(s * ar * (z - zc) * (y - yc) for s, ar, z, y, _, _ in parts)
+    return a, i1, i2, i12
+
+
+def test_pbarl_angle_section_constants():
+    """A, I1, I2, I12 of the reader's angle against the hand calculation (exact: 1e-12, both
+    exact decompositions of the same polygon), against a numerical integration over the shape
+    (1e-4: its h^2 / (12 t^2) error), and an equal-leg angle against the textbook closed form
+    (centroid c = (a^2 + a t - t^2) / (2 (2 a - t)) from the outer faces, I = (t (a - c)^3 + a c^3
+    - (a - t)(c - t)^3) / 3 about both centroidal axes parallel to the legs; principal axes at
+    45 degrees, so I12 = I - I_min with I_min from the same split about the diagonal). I12 is
+    negative: the legs run along +y and +z from the corner. J is the thin-walled sum over the
+    legs' mid-lines (the NX Nastran Element Library's formula); no shear flexibility (NASTRAN
+    ignores K1/K2 when I12 != 0)."""
+    p = read_deck(ANGLE_DECK).pbars[1]
+    b, h, t1, t2 = ANGLE
+    assert p.card == "PBARL"
+    assert (p.a, p.i1, p.i2, p.i12) == pytest.approx(angle_by_hand(*ANGLE), rel=1e-12)
+    a, i1, i2, i12 = raster_properties([(0, b, 0, t1), (0, t2, t1, h)], product=True)
+    assert (p.a, p.i1, p.i2, p.i12) == pytest.approx((a, i1, i2, i12), rel=1e-4)
+    assert p.i12 < 0 and p.i1 * p.i2 > p.i12**2
+    assert p.j == pytest.approx(((b - t2 / 2) * t1**3 + (h - t1 / 2) * t2**3) / 3, rel=1e-15)
+    assert p.k1 is None and p.k2 is None
+    # equal legs a, thickness t: the textbook formulas
+    from solver_adapters.bdf import pbarl_section
+    A_, t = 0.06, 0.006
+    c = (A_**2 + A_ * t - t**2) / (2 * (2 * A_ - t))
+    inertia = (t * (A_ - c) ** 3 + A_ * c**3 - (A_ - t) * (c - t) ** 3) / 3
+    a, i1, i2, j, k1, k2, i12 = pbarl_section("L", (A_, A_, t, t))
+    assert (a, i1, i2) == pytest.approx(((2 * A_ - t) * t, inertia, inertia), rel=1e-12)
+    lam = np.linalg.eigvalsh([[i1, i12], [i12, i2]])
+    assert lam == pytest.approx([inertia - abs(i12), inertia + abs(i12)], rel=1e-12)
+    assert i12 == pytest.approx(angle_by_hand(A_, A_, t, t)[3], rel=1e-12)
+
+
+def angle_principal_deck(path: Path) -> Path:
+    """The angle cantilever with a PBAR of the angle's principal moments (from the hand
+    calculation, no I12) and the orientation vector along the principal axis of I1: the same
+    beam in its principal axes, which MYSTRAN reads without any I12 convention."""
+    a, i1, i2, i12 = angle_by_hand(*ANGLE)
+    lam, vec = np.linalg.eigh([[i1, i12], [i12, i2]])      # in (y, z) = basic (y, z) here
+    e1 = vec[:, 1]                                          # the axis of the larger moment
+    r16 = lambda x: print_float_free(float(x), max_width=16)   # noqa: E731 - 16 characters for MYSTRAN
+    b, h, t1, t2 = ANGLE
+    j = ((b - t2 / 2) * t1**3 + (h - t1 / 2) * t2**3) / 3
+    text = ANGLE_DECK.read_text().replace(
+        'PBARL          1       1               L                                +ANG\n'
+        '+ANG         .05     .08    .005    .006\n',
+        "PBAR,1,1," + ",".join(r16(x) for x in (a, lam[1], lam[0], j)) + "\n").replace(
+        "CBAR           1       1       1       2      0.      1.      0.",
+        f"CBAR,1,1,1,2,0.,{r16(e1[0])},{r16(e1[1])}")
+    path.write_text(text)
+    return path
+
+
+def test_pbarl_angle_is_its_principal_axes_beam(tmp_path):
+    """Unsymmetric bending: the angle with I12 bends like the same beam turned to its principal
+    axes without I12 (the tip flexibility, all six components, couplings included)."""
+    tip = [(2, c) for c in range(1, 7)]
+    u = ReferenceAdapter(ANGLE_DECK).solve(unit_loads(2), tip).values
+    v = ReferenceAdapter(angle_principal_deck(tmp_path / "principal.bdf")).solve(unit_loads(2), tip).values
+    np.testing.assert_allclose(u, v, rtol=RTOL, atol=RTOL * np.abs(v).max())
+    assert abs(u[1, 2]) > 0.1 * np.sqrt(u[1, 1] * u[2, 2])     # y and z bending really couple
+
+
+@needs_mystran
+def test_pbarl_angle_mystran(tmp_path):
+    """MYSTRAN 18 has no PBARL TYPE L (``*ERROR 1162``). It reads the principal-axes PBAR beam
+    itself (no I12 there, the section constants from the hand calculation) and agrees with the
+    reference solver's PBARL L beam to MYSTRAN's 7 digits; and the MYSTRAN adapter, which writes
+    the PBARL as the equivalent PBAR with I12, agrees as well."""
+    from solver_adapters.nastran import MystranAdapter
+    tip = [(2, c) for c in range(1, 7)]
+    u = ReferenceAdapter(ANGLE_DECK).solve(unit_loads(2), tip).values
+    mys = mystran_direct(tmp_path / "m", angle_principal_deck(tmp_path / "principal.bdf"), unit_cases(2, 1.0), tip)
+    assert_close_to_mystran(u, mys)
+    assert_close_to_mystran(u, MystranAdapter(ANGLE_DECK, workdir_root=tmp_path).solve(unit_loads(2), tip).values)
+
+
+@pytest.mark.parametrize("dims, field, match", [
+    ((".05", ".08", ".08", ".006"), 12, "horizontal leg thickness DIM3 fills the height DIM2"),
+    ((".05", ".08", ".005", ".05"), 13, "vertical leg thickness DIM4 fills the width DIM1")])
+def test_pbarl_angle_bad_dimensions_are_located(dims, field, match):
+    text = ANGLE_DECK.read_text().replace('+ANG         .05     .08    .005    .006',
+                                          "+ANG    " + "".join(d.rjust(8) for d in dims))
+    with pytest.raises(DeckFormatError, match=match) as info:
+        read_deck_text(text, name="angle.bdf")
+    assert (info.value.line, info.value.field, info.value.card) == (11, field, "PBARL")
+
+
+def test_pbeaml_angle_is_an_error():
+    """On a CBEAM NASTRAN keeps shear flexibility together with the angle's I12, which the
+    reference solver does not model: PBEAML TYPE L is refused at its TYPE field."""
+    text = ("MAT1,1,2.1+11,,.3\nGRID,1,,0.,0.,0.\nGRID,2,,1.,0.,0.\nCBEAM,1,1,1,2,0.,1.,0.\n"
+            "PBEAML,1,1,,L\n,.05,.08,.005,.006\n")
+    with pytest.raises(DeckFormatError, match="TYPE L .* not supported on PBEAML") as info:
+        read_deck_text(text)
+    assert info.value.field == 5
 
 
 # --------------------------------------------------------------------------------------------
@@ -901,7 +1021,8 @@ def test_cbush_coincident_without_cid_is_an_error():
 
 
 # --------------------------------------------------------------------------------------------
-# PARAM,AUTOSPC,YES: grid-point singularities constrained, and listed
+# AUTOSPC as NASTRAN's SOL 101 does it: on unless PARAM,AUTOSPC,NO; grid-point singularities
+# constrained and listed, a load on them lost (with a warning), a mechanism still an error
 # --------------------------------------------------------------------------------------------
 TRUSS = DATA / "autospc_truss.bdf"
 TRUSS_AUTOSPC = [(g, c) for g in (1, 2, 3, 4) for c in (3, 4, 5, 6)]
@@ -937,30 +1058,81 @@ def test_autospc_constrains_and_lists_closed_form():
     assert not u[2:].any()
 
 
-def test_without_autospc_the_singularities_are_an_error():
-    """PARAM,AUTOSPC,NO (or no PARAM,AUTOSPC at all: the reference solver does not assume
-    NASTRAN's default) leaves the components free: a mechanism error naming them and the
-    PARAM that would constrain them."""
+def test_autospc_is_on_by_default_as_in_nastran():
+    """No PARAM,AUTOSPC in the deck: NASTRAN's SOL 101 default (YES) applies, so the same
+    components are constrained and listed, and the summary says where AUTOSPC came from."""
+    deck = read_deck_text(TRUSS.read_text().replace("PARAM,AUTOSPC,YES", ""))
+    assert deck.autospc and not deck.autospc_src
+    assert "AUTOSPC on (NASTRAN's SOL 101 default)" in deck.summary()
+    ref = ReferenceAdapter(deck)
+    assert ref.autospc_dofs == TRUSS_AUTOSPC
+    loads = LoadMatrix.from_dense([(4, 1), (4, 2)], np.eye(2) * 1e3, ["x", "y"])
+    u = ref.solve(loads, [(4, 1), (4, 2)]).values
+    np.testing.assert_allclose(u, 1e3 * truss_flexibility(ref.deck, 4), rtol=RTOL)
+
+
+def test_autospc_no_leaves_the_singularities_an_error():
+    """PARAM,AUTOSPC,NO (the last PARAM wins) leaves the components free: an error naming them
+    and the PARAM that keeps them free."""
     from solver_adapters.protocol import UnstableStructureError
-    for text in (TRUSS.read_text().replace("PARAM,AUTOSPC,YES", "PARAM,AUTOSPC,NO"),
-                 TRUSS.read_text().replace("PARAM,AUTOSPC,YES", "")):
-        ref = ReferenceAdapter(read_deck_text(text))
-        with pytest.raises(UnstableStructureError, match="PARAM,AUTOSPC,YES") as info:
-            ref.solve(unit_loads(4), [(4, 1)])
-        assert set(info.value.dofs) <= set(TRUSS_AUTOSPC) and info.value.dofs
+    text = TRUSS.read_text() + "PARAM,AUTOSPC,NO\n"
+    deck = read_deck_text(text)
+    assert not deck.autospc and "AUTOSPC off (PARAM,AUTOSPC,NO" in deck.summary()
+    ref = ReferenceAdapter(deck)
+    with pytest.raises(UnstableStructureError, match="remove PARAM,AUTOSPC,NO") as info:
+        ref.solve(unit_loads(4), [(4, 1)])
+    assert set(info.value.dofs) <= set(TRUSS_AUTOSPC) and info.value.dofs
+    assert ReferenceAdapter(read_deck_text(TRUSS.read_text())).autospc_dofs == TRUSS_AUTOSPC
 
 
-def test_load_on_an_autospc_component_is_an_error():
-    from solver_adapters.protocol import ModelError
-    with pytest.raises(ModelError, match=r"load on component\(s\) \[\(4, 3\), \(4, 4\), \(4, 5\), \(4, 6\)\] that PARAM,AUTOSPC"):
-        ReferenceAdapter(TRUSS).solve(unit_loads(4), [(4, 1)])
+def test_load_on_an_autospc_component_is_lost_with_a_warning():
+    """NASTRAN: a load on a component AUTOSPC constrained goes into the automatic constraint
+    and moves nothing. The reference solver does the same, and warns: the six unit loads at grid
+    4 give for components 1, 2 exactly the truss's closed form, and nothing else moves."""
+    ref = ReferenceAdapter(TRUSS)
+    with pytest.warns(RuntimeWarning, match=r"load on 4 component\(s\) that AUTOSPC constrained.*"
+                                            r"\[\(4, 3\), \(4, 4\), \(4, 5\), \(4, 6\)\].*lost"):
+        u = ref.solve(unit_loads(4, 1e3), [(4, c) for c in range(1, 7)]).values
+    np.testing.assert_allclose(u[:2, :2], 1e3 * truss_flexibility(ref.deck, 4), rtol=RTOL)
+    assert not u[2:].any() and not u[:, 2:].any()
+
+
+def test_solve_lists_what_autospc_constrained(tmp_path, capsys):
+    """`blackbox solve` with the reference solver names the constrained components, as
+    NASTRAN's F06 lists its AUTOSPC table; the deck needs no PARAM for it."""
+    from blackbox.cli import main
+    study = tmp_path / "truss"
+    study.mkdir()
+    (study / "model.bdf").write_text(TRUSS.read_text().replace("PARAM,AUTOSPC,YES", ""))
+    (study / "loads.csv").write_text("case,grid,component,value\nx,4,1,1000.\n")
+    (study / "study.toml").write_text('name = "truss"\n')
+    assert main(["solve", str(study), "--out", str(tmp_path / "out")]) == 0
+    assert "AUTOSPC constrained 16 component(s) without stiffness (grid:component 1:3, 1:4" in capsys.readouterr().out
+
+
+def test_a_mechanism_is_still_an_error_with_autospc():
+    """AUTOSPC removes grid-point singularities only (a direction without stiffness at one
+    grid), not a mechanism of the structure: a square of rods without a diagonal shears in its
+    plane although every grid is held in two directions by two rods, and a frame without
+    supports moves as a rigid body. Both stay errors that say so (NASTRAN stops too)."""
+    from solver_adapters.protocol import UnstableStructureError
+    square = ("GRID,1,,0.,0.,0.\nGRID,2,,1.,0.,0.\nGRID,3,,1.,1.,0.\nGRID,4,,0.,1.,0.\n"
+              "CONROD,1,1,2,1,1.-4\nCONROD,2,2,3,1,1.-4\nCONROD,3,3,4,1,1.-4\nCONROD,4,4,1,1,1.-4\n"
+              "MAT1,1,7.+10,,.33\nSPC1,1,12,1\nSPC1,1,2,2\n")
+    ref = ReferenceAdapter(read_deck_text(square))
+    with pytest.raises(UnstableStructureError, match="mechanism") as info:
+        ref.solve(LoadMatrix.unit([(3, 1)]), [(3, 1)])
+    assert {g for g, _ in info.value.dofs} & {3, 4}
+    free = read_deck_text(TRUSS.read_text().replace("SPC1,1,12,1", "").replace("SPC1,1,2,2", ""))
+    with pytest.raises(UnstableStructureError, match="mechanism"):
+        ReferenceAdapter(free).solve(LoadMatrix.unit([(4, 1)]), [(4, 1)])
 
 
 def test_autospc_rotated_singular_direction():
     """A grid held only by a CONROD along (1, 1, 0)/sqrt 2: its translational block has two zero
     eigenvalues, spanned by (1, -1, 0) and z; AUTOSPC constrains the component most aligned
     with each (x or y for the first, z), leaving one translation, as NASTRAN does."""
-    text = ("PARAM,AUTOSPC,YES\nGRID,1,,0.,0.,0.,,123456\nGRID,2,,1.,1.,0.\n"
+    text = ("GRID,1,,0.,0.,0.,,123456\nGRID,2,,1.,1.,0.\n"
             "CONROD,1,1,2,1,1.-4\nMAT1,1,7.+10,,.33\n")
     ref = ReferenceAdapter(read_deck_text(text))
     dofs = ref.autospc_dofs
@@ -985,12 +1157,29 @@ def test_autospc_mystran(tmp_path):
 
 @needs_mystran
 def test_mystran_adapter_follows_the_decks_autospc(tmp_path):
-    """A deck with PARAM,AUTOSPC,YES: the MYSTRAN adapter lets MYSTRAN constrain the same
-    components instead of failing on them, and agrees with the reference solver (7 digits)."""
+    """The MYSTRAN adapter runs AUTOSPC as the deck says, as the reference solver does: with
+    PARAM,AUTOSPC,YES and without any PARAM (NASTRAN's default) MYSTRAN constrains the same
+    components and agrees with the reference solver (7 digits); a load on one of them is lost
+    in both, with a warning; PARAM,AUTOSPC,NO leaves MYSTRAN a singular matrix (an error)."""
     from solver_adapters.nastran import MystranAdapter
+    from solver_adapters.protocol import UnstableStructureError
 
-    ref = ReferenceAdapter(TRUSS)
-    mys = MystranAdapter(TRUSS, workdir_root=tmp_path)
     report = [(g, c) for g in (2, 3, 4) for c in (1, 2)]
     loads = LoadMatrix.from_dense([(4, 1), (4, 2)], np.eye(2) * 1e3, ["x", "y"])
-    assert_close_to_mystran(ref.solve(loads, report).values, mys.solve(loads, report).values)
+    plain = tmp_path / "plain.bdf"
+    plain.write_text(TRUSS.read_text().replace("PARAM,AUTOSPC,YES", ""))
+    for path in (TRUSS, plain):
+        ref = ReferenceAdapter(path)
+        mys = MystranAdapter(path, workdir_root=tmp_path)
+        assert_close_to_mystran(ref.solve(loads, report).values, mys.solve(loads, report).values)
+    # a load on the constrained components 3-6 of grid 4 is lost in both (NASTRAN's behaviour)
+    lost = LoadMatrix.from_dense([(4, 1), (4, 3), (4, 5)], np.array([[1e3], [2e3], [50.0]]), ["lost"])
+    with pytest.warns(RuntimeWarning, match="AUTOSPC constrained"):
+        u = ReferenceAdapter(plain).solve(lost, report).values
+    with pytest.warns(RuntimeWarning, match=r"MYSTRAN's AUTOSPC took load.*case 'lost': force 2000 "):
+        v = MystranAdapter(plain, workdir_root=tmp_path).solve(lost, report).values
+    assert_close_to_mystran(u, v)
+    off = tmp_path / "off.bdf"
+    off.write_text(TRUSS.read_text() + "PARAM,AUTOSPC,NO\n")
+    with pytest.raises(UnstableStructureError):
+        MystranAdapter(off, workdir_root=tmp_path).solve(loads, report)

@@ -115,3 +115,35 @@ def test_diagnose_uses_the_same_declared_model(rigid_study):
     r_diag = pr.declared.condensed_model(ident.model.c).response(k).U_B
     np.testing.assert_allclose(r_diag, ident.model.response(k).U_B, rtol=0, atol=SAME_RESPONSE_RTOL *
                                np.abs(ident.model.response(k).U_B).max())
+
+
+def test_a_joint_dof_autospc_removed_is_an_error(cube, tmp_path, capsys):
+    """AUTOSPC (NASTRAN's default, the reference solver's now) constrains a component no
+    element of the deck holds. A branch member pinned at the joint (CBAR 7's end at branch grid
+    71 released in 456) leaves branch 71's rotations held by nothing but the joint's springs,
+    which the deck alone does not have: AUTOSPC fixes them, and the condensation would take
+    them as fixed. Every command that condenses stops with an error naming the DOFs instead
+    (before, the same deck failed as a mechanism); the deck's own SPC on a joint DOF passes."""
+    deck = cube / "model.bdf"
+    text = deck.read_text()
+    pinned = "CBAR           7       1      71       8     0.0     0.0     1.0\n             456"
+    deck.write_text(text.replace("CBAR           7       1      71       8     0.0     0.0     1.0", pinned))
+    study = load_study(cube)
+    assert study.deck.cbars[7].pa == "456"
+    from blackbox.errors import StudyError
+    with pytest.raises(StudyError, match=r"joint 'J7': DOF\(s\) \[\(71, 4\), \(71, 5\), \(71, 6\)\].*AUTOSPC"), \
+            pytest.warns(RuntimeWarning, match="AUTOSPC constrained"):
+        declared_model(study).condense(make_adapter_for(study, cache=False))
+    with pytest.warns(RuntimeWarning, match="AUTOSPC constrained"):
+        assert identify_main(cube, tmp_path) == 2
+    assert "do not move under a load there although the deck does not constrain them" in capsys.readouterr().err
+    # the same joint DOFs constrained by the deck itself: fixed on purpose, no error
+    deck.write_text(text.replace("ENDDATA", "CBAR,7,1,71,8,0.,0.,1.\n,456\nSPC1,1,456,71\nENDDATA")
+                    .replace("CBAR           7       1      71       8     0.0     0.0     1.0\n", ""))
+    study = load_study(cube)
+    declared_model(study).condense(make_adapter_for(study, cache=False))
+
+
+def identify_main(study: Path, tmp_path: Path) -> int:
+    from blackbox.cli import main
+    return main(["identify", str(study), "--out", str(tmp_path / "id"), "--no-cache"])

@@ -429,3 +429,31 @@ def test_cli_import(tmp_path, capsys):
     assert {p.name for p in (tmp_path / "s").iterdir()} >= {"model.bdf", "loads.csv", "study.toml"}
     assert main(["import", str(deck), "--out", str(tmp_path / "t"), "--joint", "J:1,999"]) == 2
     assert not (tmp_path / "t").exists()
+
+
+SHELL = ("GRID    4               0.      1.      0.\nGRID    5               1.      1.      0.\n"
+         "CQUAD4  11      7       1       2       5       4\nPSHELL  7       1       .002    1               1\n")
+
+
+def test_shells_are_kept_for_mystran(tmp_path):
+    """A deck with shells: model.bdf keeps them as written, study.toml names the mystran adapter
+    (a note says why), the study loads; the reference adapter refuses it, naming every card.
+    No PARAM,AUTOSPC is added: the reader applies NASTRAN's default itself."""
+    p = _deck(tmp_path, "SPC = 1\nLOAD = 5\n", "FORCE   5       3               10.     0.      0.      1.\n" + SHELL)
+    result = import_deck.run(p)
+    assert any("kept 2 cards the reference solver does not model (CQUAD4 x1, PSHELL x1)" in n for n in result.notes)
+    assert [u.name for u in result.deck.unmodelled] == ["CQUAD4", "PSHELL"]
+    study_dir = _study(result, tmp_path)
+    assert 'adapter = "mystran"' in (study_dir / "study.toml").read_text()
+    assert "CQUAD4  11" in (study_dir / "model.bdf").read_text()
+    assert "AUTOSPC" not in (study_dir / "model.bdf").read_text()
+    study = load_study(study_dir)
+    with pytest.raises(DeckFormatError, match=r"(?s)CQUAD4 x1 \(first at .*model.bdf:\d+\).*PSHELL x1"):
+        make_adapter_for(study, "reference")
+
+
+def test_mpc_is_refused_also_with_shells(tmp_path):
+    p = _deck(tmp_path, "SPC = 1\nLOAD = 5\n", "FORCE   5       3               10.     0.      0.      1.\n"
+              + SHELL + "MPC     9       3       1       1.      2       1       -1.\n")
+    with pytest.raises(DeckFormatError, match="MPC x1 .*case control selects"):
+        import_deck.run(p)

@@ -151,9 +151,9 @@ def test_unprocessed_cards_named():
 # failure detection on hand-made outputs
 # --------------------------------------------------------------------------------------------
 def _fake_run(tmp_path, f06: str | None, err: str = "", stdout: str = " MYSTRAN terminated normally.\n",
-              returncode: int = 0, n_cases: int = 2, report=((5, 3),)):
+              returncode: int = 0, n_cases: int = 2, report=((5, 3),), deck_text: str = ""):
     deck = tmp_path / "run.bdf"
-    deck.write_text("")
+    deck.write_text(deck_text)
     if f06 is not None:
         (tmp_path / "run.F06").write_text(f06)
     (tmp_path / "run.ERR").write_text(err)
@@ -211,8 +211,25 @@ def test_read_results_large_epsilon_is_unstable(tmp_path):
 
 
 def test_read_results_autospc_used(tmp_path):
+    """AUTOSPC DOFs in the F06 of a run deck that turned AUTOSPC off (the deck said
+    PARAM,AUTOSPC,NO, or the dialect's autospc=False) are an error; with AUTOSPC on (the deck's
+    default, as in NASTRAN) they are what was asked for."""
     f06 = GOOD.replace("overall                       =            0", "overall  =  4")
     with pytest.raises(UnstableStructureError, match="AUTOSPC constrained 4"):
+        _fake_run(tmp_path, f06, deck_text="BEGIN BULK\nPARAM,AUTOSPC,N\nENDDATA\n")
+    _fake_run(tmp_path, f06, deck_text="BEGIN BULK\nPARAM,AUTOSPC,Y\nENDDATA\n")
+
+
+def test_read_results_lost_load_warns(tmp_path):
+    """``ABS AUTOSPC FORCES`` of a subcase above 1e-6 of its load: the load was applied on a
+    component AUTOSPC constrained, and is lost (NASTRAN's behaviour): a warning names the case."""
+    line = (" ABS AUTOSPC FORCES  :   0.000000E+00   0.000000E+00   {:.6E}   0.000000E+00   0.000000E+00"
+            "   0.000000E+00\n")
+    cut = GOOD.index(" OUTPUT FOR SUBCASE        2")
+    f06 = GOOD[:cut] + line.format(0.25) + GOOD[cut:] + line.format(1e-12)
+    assert parse_f06(f06).autospc_forces == {1: (0.0, 0.0, 0.25, 0.0, 0.0, 0.0),
+                                             2: (0.0, 0.0, 1e-12, 0.0, 0.0, 0.0)}
+    with pytest.warns(RuntimeWarning, match=r"1 case\(s\), case 'unit:5:3': force 0.25 of at most 1 "):
         _fake_run(tmp_path, f06)
 
 

@@ -96,8 +96,8 @@ def _run_bulk(path: Path, springs=()) -> tuple[str, object]:
 
 
 ROUND_TRIP_DECKS = ["cbar_pins_offsets.bdf", "cbeam_cantilevers.bdf", "coord_cantilever.bdf", "coord_frame.bdf",
-                    "pbar_i12.bdf", "pbarl_cantilevers.bdf", "rbe3_posts.bdf", "rod_line.bdf", "rod_tripod.bdf",
-                    "shear_cantilever.bdf"]
+                    "pbar_i12.bdf", "pbarl_angle.bdf", "pbarl_cantilevers.bdf", "rbe3_posts.bdf", "rod_line.bdf",
+                    "rod_tripod.bdf", "shear_cantilever.bdf"]
 
 EVERY_CARD = """$ every card the reader models, in mixed formats
 GRDSET,,0,,,,0,6

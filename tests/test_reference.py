@@ -253,8 +253,14 @@ def test_errors_name_what_is_wrong():
     assert (1, 6) in err.value.dofs or (5, 2) in err.value.dofs
     f.fix(1)
     f.grid(77, (9, 9, 9))              # a grid nothing connects
+    # NASTRAN's default AUTOSPC constrains it (a grid-point singularity), and lists it ...
+    a = adapter_of(f)
+    a.solve(LoadMatrix.unit([(5, 1)]), [(5, 1)])
+    assert a.autospc_dofs == [(77, c) for c in range(1, 7)]
+    # ... and with PARAM,AUTOSPC,NO it is an error that names it
     with pytest.raises(UnstableStructureError, match="77:T1"):
-        adapter_of(f).solve(LoadMatrix.unit([(5, 1)]), [(5, 1)])
+        ReferenceAdapter(read_deck_text(f.bdf().replace("ENDDATA", "PARAM,AUTOSPC,NO\nENDDATA"))).solve(
+            LoadMatrix.unit([(5, 1)]), [(5, 1)])
     g = cantilever((1, 0, 0), v=(1, 0, 0))
     with pytest.raises(ModelError, match="parallel"):
         adapter_of(g).solve(LoadMatrix.unit([(5, 1)]), [(5, 1)])

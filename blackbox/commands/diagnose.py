@@ -49,7 +49,7 @@ import numpy as np
 from blackbox.adapters import make_adapter_for
 from blackbox.commands.common import as_study
 from blackbox.declared import DeclaredModel, SolverCost, declared_model
-from blackbox.diagnosis.decks import SplitDeck, element_deck, split_deck
+from blackbox.diagnosis.decks import SplitDeck, element_deck, split_deck, unmodelled_notes
 from blackbox.diagnosis.document import diagnosis_document, verdict_detail
 from blackbox.diagnosis.effects import CandidateContext, Effect, families
 from blackbox.diagnosis.effects.undeclared_joint import UndeclaredJoint, joint_candidate_grids
@@ -394,6 +394,7 @@ class DiagnosisResult:
         doc = diagnosis_document(self.study.name, self.diagnosis, self.solver_json(), list(pr.holdout),
                                  pr.declared_holdout, pr.ident)
         doc["wall_s"] = self.wall_s
+        doc["notes"] = unmodelled_notes(pr.deck)     # what a deck with shells/solids leaves aside
         return doc
 
     def to_json(self) -> dict:

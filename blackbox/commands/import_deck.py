@@ -125,7 +125,15 @@ def _study_toml(name: str, source: Path, cases, joints, deck: Deck) -> str:
     lines = [f"# Made by `blackbox import` from {source.name}: model.bdf (its bulk data), loads.csv",
              f"# ({len(cases)} case(s): {', '.join(cases[:20])}{' ...' if len(cases) > 20 else ''}, "
              f"one per SUBCASE). Complete it, then add measurements.csv (docs/study-format.md).",
-             f"name = {json.dumps(name)}", "", "[solver]", 'adapter = "reference"', 'deck = "model.bdf"', ""]
+             f"name = {json.dumps(name)}", "", "[solver]"]
+    if deck.unmodelled:
+        kinds = ", ".join(f"{n} x{k}" for n, (k, _) in deck.unmodelled_counts().items())
+        lines += [f"# The deck has cards the in-process reference solver does not model ({kinds}):",
+                  "# MYSTRAN solves it (an external adapter needs only the grids, joints and loads).",
+                  'adapter = "mystran"']
+    else:
+        lines.append('adapter = "reference"')
+    lines += ['deck = "model.bdf"', ""]
     if joints:
         for n, g in joints:
             lines += ["[[joints]]", f"name = {json.dumps(n)}", f"grids = [{', '.join(map(str, g))}]",
@@ -307,7 +315,14 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = ()) -> I
     drop_cards += debug
     dropped_ids = {id(c) for c in drop_cards}
     kept = [c for c in cards if id(c) not in dropped_ids]
-    deck = deck_from_cards(kept)
+    # cards the reference solver does not model (shells, solids) are kept for an external solver:
+    # the study's adapter is then MYSTRAN (study.toml, a note); load cards are gone already, and
+    # the cards that cannot be handed on (MPC, superelements) stay errors
+    deck = deck_from_cards(kept, unmodelled="keep")
+    if deck.unmodelled:
+        kinds = ", ".join(f"{n} x{k}" for n, (k, _) in deck.unmodelled_counts().items())
+        notes.append(f"kept {_plural(len(deck.unmodelled), 'card')} the reference solver does not model "
+                     f"({kinds}): study.toml names the mystran adapter, which runs them")
     read_seconds = time.perf_counter() - t0
 
     # loads.csv
@@ -361,13 +376,6 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = ()) -> I
     start = 0
     if cc is not None:
         start = bulk_start(lines)[1] + 1
-    if not deck.autospc_src:
-        # NASTRAN's SOL 101 constrains components without stiffness by default (PARAM,AUTOSPC,YES);
-        # the reference solver does so only when the deck says it, so the study says it here.
-        model_lines += ["$ NASTRAN's default for linear statics, written out by `blackbox import`:",
-                        "PARAM,AUTOSPC,YES"]
-        notes.append("added PARAM,AUTOSPC,YES (NASTRAN's SOL 101 default, which the deck relied on): "
-                     "components without stiffness are constrained and listed by the reference solver")
     _inline(path.resolve(), str(path), path.parent, start, drop_lines, model_lines)
     model_lines.append("ENDDATA")
 

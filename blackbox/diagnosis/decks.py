@@ -26,7 +26,8 @@ from solver_adapters.protocol import DofLabel
 if TYPE_CHECKING:
     from blackbox.diagnosis.effects.base import CandidateContext, Effect
 
-__all__ = ["members_at", "constrained_grids", "element_deck", "SplitEditor", "SplitDeck", "split_deck"]
+__all__ = ["members_at", "constrained_grids", "unsplittable_grids", "unmodelled_notes", "element_deck",
+           "SplitEditor", "SplitDeck", "split_deck"]
 
 
 def members_at(deck: Deck) -> dict[int, list[int]]:
@@ -53,6 +54,41 @@ def constrained_grids(deck: Deck) -> dict[int, str]:
 def rbe2_grids(deck: Deck) -> set[int]:
     """Every grid of every RBE2 (independent and dependent)."""
     return {g for r in deck.rbe2s.values() for g in (r.gn, *r.gm)}
+
+
+def unsplittable_grids(deck: Deck) -> dict[int, list[str]]:
+    """Grids where >= 2 bars meet that also carry a card the reader does not model (a shell, a
+    solid, kept for an external solver), with those cards. The undeclared-joint cut splits a
+    grid into one grid per bar; such an element is no bar and would stay on the first bar's grid
+    only, rigidly joined to that bar and flexibly to the others: a connection the structure does
+    not have. So these grids are not undeclared-joint candidates (:func:`unmodelled_notes`)."""
+    if not deck.unmodelled:
+        return {}
+    at = members_at(deck)
+    # grids no cut touches anyway (constrained, in an RBE2, on a spring) are left out
+    sprung = {g for s in deck.springs.values() for g in (s.g1, s.g2) if g}
+    other = set(constrained_grids(deck)) | rbe2_grids(deck) | sprung
+    return {g: cards for g, cards in sorted(deck.unmodelled_grids().items())
+            if len(at.get(g, ())) >= 2 and g not in other}
+
+
+def unmodelled_notes(deck: Deck) -> list[str]:
+    """What the diagnosis leaves aside on a deck with cards the reader does not model (shells,
+    solids, solved by an external adapter), one sentence each, for ``diagnosis.json`` ``notes``."""
+    if not deck.unmodelled:
+        return []
+    kinds = ", ".join(f"{n} x{k}" for n, (k, _) in deck.unmodelled_counts().items())
+    notes = [f"the deck holds cards the diagnosis does not edit ({kinds}): they stay in every edited "
+             f"deck as they are; member_stiffness candidates are the CBAR members only"]
+    skipped = unsplittable_grids(deck)
+    if skipped:
+        cards = sorted({c.split()[0] for cs in skipped.values() for c in cs})
+        grids = list(skipped)
+        notes.append(f"undeclared_joint: {len(grids)} grid(s) where bars meet {'/'.join(cards)} elements are "
+                     f"not candidates ({', '.join(map(str, grids[:20]))}{' ...' if len(grids) > 20 else ''}): "
+                     f"the cut splits the bars there but not the {'/'.join(cards)}, which would stay rigidly "
+                     f"joined to one bar and flexibly to the others")
+    return notes
 
 
 def element_deck(deck: Deck) -> tuple[Deck, dict[int, tuple[int, int]]]:
@@ -87,8 +123,9 @@ class SplitEditor:
     @classmethod
     def of(cls, deck: Deck, K_e: dict[int, np.ndarray]) -> "SplitEditor":
         d = copy.deepcopy(deck)
-        return cls(deck, d, K_e, [], {}, max(d.grids) + 1,
-                   max(list(d.cbars) + list(d.rbe2s) + list(d.springs) + [0]) + 1)
+        # new elements go above every element ID of the deck, those of the cards it keeps for an
+        # external solver (shells, solids) included: NASTRAN element IDs are unique over all
+        return cls(deck, d, K_e, [], {}, max(d.grids) + 1, d.max_element_id() + 1)
 
     @property
     def members_at(self) -> dict[int, list[int]]:

@@ -3,8 +3,10 @@
 Keys: ``study``, ``before`` / ``after`` (fit statistics with the 99 % band), ``candidates`` (the
 first round's, best first), ``added`` (each effect with its parameters), ``steps`` (every round:
 statistics, the 25 best candidates, joint parameters and residual structure before and after),
-``stop_reason``, ``joint_parameters``, ``holdout``, ``validation`` (hold-out cases or K-fold over the load cases, :mod:`blackbox.diagnosis.validation`), ``settings``, ``identify_check``, ``solver``,
-``warnings``, ``method_wall_s`` (and ``wall_s``, the whole command, added by the command);
+``stop_reason``, ``joint_parameters``, ``holdout``, ``validation`` (hold-out cases or K-fold over
+the load cases, :mod:`blackbox.diagnosis.validation`), ``settings``, ``identify_check``, ``solver``,
+``warnings``, ``method_wall_s`` (and ``wall_s``, the whole command, and ``notes``, what the
+diagnosis leaves aside on a deck with shells or solids, added by the command);
 ``verdict`` (``adequate`` / ``explained`` / ``unexplained``, :func:`blackbox.diagnosis.search.verdict`)
 with ``verdict_detail`` (one sentence), ``hotspots`` (``[{"grid", "share", "n", "excess"}]``: each
 grid's share of the final fit's chi-square excess, largest first, top 10), ``hotspot_cases`` and

@@ -126,6 +126,8 @@ def diagnosis_report(study: Study, doc: dict, files: list[str]) -> str:
                 f"(rigid state of {sv['split_pairs']} cut pairs, condition {_g(sv['split_condition'], 2)})."]
     if doc["warnings"]:
         out += ["", "## Warnings", ""] + [f"- {w}" for w in doc["warnings"]]
+    if doc.get("notes"):
+        out += ["", "## Notes", ""] + [f"- {n}" for n in doc["notes"]]
     pics = [f for f in files if f.endswith(".png")]
     if pics:
         out += ["", "## Plots", ""] + [f"![{p[:-4]}]({p})" for p in pics]

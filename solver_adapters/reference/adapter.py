@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+import warnings
 from pathlib import Path
 from typing import Sequence
 
@@ -13,6 +14,23 @@ from solver_adapters.deck import Deck
 from solver_adapters.protocol import (Displacements, DofLabel, LoadMatrix, ModelError, ScalarSpring,
                                       SolverStats, UnknownDofError, UnstableStructureError)
 from solver_adapters.reference.model import BACKENDS, Assembled, Factorization, assemble
+
+
+def lost_loads_warning(loads: LoadMatrix, removed: Sequence[DofLabel]) -> list[DofLabel]:
+    """Warn (``RuntimeWarning``) about the loaded components that AUTOSPC constrained and return
+    them. NASTRAN does the same thing with such a load: the component is held by an automatic
+    SPC, so the load goes into its constraint force and moves nothing (it is lost); the
+    solution is that of the other loads. MYSTRAN too (docs/mystran.md)."""
+    gone = set(map(tuple, removed))
+    vals = loads.values.tocoo()
+    loaded = np.unique(vals.row[vals.data != 0.0])
+    hit = [tuple(loads.dofs[i]) for i in loaded.tolist() if tuple(loads.dofs[i]) in gone]
+    if hit:
+        warnings.warn(f"load on {len(hit)} component(s) that AUTOSPC constrained (no stiffness there), "
+                      f"first {hit[:10]}: as in NASTRAN, such a load is taken by the automatic constraint "
+                      f"and lost; the displacements are those of the other loads (PARAM,AUTOSPC,NO makes "
+                      f"the component a mechanism error instead)", RuntimeWarning, stacklevel=3)
+    return hit
 
 
 class ReferenceAdapter:
@@ -46,6 +64,11 @@ class ReferenceAdapter:
             deck = parsed
         else:
             self.deck_path = None
+        if deck.unmodelled:
+            # a deck read for an external solver (shells, solids kept apart): this solver would
+            # leave them out and solve another structure; the reader's own message instead
+            from solver_adapters.bdf import unmodelled_error
+            raise unmodelled_error(deck)
         self.deck = deck
         self.backend = backend
         self.extra_springs = tuple(extra_springs)
@@ -73,14 +96,7 @@ class ReferenceAdapter:
         fact = self.factorization()
         m = self.model
         if m.autospc and loads.dofs:
-            gone = set(m.autospc)
-            vals = loads.values.tocoo()
-            loaded = np.unique(vals.row[vals.data != 0.0])
-            hit = [loads.dofs[i] for i in loaded.tolist() if tuple(loads.dofs[i]) in gone]
-            if hit:
-                raise ModelError(f"load on component(s) {hit[:10]} that PARAM,AUTOSPC,YES "
-                                 f"constrained (no stiffness there): NASTRAN drops such a load "
-                                 f"silently; the reference solver refuses it")
+            lost_loads_warning(loads, m.autospc)
         F_g = sp.csr_matrix((m.T.shape[0], loads.n_cases))
         if loads.dofs:
             gi = m.g_index(loads.dofs)
@@ -124,9 +140,9 @@ class ReferenceAdapter:
 
     @property
     def autospc_dofs(self) -> list[DofLabel]:
-        """The components PARAM,AUTOSPC,YES constrained (grid, component), after assembly; empty
-        when the deck does not say PARAM,AUTOSPC,YES (then nothing is constrained silently: a
-        component without stiffness is a mechanism error naming it)."""
+        """The components AUTOSPC constrained (grid, component), after assembly. AUTOSPC is
+        NASTRAN's SOL 101 default and runs unless the deck says PARAM,AUTOSPC,NO (then this is
+        empty and a component without stiffness is a mechanism error naming it)."""
         return list(self.model.autospc)
 
     @property

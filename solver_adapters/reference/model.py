@@ -4,8 +4,10 @@ Elements: CBAR/CBEAM (Euler-Bernoulli or, with K1/K2, Timoshenko bending; pin fl
 CROD/CONROD (axial + torsion), element matrices in ``frame.py``; CBUSH springs; CELAS springs.
 Elements are assembled in basic; the g-set is in each grid's CD system (``u_basic = D u_cd``,
 ``K_gg = D^T K_basic D``), so SPCs, springs, loads and results are in CD components.
-RBE3 rows (weighted least squares) are eliminated like RBE2 rows; PARAM,AUTOSPC,YES removes
-free components without stiffness (:func:`autospc`) and lists them.
+RBE3 rows (weighted least squares) are eliminated like RBE2 rows; AUTOSPC (NASTRAN's SOL 101
+default, off only with PARAM,AUTOSPC,NO) removes free components without stiffness
+(:func:`autospc`) and lists them. It removes grid-point singularities only: a mechanism of the
+structure (a rigid-body motion, a linkage) still fails the factorization with an error naming it.
 
 ``u_g = T u_f``: every grid component (g-set, 6 per grid) is a combination of the independent
 free components (f-set). SPC1 and GRID PS components get a zero row; RBE2 dependent components
@@ -81,6 +83,7 @@ class Assembled:
     K_ff: sp.csc_matrix
     f_labels: list[DofLabel]
     autospc: list[DofLabel] = dataclasses.field(default_factory=list)   # constrained by AUTOSPC
+    autospc_on: bool = True             # whether AUTOSPC ran (the deck's PARAM,AUTOSPC, default YES)
 
     def g_index(self, dofs) -> np.ndarray:
         pos = np.searchsorted(self.grid_ids, [d[0] for d in dofs])
@@ -309,11 +312,11 @@ def assemble(deck: Deck, extra_springs: tuple[ScalarSpring, ...] = (),
     auto_labels = [g_labels[i] for i in removed.tolist()]
     tm["labels_s"] = time.perf_counter() - t1
     tm["assemble_s"] = time.perf_counter() - t0
-    return Assembled(grid_ids, g_labels, T, K_gg, K_ff, f_labels, auto_labels)
+    return Assembled(grid_ids, g_labels, T, K_gg, K_ff, f_labels, auto_labels, bool(deck.autospc))
 
 
 def autospc(K_ff: sp.spmatrix, f_index: np.ndarray, ratio: float) -> tuple[np.ndarray, np.ndarray]:
-    """NASTRAN's grid-point singularity processing (PARAM,AUTOSPC,YES): ``(keep, removed)``,
+    """NASTRAN's grid-point singularity processing (AUTOSPC): ``(keep, removed)``,
     positions in the f-set to keep and the g-indices of the components it constrains.
 
     For every grid, the 3x3 blocks of K_ff of its free translations and of its free rotations
@@ -883,8 +886,9 @@ class Factorization:
             raise UnstableStructureError(
                 "the stiffness has no diagonal term at these free components: nothing connects "
                 "them (a grid without elements, or a rotation no element reaches); add an SPC1 or "
-                "an element, or PARAM,AUTOSPC,YES to the deck (NASTRAN's SOL 101 default, applied "
-                "by the reference solver only when the deck says so)",
+                "an element, or remove PARAM,AUTOSPC,NO from the deck (AUTOSPC, NASTRAN's SOL 101 "
+                "default, would constrain them)" if not model.autospc_on else
+                "the stiffness has no diagonal term at these free components: nothing connects them",
                 [model.f_labels[i] for i in dead])
         negative = np.flatnonzero(diag < 0.0)
         if negative.size:

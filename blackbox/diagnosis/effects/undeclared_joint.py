@@ -7,8 +7,8 @@ at the grid). Released, as the data support (:func:`~blackbox.diagnosis.effects.
 "equal" (``k_G``: one factor on that stiffness about every global axis), "per-axis" (``kx_G, ky_G,
 kz_G``: equal springs between every pair of branches about each axis) or "per-branch" (``kx_G_eE``
 ...: per axis, a spring from each member ``E``'s end to the joint's centre; three or more members).
-Candidates: grids of >= 2 members that are not a declared joint's, constrained, in an RBE2 or on a
-spring; beyond ``max_joint_candidates`` those nearest the declared fit's residual concentration.
+Candidates: grids of >= 2 members that are not a declared joint's, constrained, in an RBE2, on a
+spring or on an element the reader does not model (a shell, a solid); beyond ``max_joint_candidates`` those nearest the declared fit's residual concentration.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from blackbox.diagnosis.decks import constrained_grids, members_at, rbe2_grids
+from blackbox.diagnosis.decks import constrained_grids, members_at, rbe2_grids, unsplittable_grids
 from blackbox.diagnosis.effects.connection import GridConnection, branch_ladder
 from blackbox.diagnosis.effects.registry import register
 from solver_adapters.protocol import Deck, Rbe2
@@ -28,11 +28,13 @@ __all__ = ["UndeclaredJoint", "joint_candidate_grids", "preselect"]
 
 def joint_candidate_grids(deck: Deck, declared_grids: set[int]) -> list[int]:
     """Grids where >= 2 members meet that could be an undeclared flexible joint: not a declared
-    joint's grid, not constrained, not in an RBE2, no scalar spring."""
+    joint's grid, not constrained, not in an RBE2, no scalar spring, and no element the reader
+    does not model (:func:`unsplittable_grids`)."""
     at = members_at(deck)
     fixed = set(constrained_grids(deck))
     sprung = {g for s in deck.springs.values() for g in (s.g1, s.g2) if g}
-    return [g for g in sorted(at) if len(at[g]) >= 2 and g not in declared_grids | fixed | rbe2_grids(deck) | sprung]
+    skip = declared_grids | fixed | rbe2_grids(deck) | sprung | set(unsplittable_grids(deck))
+    return [g for g in sorted(at) if len(at[g]) >= 2 and g not in skip]
 
 
 def preselect(grids: list[int], limit: int, deck: Deck, residual_rms: dict[int, float]) -> list[int]:
