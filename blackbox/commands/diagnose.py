@@ -52,6 +52,7 @@ from blackbox.declared import DeclaredModel, SolverCost, declared_model
 from blackbox.diagnosis.decks import SplitDeck, element_deck, split_deck, unmodelled_notes
 from blackbox.diagnosis.document import diagnosis_document, verdict_detail
 from blackbox.diagnosis.effects import CandidateContext, Effect, families
+from blackbox.diagnosis.effects.load_scale import case_scales
 from blackbox.diagnosis.effects.undeclared_joint import UndeclaredJoint, joint_candidate_grids
 from blackbox.diagnosis.runs import RunRecord, element_stiffness
 from blackbox.diagnosis.search import Diagnosis, diagnose
@@ -119,21 +120,6 @@ class Prepared:
         element = self.element_cost if self.element_cost is not None else SolverCost.of(self.element_adapter)
         cost = self.declared_cost + element + SolverCost.of(self.base.adapter)
         return dataclasses.replace(cost, right_hand_sides=sum(r.right_hand_sides for r in self.log))
-
-
-def _case_scales(obs: Observations, predicted: np.ndarray) -> dict[str, tuple[float, float]]:
-    """Each fitted case's least-squares scale of its predicted responses, minus 1, and its
-    standard deviation: ``(sum(u r / s^2) / sum(u^2 / s^2), 1 / sqrt(sum(u^2 / s^2)))``."""
-    u = np.asarray(predicted, float)
-    w = 1.0 / np.asarray(obs.sigma, float) ** 2
-    r = np.asarray(obs.values, float) - u
-    out = {}
-    for c in dict.fromkeys(obs.case_index.tolist()):
-        rows = obs.case_index == c
-        uu = float(np.sum(w[rows] * u[rows] ** 2))
-        if uu > 0:
-            out[obs.case_labels[c]] = (float(np.sum(w[rows] * u[rows] * r[rows]) / uu), 1.0 / math.sqrt(uu))
-    return out
 
 
 def _residual_rms(obs: Observations, r: np.ndarray) -> dict[int, float]:
@@ -336,7 +322,8 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
             return CandidateContext(deck, tuple(dm.joints), K_e, fit_obs, tuple(study.loads.cases),
                                     _residual_rms(fit_obs, ident.residuals) if ident is not None else None,
                                     max_joint_candidates, read_load_groups(study.root / "loads.csv"),
-                                    _case_scales(fit_obs, ident.predicted) if ident is not None else None)
+                                    case_scales(fit_obs.case_index, fit_obs.values, fit_obs.sigma, ident.predicted,
+                                                fit_obs.case_labels) if ident is not None else None)
         # without the fit yet, the cuts do not read the residuals (checked above)
         sd = split_deck(deck, K_e, fams, context())
         spath = deck_dir / "split.bdf"

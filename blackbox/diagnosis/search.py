@@ -369,8 +369,13 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
     for e in candidates:
         counts[e.kind] = counts.get(e.kind, 0) + 1
     stop = "max_steps reached"
+    candidates = list(candidates)
+    labels = obs_fit.case_labels
     for it in range(max_steps):
         runs0 = len(base.log)
+        if it:                          # candidates that depend on the current fit, re-listed from it
+            for fam in dict.fromkeys(type(e) for e in candidates):
+                candidates = fam.refresh(candidates, fit, om, labels)
         pool = [e for e in candidates if not fit.spec.has(e) and e.applicable(fit.spec)]
         if not pool:
             stop = "no candidate left"

@@ -123,6 +123,13 @@ class Effect:
         """Whether the effect can still be added to ``spec``."""
         return True
 
+    @classmethod
+    def refresh(cls, pool: list["Effect"], fit: "Fit", om: "ObsMap", labels: Sequence[str]) -> list["Effect"]:
+        """The candidates of a new round: ``pool`` with those of this family that depend on the
+        current fit re-listed from it (default: unchanged; load-scale groups found from the data
+        are re-found from each round's residuals)."""
+        return pool
+
     # ---- how the effect enters the augmented model -------------------------------------------------
     def joint_models(self, spec: "ModelSpec", x: np.ndarray) -> tuple[tuple["JointModel", ...], np.ndarray]:
         """The joints after adding the effect and their parameters (default: unchanged)."""

@@ -11,7 +11,9 @@ responses in the declared fit (``1 + sum(u r / sigma^2) / sum(u^2 / sigma^2)``, 
 predicted responses, ``r`` the residuals) orders the fitted cases, and every run of ``k`` cases at
 either end of that order (``2 <= k <= n - 1``: the ``k`` most over- or under-scaled) is a
 candidate ``s_found_<first>_<k>`` -- the cases of a test day whose load cell read low share one
-factor and sit together at one end. The order is read from the same data the candidates are
+factor and sit together at one end. The groups are found again from each round's fit
+(:meth:`LoadScale.refresh`): with a support spring still missing, the declared fit's case scales
+mix both effects, and the day stands out only once the support is in the model. The order is read from the same data the candidates are
 then tested on, so every such group is a hypothesis of its own round and counted in its
 Bonferroni correction (2 (n - 2) of them for n fitted cases); one case's own factor stays a
 candidate beside them. Hold-out cases are never in a found group (their residuals are not
@@ -27,7 +29,25 @@ import numpy as np
 from blackbox.diagnosis.effects.base import Effect
 from blackbox.diagnosis.effects.registry import register
 
-__all__ = ["LoadScale"]
+__all__ = ["LoadScale", "case_scales"]
+
+
+def case_scales(case: np.ndarray, y: np.ndarray, sigma: np.ndarray, predicted: np.ndarray,
+                labels) -> dict[str, tuple[float, float]]:
+    """Each case's least-squares scale of its predicted responses, minus 1, and its standard
+    deviation: ``(sum(u r / s^2) / sum(u^2 / s^2), 1 / sqrt(sum(u^2 / s^2)))`` over the case's
+    rows (``u`` predicted, ``r = y - u``); ``case`` indexes ``labels``."""
+    u = np.asarray(predicted, float)
+    w = 1.0 / np.asarray(sigma, float) ** 2
+    r = np.asarray(y, float) - u
+    case = np.asarray(case)
+    out = {}
+    for c in dict.fromkeys(case.tolist()):
+        rows = case == c
+        uu = float(np.sum(w[rows] * u[rows] ** 2))
+        if uu > 0:
+            out[labels[c]] = (float(np.sum(w[rows] * u[rows] * r[rows]) / uu), 1.0 / np.sqrt(uu))
+    return out
 
 
 @register
@@ -65,6 +85,19 @@ class LoadScale(Effect):
         if len(names) <= 1 and ctx.case_scales:
             out += cls.found_groups(cases, ctx.case_scales)
         return out
+
+    @property
+    def found(self) -> bool:
+        """A group found from the data (not named in ``loads.csv``)."""
+        return self.group is not None and self.group.startswith("found")
+
+    @classmethod
+    def refresh(cls, pool, fit, om, labels):
+        if not any(isinstance(e, cls) and e.found for e in pool):
+            return pool
+        scales = case_scales(om.case, om.y, om.sigma, fit.predicted, labels)
+        keep = [e for e in pool if not (isinstance(e, cls) and e.found)]
+        return keep + cls.found_groups(list(labels), scales)
 
     @classmethod
     def found_groups(cls, cases: list[str], case_scales: dict[str, tuple[float, float]]) -> list["LoadScale"]:
