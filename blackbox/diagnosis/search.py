@@ -304,8 +304,9 @@ def _refit_variant(base: SplitBase, fit: Fit, i: int, e: Effect, x_e: np.ndarray
 def refine(base: SplitBase, fit: Fit, i: int, om: ObsMap, hold: ObsMap | None, boundary, K_deck, o_dofs,
            alpha: float, multiplier: float, checks: Checks | None = None) -> tuple[Fit, tuple[VariantTrial, ...]]:
     """Climb effect ``i`` of ``fit`` up its richer variants (module docstring): refit each richer
-    variant from its nested point, keep the accepted one with the lowest BIC, repeat from it.
-    Returns the final fit and every variant tried."""
+    variant from its nested point, keep the accepted one with the strongest evidence (lowest
+    ``delta BIC + hold-out chi2``), repeat from it. ``checks``: the search's tests (default: the
+    hold-out when there is one). Returns the final fit and every variant tried."""
     checks = checks or Checks(om, hold, Validation("holdout" if hold is not None else "none"))
     trials: list[VariantTrial] = []
     while True:
