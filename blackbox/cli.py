@@ -101,9 +101,9 @@ def cmd_identify(args) -> int:
     study = load_study(args.study, need_measurements=True)
     print(f"identify {study.name}: {len(study.measurements)} measurements, joints "
           f"{[j.name for j in study.config.joints]}", flush=True)
-    with _executor(args, "solver chunks") as ex:
+    with _executor(args, "solver chunks, bootstrap refits") as ex:
         res = identify.run(study, adapter=_chunked(study, args, ex), model=args.model, progress=progress,
-                           stages=_Throttled())
+                           stages=_Throttled(), executor=ex)
     print("  writing the report and plots", flush=True)
     files = write_output(out, "identify", res.write)
     r, cost = res.result, res.solver
@@ -149,9 +149,11 @@ def cmd_diagnose(args) -> int:
     out = _out_for(args, "diagnose")
     effects = tuple(e.strip() for e in args.effects.split(",") if e.strip()) if args.effects else None
     with _executor(args, "diagnose runs") as ex:
+        caps = {k: v for k, v in (("max_joint_candidates", args.max_joint_candidates),
+                                  ("max_member_candidates", args.max_member_candidates)) if v is not None}
         res = diagnose.run(args.study, adapter=args.adapter, alpha=args.alpha, max_steps=args.max_steps,
                            refit_top=args.refit_top, effects=effects, progress=lambda s: print(s, flush=True),
-                           executor=ex)
+                           executor=ex, **caps)
     write_output(out, "diagnose", res.write)
     d = res.document
     b, a = d["before"], d["after"]
@@ -378,6 +380,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="significance level of the whole search (spent over its rounds; default 0.01)")
     s.add_argument("--max-steps", type=int, default=5, help="effects added at most (default 5)")
     s.add_argument("--refit-top", type=int, default=6, help="candidates refitted per round (default 6)")
+    s.add_argument("--max-joint-candidates", type=int, default=None, metavar="N",
+                   help="undeclared-joint grids considered at most, those nearest the declared fit's "
+                        "residual beyond (default 100; each costs 3 (members - 1) right-hand sides of the "
+                        "split run)")
+    s.add_argument("--max-member-candidates", type=int, default=None, metavar="N",
+                   help="members considered at most for member_stiffness, those nearest the declared "
+                        "fit's residual beyond (default 300)")
     s.add_argument("--effects", default=None,
                    help="comma-separated effect kinds to consider (default: all of joint_coupling, "
                         "joint_translation, undeclared_joint, support_flexibility, load_scale, "

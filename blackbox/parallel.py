@@ -1,7 +1,10 @@
 """Independent work of a command run side by side: serially here, or on a Dask cluster.
 
 One small interface, :class:`Executor`: ``map(fn, items)`` returns ``[fn(x) for x in items]`` in
-the order of ``items`` and reports ``progress(done, total, failed)`` as tasks finish.
+the order of ``items`` and reports ``progress(done, total, failed)`` as tasks finish. A large value
+that every task of a map needs travels once: ``with executor.share(value) as h:
+executor.map_shared(fn, h, items)`` returns ``[fn(x, value) for x in items]``, the value sent to
+each worker once (Dask: scattered with ``broadcast=True``) and not with every task.
 
 * :class:`SerialExecutor` runs the tasks one after the other in this process (the default, and
   what every command does without dask installed);
@@ -32,6 +35,8 @@ batch runs as several solver processes side by side.
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import hashlib
 import os
 import tempfile
@@ -89,6 +94,15 @@ class Executor(Protocol):
         order) is raised after every task has ended; ``"return"``: a :class:`TaskFailure` takes
         the failed task's place."""
 
+    def share(self, value: Any) -> contextlib.AbstractContextManager:
+        """A context manager giving a handle to ``value`` for :meth:`map_shared`: the value is
+        sent to every worker once, and dropped there when the block ends."""
+
+    def map_shared(self, fn: Callable[[Any, Any], Any], shared: Any, items: Iterable[Any], *,
+                   errors: str = "raise", progress: Progress | None = None) -> list:
+        """``[fn(x, value) for x in items]`` in order, ``shared`` a handle from :meth:`share`
+        (``errors`` and ``progress`` as :meth:`map`)."""
+
     def close(self) -> None: ...
 
 
@@ -122,6 +136,13 @@ class SerialExecutor:
             say(i + 1, len(items), failed)
         return out
 
+    @contextlib.contextmanager
+    def share(self, value):
+        yield value                     # in this process: the value itself
+
+    def map_shared(self, fn, shared, items, *, errors: str = "raise", progress: Progress | None = None) -> list:
+        return self.map(functools.partial(_with_shared, fn, shared), items, errors=errors, progress=progress)
+
     def close(self) -> None:
         pass
 
@@ -130,6 +151,10 @@ class SerialExecutor:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def _with_shared(fn, shared, x):
+    return fn(x, shared)
 
 
 class DaskExecutor:
@@ -191,6 +216,22 @@ class DaskExecutor:
         return self.client.run(os.getpid)
 
     def map(self, fn, items, *, errors: str = "raise", progress: Progress | None = None) -> list:
+        return self._map(fn, items, None, errors, progress)
+
+    @contextlib.contextmanager
+    def share(self, value):
+        """The value scattered to every worker (``broadcast=True``) as one object; released when
+        the block ends. A worker that joins later gets it from another worker when a task needs it."""
+        (fut,) = self.client.scatter([value], broadcast=True, hash=False)
+        try:
+            yield fut
+        finally:
+            fut.release()
+
+    def map_shared(self, fn, shared, items, *, errors: str = "raise", progress: Progress | None = None) -> list:
+        return self._map(fn, items, shared, errors, progress)
+
+    def _map(self, fn, items, shared, errors: str, progress: Progress | None) -> list:
         _check_errors(errors)
         from distributed import as_completed
         from distributed.scheduler import KilledWorker
@@ -201,8 +242,10 @@ class DaskExecutor:
         say(0, total, 0)
         if not items:
             return []
-        # pure=False: equal items are still separate tasks (a replicate is not a cache hit)
-        futures = self.client.map(fn, items, pure=False)
+        # pure=False: equal items are still separate tasks (a replicate is not a cache hit); a
+        # shared value is a future of scattered data, resolved on the worker (not sent again)
+        futures = (self.client.map(fn, items, pure=False) if shared is None else
+                   self.client.map(fn, items, [shared] * total, pure=False))
         position = {f.key: i for i, f in enumerate(futures)}
         results: list[Any] = [None] * total
         failures: dict[int, BaseException] = {}
@@ -282,9 +325,11 @@ def chunked(n: int, chunks: int) -> list[range]:
 
 def use_executor(adapter: Any, executor: Executor | None, chunks: int | None = None) -> Any:
     """Give an external-solver adapter the executor for its right-hand-side chunks: every
-    ``solve`` with more than one case is cut into ``chunks`` (default: the executor's workers)
-    solver runs mapped through ``executor``. Reaches through a cache wrapper (``inner``). An
-    adapter without the hook (the in-process reference solver) is returned unchanged."""
+    ``solve`` with more than one case is cut into ``chunks`` solver runs mapped through
+    ``executor`` (default: the executor's workers, but no chunk of fewer than
+    :data:`solver_adapters.subprocess.MIN_CASES_PER_CHUNK` cases: a small batch stays one run).
+    Reaches through a cache wrapper (``inner``). An adapter without the hook (the in-process
+    reference solver) is returned unchanged."""
     target = adapter
     while not hasattr(target, "executor") and hasattr(target, "inner"):
         target = target.inner

@@ -54,6 +54,14 @@ doubling) so that a 10 ms run does not wait 50 ms to be noticed."""
 
 TAIL_LINES = 40
 
+MIN_CASES_PER_CHUNK = 50
+"""With an executor and no explicit ``chunks``, a batch is cut into no chunk of fewer load cases:
+every chunk is a whole solver run that repeats the start, the deck's reading, the assembly and
+the factorization (``F``), and only the substitutions (``r`` per case) are shared out. MYSTRAN
+measured ``F`` ~ 50-150 ``r`` from 1e3 to 1e5 DOFs (docs/parallel.md), so two chunks save a
+third of the wall time or more only from ~100 cases; a 24-case batch on a 1e5-DOF model took
+22 s as one run and 37 s in two chunks on a loaded 2-core machine."""
+
 
 # --------------------------------------------------------------------------------------------
 # the runner
@@ -846,6 +854,8 @@ class CommandAdapter:
         side_by_side = executor is not None and loads.n_cases > 1
         if side_by_side:      # one run per worker (or per ``chunks``), each a separate solver process
             n = int(self.chunks or getattr(executor, "workers", 1))
+            if not self.chunks:             # by default no chunk below MIN_CASES_PER_CHUNK cases
+                n = min(n, loads.n_cases // MIN_CASES_PER_CHUNK)
             chunk = min(chunk, -(-loads.n_cases // max(1, n)))
             side_by_side = chunk < loads.n_cases
         ranges = [range(j, min(j + chunk, loads.n_cases)) for j in range(0, loads.n_cases, chunk)]
@@ -863,11 +873,11 @@ class CommandAdapter:
     # ---- runs side by side (``executor``) ---------------------------------------------------
     executor: Any = None
     """An object with ``map(fn, items) -> list`` (:mod:`blackbox.parallel`): when set, a ``solve``
-    with several cases is cut into ``chunks`` (default: ``executor.workers``) contiguous column
-    blocks, each run as a separate solver process through ``executor.map``; the blocks are put
-    back in order. Each column is solved on its own by the solver either way, so the result is
-    the serial one (for a solver whose answer for one load case does not depend on the others
-    in its run)."""
+    with several cases is cut into ``chunks`` contiguous column blocks (default: ``executor.workers``,
+    but none of fewer than :data:`MIN_CASES_PER_CHUNK` cases), each run as a separate solver
+    process through ``executor.map``; the blocks are put back in order. Each column is solved on
+    its own by the solver either way, so the result is the serial one (for a solver whose answer
+    for one load case does not depend on the others in its run)."""
     chunks: int | None = None
 
     def __getstate__(self) -> dict:

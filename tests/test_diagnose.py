@@ -40,7 +40,11 @@ from blackbox.joints import frame_element_stiffness, make_joint, spring_network
 from blackbox.structures import random_loads, star_joint_frame, tube_body, write_study
 from blackbox.commands import simulate as simulate_command
 from blackbox.commands.output import write_output
+from solver_adapters.bdf_write import write_deck
+from solver_adapters.protocol import LoadMatrix
 from solver_adapters.reference import ReferenceAdapter
+
+from conftest import MYSTRAN_MARKS
 
 FIXTURES = Path(__file__).resolve().parents[1] / "fixtures" / "undeclared"
 FOLDERS = sorted(p.name for p in FIXTURES.iterdir() if (p / "planted.json").exists())
@@ -432,6 +436,74 @@ def test_run_writes_nothing_until_write(tmp_path, monkeypatch):
     assert json.loads((out / "diagnosis.json").read_text())["added"] == result.document["added"]
 
 
+def test_candidate_caps_are_reported_and_follow_the_residual(tmp_path):
+    """Beyond ``max_joint_candidates`` / ``max_member_candidates`` a diagnosis considers the grids
+    and members nearest the declared fit's residual and says so: on the car's undeclared-joint
+    fixture (planted at grid 41, 115 members) capped at 5 grids and 20 members, the candidates are
+    exactly that many, grid 41 is among the 5, the split run reports the considered members' end
+    DOFs and no other member's, the document lists both caps and warns of each, and the planted
+    joint is still the effect added."""
+    d = tmp_path / "decks"
+    d.mkdir()
+    pr = diagnose_command.prepare(FIXTURES / "undeclared_joint", d, max_joint_candidates=5, max_member_candidates=20)
+    lim = {x.kind: x for x in pr.limits}
+    declared = {g for j in pr.joints for g in j.grids}
+    n_grids = len(dg.effects.undeclared_joint.joint_candidate_grids(pr.deck, declared))
+    assert (lim["undeclared_joint"].considered, lim["undeclared_joint"].available) == (5, n_grids) and n_grids > 5
+    assert (lim["member_stiffness"].considered, lim["member_stiffness"].available) == (20, len(pr.deck.cbars))
+    joints = [c for c in pr.candidates if c.kind == "undeclared_joint"]
+    members = [c for c in pr.candidates if c.kind == "member_stiffness"]
+    assert len(joints) == 5 and len(members) == 20 and [41] in [c.where_json() for c in joints]
+    rows = set(pr.base.rows)
+    assert all(dof in rows for c in members for dof in c.dofs)
+    others = [eid for eid in pr.split.member_dofs if eid not in {c.eid for c in members}]
+    assert any(not set(pr.split.member_dofs[eid]) <= rows for eid in others)
+    doc = diagnose_command.run(FIXTURES / "undeclared_joint", plots=False, max_joint_candidates=5,
+                               max_member_candidates=20).document
+    assert {x["effect"]: (x["considered"], x["available"]) for x in doc["settings"]["candidates_limited"]} == {
+        "undeclared_joint": (5, n_grids), "member_stiffness": (20, len(pr.deck.cbars))}
+    assert any(w.startswith(f"undeclared_joint: 5 of {n_grids} candidates considered") for w in doc["warnings"])
+    assert any(w.startswith("member_stiffness: 20 of 115 candidates considered") for w in doc["warnings"])
+    assert doc["added"][0]["effect"] == "undeclared_joint" and doc["added"][0]["where"] == [41]
+    # no cap reached: nothing said
+    assert diagnose_command.run(FIXTURES / "support_flexibility", plots=False).document["settings"][
+        "candidates_limited"] == []
+
+
+def test_without_a_declared_fit_the_cap_keeps_the_grids_nearest_the_sensors():
+    """No declared joints, so no residual to follow: the cap keeps the points nearest the
+    measured grids (every measured grid weighs 1; a measured grid itself scores the most)."""
+    from blackbox.diagnosis.effects import CandidateContext
+    from blackbox.identification import Observations
+    from blackbox.study import load_study
+
+    study = load_study(FIXTURES.parent / "car", need_measurements=True)
+    obs = Observations.from_measurements(study.measurements, study.loads.cases)
+    ctx = CandidateContext(study.deck, (), {}, obs, tuple(study.loads.cases), None, 5)
+    measured = {g for g, _ in obs.dofs}
+    points = {g.id: g.xyz for g in study.deck.grids.values()}
+    chosen = ctx.nearest_residual(points, 5)
+    assert len(chosen) == 5 and set(chosen) <= measured
+    assert chosen == [g for g in points if g in measured][:5]          # ties keep the points' order
+    far = max(points, key=lambda g: min(np.linalg.norm(np.subtract(points[g], points[m])) for m in measured))
+    assert far not in ctx.nearest_residual(points, len(points) - 1)
+
+
+def test_refits_go_to_the_workers_only_when_that_pays():
+    """``search.refits_pay``: six refits estimated from a 1 s declared fit (18 s serially) are
+    sent to 2 workers even with a 50 MB base (9 s + 0.5 s + 0.2 s); from a 10 ms fit (0.18 s)
+    they stay here whatever the base (the round's 0.2 s overhead alone is more than the saving);
+    one worker, or one refit, never."""
+    from blackbox.diagnosis.search import refits_pay
+
+    assert refits_pay(6, 1.0, 50.0, 2) and refits_pay(6, 1.0, 50.0, 8)
+    assert not refits_pay(6, 0.01, 0.0, 2) and not refits_pay(6, 0.01, 50.0, 8)
+    assert not refits_pay(6, 1.0, 50.0, 1) and not refits_pay(1, 1.0, 0.0, 2)
+    # the base's trip counts: 0.1 s fits (1.8 s serially, 0.9 s + 0.2 s mapped) pay with a small
+    # base, not with a 100 MB one (+1 s)
+    assert refits_pay(6, 0.1, 1.0, 2) and not refits_pay(6, 0.1, 100.0, 2)
+
+
 def test_declared_fit_keeps_rigid_pairs(tmp_path):
     """With ``rigid_pairs`` the declared fit inside diagnose is identify's: the cube with branches
     7 and 71 of joint J7 declared rigid (its data were simulated with every pair flexible, so the
@@ -481,6 +553,61 @@ def test_element_stiffness_is_the_frame_element(cube_prepared):
                                     p.j, b.x)
         np.testing.assert_allclose(pr.K_e[eid], K, rtol=0, atol=1e-9 * np.abs(K).max())
     assert pr.element_asymmetry < 1e-12            # Maxwell-Betti in the element run
+
+
+def _element_flexibility_per_dof(adapter, members):
+    """The element run the way it was first written: one unit load per member-end DOF (``6 m``
+    cases), every member's ``F_bb`` the diagonal block of the dense ``6 m x 6 m`` answer."""
+    dofs = [(gb, c) for _, gb in members.values() for c in range(1, 7)]
+    V = adapter.solve(LoadMatrix.unit(dofs), dofs).values
+    blocks = {eid: V[6 * i:6 * i + 6, 6 * i:6 * i + 6] for i, eid in enumerate(members)}
+    off = V.copy()
+    for i in range(len(members)):
+        off[6 * i:6 * i + 6, 6 * i:6 * i + 6] = 0.0
+    return blocks, off
+
+
+@pytest.mark.parametrize("adapter_name", ["reference", pytest.param("mystran", marks=MYSTRAN_MARKS)])
+def test_element_run_six_cases_equals_one_unit_load_per_dof(adapter_name, tmp_path):
+    """The element deck gives every member its own two grids and clamps end a, and nothing else
+    couples the members, so loading component c at end b of EVERY member at once (6 cases,
+    ``element_flexibility``) gives each member the flexibility of its own unit loads (6 m cases).
+    Checked on the car fixture's deck (115 members): the per-DOF answer has exactly zero
+    off-diagonal blocks (the premise), and the blocks agree (bit for bit when written; allowed:)
+    the reference solver to 1e-12 of the block's largest entry (one sparse factorization either
+    way, only the summation order of the substitutions could differ), MYSTRAN to 1e-6 (its 7
+    printed digits: half a unit in the 7th digit is 5e-7 relative); ``K_e`` after the inversion
+    to cond(F_bb) ~ 1e6 times that."""
+    from blackbox.adapters import make_adapter_for
+    from blackbox.study import load_study
+
+    study = load_study(FIXTURES.parent / "car")
+    edeck, members = dg.element_deck(study.deck)
+    assert len({g for ends in members.values() for g in ends}) == 2 * len(members)     # own grids
+    assert not edeck.springs and not edeck.rbe2s and not edeck.rbe3s
+    path = tmp_path / "elements.bdf"
+    path.write_text(write_deck(edeck, "large"))
+    adapter = make_adapter_for(study, adapter_name, deck=path, cache=False)
+    per_dof, off = _element_flexibility_per_dof(adapter, members)
+    assert np.all(off == 0.0)
+    log = []
+    flex = dg.element_flexibility(adapter, members, log)
+    assert [r.right_hand_sides for r in log] == [6]
+    rtol = 1e-12 if adapter_name == "reference" else 1e-6
+    for eid, F in per_dof.items():
+        np.testing.assert_allclose(flex[eid], F, rtol=0, atol=rtol * np.abs(F).max(), err_msg=f"member {eid}")
+    K, asym = dg.element_stiffness(adapter, members, [])
+    assert asym < (1e-12 if adapter_name == "reference" else 1e-5)
+    xyz = adapter.grid_xyz()
+    for eid, (ga, gb) in members.items():
+        F = 0.5 * (per_dof[eid] + per_dof[eid].T)
+        gamma = np.eye(6)
+        r = np.subtract(xyz[gb], xyz[ga])
+        gamma[:3, 3:] = -np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])
+        T = np.hstack([-gamma, np.eye(6)])
+        K_old = T.T @ np.linalg.inv(F) @ T
+        np.testing.assert_allclose(K[eid], 0.5 * (K_old + K_old.T), rtol=0,
+                                   atol=1e6 * rtol * np.abs(K_old).max(), err_msg=f"member {eid}")
 
 
 def _model(pr, spec, om_obs=None, K_deck="declared"):

@@ -14,19 +14,24 @@
 The edited decks are run from a temporary folder, removed afterwards; their text is kept. Then
 the loop of :mod:`blackbox.diagnosis.search`.
 
+Run 2 has six right-hand sides however many members (:func:`blackbox.diagnosis.runs.element_flexibility`).
+On a large model the candidates are capped (``max_joint_candidates`` undeclared-joint grids,
+``max_member_candidates`` members, those nearest the declared fit's residual beyond): the cap
+bounds run 3's right-hand sides and rows, and the document says how many were left out.
+
 With an executor of more than one worker (``run(..., executor=...)``, ``--workers N``), run 1 is
 a task on the cluster (it carries the study folder in memory, :func:`blackbox.parallel.pack_study`,
-and builds its adapter where it runs: no shared file system is needed) and runs while run 2 goes:
-through an external solver cut into column chunks over the workers
-(:func:`blackbox.parallel.use_executor`; each chunk carries the deck's text), with the in-process
-reference solver as one task carrying the element deck's text. Run 3 is not independent of them:
-the split deck's ``K0`` springs come from run 2's ``K_e``, and with more undeclared-joint grids
-than ``max_joint_candidates`` its cuts are chosen by run 1's residuals. It runs here, on the
-client (whose adapter the loop keeps using for later columns), as soon as its inputs are in --
-while run 1 is still on its worker when the cuts do not need the declared fit -- an external
-solver's runs again in column chunks. The solver's answers are the serial run's; the declared
-fit, the candidates and the loop (its refits included) run here as they do
-serially. :func:`run` returns a :class:`DiagnosisResult`; its
+and builds its adapter where it runs: no shared file system is needed) and runs while run 2 goes
+here (one solver run: cutting six right-hand sides into chunks would only repeat the deck's
+assembly). Run 3 is not independent of them: the split deck's ``K0`` springs come from run 2's
+``K_e``, and when a cap applies its cuts and rows are chosen by run 1's residuals. It runs here, on
+the client (whose adapter the loop keeps using for later columns), as soon as its inputs are in --
+while run 1 is still on its worker when nothing in it needs the declared fit -- an external
+solver's runs in column chunks over the workers (:func:`blackbox.parallel.use_executor`; each
+chunk carries the deck's text). The solver's answers are the serial run's. The declared fit and
+the candidates run here as serially; the loop's refits of a round go to the workers when that
+pays (:func:`blackbox.diagnosis.search.refits_pay`: the split base sent once per round), else
+here. :func:`run` returns a :class:`DiagnosisResult`; its
 :meth:`~DiagnosisResult.write` puts ``diagnosis.json``, ``report.md``, the plots and the edited
 decks (``decks/elements.bdf``, ``decks/split.bdf``) into a folder.
 """
@@ -51,7 +56,7 @@ from blackbox.commands.common import as_study
 from blackbox.declared import DeclaredModel, SolverCost, declared_model
 from blackbox.diagnosis.decks import SplitDeck, element_deck, split_deck, unmodelled_notes
 from blackbox.diagnosis.document import diagnosis_document, verdict_detail
-from blackbox.diagnosis.effects import CandidateContext, Effect, families
+from blackbox.diagnosis.effects import CandidateContext, CandidateLimit, Effect, MemberStiffness, families
 from blackbox.diagnosis.effects.load_scale import case_scales
 from blackbox.diagnosis.effects.undeclared_joint import UndeclaredJoint, joint_candidate_grids
 from blackbox.diagnosis.runs import RunRecord, element_stiffness
@@ -66,7 +71,18 @@ from solver_adapters.deck import Deck
 from solver_adapters.protocol import DofLabel, SolverAdapter
 
 __all__ = ["DiagnosisResult", "Prepared", "PrepareTask", "Remote", "run", "prepare", "prepare_study",
-           "prepare_run", "check_options"]
+           "prepare_run", "check_options", "MAX_JOINT_CANDIDATES", "MAX_MEMBER_CANDIDATES"]
+
+MAX_JOINT_CANDIDATES = 100
+"""Undeclared-joint grids considered at most (those nearest the declared fit's residual beyond).
+Each costs ``3 (n - 1)`` right-hand sides of the split run (12 for a grid of 5 members): 100
+grids are ~1,200 right-hand sides, ~4 minutes of MYSTRAN on a 1e5-DOF body (docs/parallel.md);
+a frame of up to 100 such grids (the fixtures, a 1e3-DOF body) has all of them considered."""
+
+MAX_MEMBER_CANDIDATES = 300
+"""Members considered at most for ``member_stiffness`` (nearest the residual beyond). Each adds
+its 12 end DOFs to the split run's reported rows and one candidate (one hypothesis of the
+round's Bonferroni correction); a member far from every sensor changes nothing it can see."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -93,9 +109,9 @@ class Prepared:
     decks: tuple[tuple[str, str], ...]
     log: list[RunRecord]
     declared_cost: SolverCost
-    element_adapter: SolverAdapter | None
-    element_cost: SolverCost | None = None
-    """The element run's cost when it ran on a worker (``element_adapter`` is then None)."""
+    element_adapter: SolverAdapter
+    limits: tuple[CandidateLimit, ...] = ()
+    """The families that considered fewer candidates than the study offers (their caps)."""
 
     @property
     def deck(self) -> Deck:
@@ -117,8 +133,7 @@ class Prepared:
         """What the three decks' runs cost so far (the declared condensation, the element run,
         the split runs). Right-hand sides count every batch, solved or read back from the cache
         (as :meth:`SolverCost.of_batch` counts the condensation's)."""
-        element = self.element_cost if self.element_cost is not None else SolverCost.of(self.element_adapter)
-        cost = self.declared_cost + element + SolverCost.of(self.base.adapter)
+        cost = self.declared_cost + SolverCost.of(self.element_adapter) + SolverCost.of(self.base.adapter)
         return dataclasses.replace(cost, right_hand_sides=sum(r.right_hand_sides for r in self.log))
 
 
@@ -130,28 +145,24 @@ def _residual_rms(obs: Observations, r: np.ndarray) -> dict[int, float]:
 
 
 # --------------------------------------------------------------------------------------------
-# runs 1 and 2 on a cluster
+# run 1 on a cluster
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class PrepareTask:
     """What travels to a worker for run 1 (``kind="declared"``: the declared model's
-    condensation on the study's deck) or run 2 (``"elements"``: the element deck, as text, and
-    its members): the study folder in memory, the adapter's name, the client's cache folder
-    (None: no cache) and the consent for an external command."""
+    condensation on the study's deck): the study folder in memory, the adapter's name, the
+    client's cache folder (None: no cache) and the consent for an external command."""
     kind: str
     package: StudyPackage
     adapter: str | None
     cache: str | None
     trust_command: bool
-    deck_name: str = ""
-    deck_text: str = ""
-    members: tuple[tuple[int, int, int], ...] = ()      # (eid, grid_a, grid_b), in the deck's order
 
 
 def prepare_run(task: PrepareTask):
-    """One of runs 1 and 2 where the task runs (a worker): rebuild the study folder, build the
-    adapter there, run it. Returns run 1's ``(Condensed, SolverCost)`` (the identification stays
-    on the client, as serially) or run 2's ``(K_e, asymmetry, [RunRecord], SolverCost)``."""
+    """Run 1 where the task runs (a worker): rebuild the study folder, build the adapter there,
+    run it. Returns ``(Condensed, SolverCost)`` (the identification stays on the client, as
+    serially)."""
     from blackbox.adapters import ADAPTER_CACHE, TRUST_COMMAND
     from blackbox.commands.batch import _cache_for_worker
     from blackbox.parallel import scratch, unpack_study
@@ -168,14 +179,6 @@ def prepare_run(task: PrepareTask):
                 # the same boundary and observed DOFs as the client's: both come from the study's files
                 cm = declared_model(study).condense(adapter)
                 return cm.c, SolverCost.of_batch(cm.c, adapter, before)
-            if task.kind == "elements":
-                path = tmp / task.deck_name
-                path.write_text(task.deck_text)
-                adapter = make_adapter_for(study, task.adapter, deck=path)
-                log: list[RunRecord] = []
-                members = {eid: (a, b) for eid, a, b in task.members}
-                K_e, asym = element_stiffness(adapter, members, log, deck=task.deck_name)
-                return K_e, asym, log, SolverCost.of(adapter)
             raise ValueError(f"unknown prepare task {task.kind!r}")
     finally:
         ADAPTER_CACHE.reset(tokens[0])
@@ -184,8 +187,8 @@ def prepare_run(task: PrepareTask):
 
 @dataclass(frozen=True)
 class Remote:
-    """How :func:`prepare_study` sends runs 1 and 2 to a cluster: the executor and what each
-    task carries besides its deck (see :class:`PrepareTask`)."""
+    """How :func:`prepare_study` sends run 1 to a cluster: the executor and what the task
+    carries (see :class:`PrepareTask`)."""
     executor: Executor
     package: StudyPackage
     adapter: str | None
@@ -205,35 +208,34 @@ class Remote:
             str(Path(c).absolute()) if c else None)
         return cls(executor, pack_study(study.root), adapter, cache, TRUST_COMMAND.get())
 
-    def task(self, kind: str, **kw) -> PrepareTask:
-        return PrepareTask(kind, self.package, self.adapter, self.cache, self.trust_command, **kw)
+    def task(self, kind: str) -> PrepareTask:
+        return PrepareTask(kind, self.package, self.adapter, self.cache, self.trust_command)
 
 
-def _chunked(adapter: SolverAdapter) -> bool:
-    """Whether :func:`use_executor` gave ``adapter`` (or the adapter in its cache wrapper) an
-    executor: its batches are then cut into column chunks over the workers."""
-    while not hasattr(adapter, "executor") and hasattr(adapter, "inner"):
-        adapter = adapter.inner
-    return getattr(adapter, "executor", None) is not None
-
-
-def _split_needs_declared_fit(deck: Deck, dm: DeclaredModel, fams, max_joint_candidates: int) -> bool:
-    """Whether the split deck's cuts depend on the declared fit: only the undeclared-joint
-    family's, when it has more grids than ``max_joint_candidates`` and there is a declared fit
-    (its residuals then choose the grids; :meth:`UndeclaredJoint.cut`)."""
-    if not dm.joints or UndeclaredJoint not in fams:
+def _split_needs_declared_fit(deck: Deck, dm: DeclaredModel, fams, max_joint_candidates: int,
+                              max_member_candidates: int) -> bool:
+    """Whether the split run depends on the declared fit: when there is one and a capped family
+    has more candidates than its cap, the fit's residuals choose them -- the undeclared-joint
+    grids the split deck cuts (:meth:`UndeclaredJoint.cut`), the members whose end DOFs it
+    reports (:meth:`MemberStiffness.split_rows`)."""
+    if not dm.joints:
         return False
     declared = {g for j in dm.joints for g in j.grids}
-    return len(joint_candidate_grids(deck, declared)) > max_joint_candidates
+    return ((UndeclaredJoint in fams and len(joint_candidate_grids(deck, declared)) > max_joint_candidates)
+            or (MemberStiffness in fams and len(deck.cbars) > max_member_candidates))
 
 
 def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapter], deck_dir: Path, *,
-                  max_joint_candidates: int = 300, effects: Sequence[str] | None = None,
+                  max_joint_candidates: int = MAX_JOINT_CANDIDATES,
+                  max_member_candidates: int = MAX_MEMBER_CANDIDATES, effects: Sequence[str] | None = None,
                   say: Callable[[str], None] | None = None, remote: Remote | None = None) -> Prepared:
     """Fit the declared model, run the element and the split deck (written into ``deck_dir``),
-    list the candidates of the families ``effects`` (default: all). ``adapter_for(path)``: the
-    adapter for the deck at ``path`` (``None``: the study's own deck). ``remote``: runs 1 and 2
-    as tasks of its executor (module docstring); the split run stays on ``adapter_for``."""
+    list the candidates of the families ``effects`` (default: all), at most
+    ``max_joint_candidates`` undeclared-joint grids and ``max_member_candidates`` members (those
+    nearest the declared fit's residual beyond; :attr:`Prepared.limits` says so).
+    ``adapter_for(path)``: the adapter for the deck at ``path`` (``None``: the study's own deck).
+    ``remote``: run 1 as a task of its executor, the split runs in column chunks over it
+    (module docstring); runs 2 and 3 stay on ``adapter_for``."""
     say = say or (lambda msg: None)
     fams = families(effects)
     if study.measurements is None:
@@ -267,7 +269,6 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
         return dm.K_deck(c), ident, rec       # deck springs minus the rigid-pair penalty
 
     ident, K_deck = None, None
-    eadapter, ecost = None, None
     with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="diagnose-declared") as pool:
         pending = None
         if remote is None:
@@ -280,29 +281,19 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
                 cost = SolverCost.of_batch(cm.c, adapter, before)
                 K_deck, ident, rec = fit_declared(cm.c)
                 log.append(rec)
-            # ---- 2. member stiffness from the element deck ---------------------------------------
-            eadapter = adapter_for(epath)
-            K_e, e_asym = element_stiffness(eadapter, emembers, log, deck=epath.name)
         else:
-            # runs 1 and 2 side by side on the cluster: run 1 waited for in a thread of this
-            # process (executor.map blocks), so that run 3 can start here while it is still going
-            ex = remote.executor
+            # run 1 on a worker, waited for in a thread of this process (executor.map blocks),
+            # so that runs 2 and 3 go here while it is still going
+            cost = None             # run 1's cost arrives with its answer (collect_declared)
             if dm.joints:
-                pending = pool.submit(ex.map, prepare_run, [remote.task("declared")])
-            eadapter = use_executor(adapter_for(epath), ex)
-            if _chunked(eadapter):
-                # an external solver: the element run's many unit loads (six per member) in column
-                # chunks over the workers, the solver processes fed with the deck's text
-                K_e, e_asym = element_stiffness(eadapter, emembers, log, deck=epath.name)
-                cost = SolverCost(eadapter.name)
-            else:
-                # no chunk hook (the in-process reference solver): the run is one task
-                eadapter = None
-                etask = remote.task("elements", deck_name=epath.name, deck_text=decks[-1][1],
-                                    members=tuple((eid, a, b) for eid, (a, b) in emembers.items()))
-                K_e, e_asym, erecs, ecost = ex.map(prepare_run, [etask])[0]
-                log.extend(erecs)
-                cost = SolverCost(ecost.adapter)
+                pending = pool.submit(remote.executor.map, prepare_run, [remote.task("declared")])
+        # ---- 2. member stiffness from the element deck -------------------------------------------
+        # six right-hand sides however many members: one solver run, never cut into chunks (each
+        # chunk would repeat the reading and assembly of the whole deck)
+        eadapter = adapter_for(epath)
+        K_e, e_asym = element_stiffness(eadapter, emembers, log, deck=epath.name)
+        if cost is None:
+            cost = SolverCost(eadapter.name)
 
         def collect_declared() -> None:
             """Run 1's answer in (remote): the fit, its record first in the log as serially."""
@@ -314,7 +305,7 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
             K_deck, ident, rec = fit_declared(c)
             log.insert(0, rec)
 
-        if _split_needs_declared_fit(deck, dm, fams, max_joint_candidates):
+        if _split_needs_declared_fit(deck, dm, fams, max_joint_candidates, max_member_candidates):
             collect_declared()
 
         # ---- 3. the split deck -----------------------------------------------------------------
@@ -322,16 +313,22 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
             return CandidateContext(deck, tuple(dm.joints), K_e, fit_obs, tuple(study.loads.cases),
                                     _residual_rms(fit_obs, ident.residuals) if ident is not None else None,
                                     max_joint_candidates, read_load_groups(study.root / "loads.csv"),
-                                    case_scales(fit_obs.case_index, fit_obs.values, fit_obs.sigma, ident.predicted,
-                                                fit_obs.case_labels) if ident is not None else None)
-        # without the fit yet, the cuts do not read the residuals (checked above)
-        sd = split_deck(deck, K_e, fams, context())
+                                    case_scales=(case_scales(fit_obs.case_index, fit_obs.values, fit_obs.sigma,
+                                                             ident.predicted, fit_obs.case_labels)
+                                                 if ident is not None else None),
+                                    max_member_candidates=max_member_candidates)
+        # without the fit yet, the cuts and the rows do not read the residuals (checked above)
+        sctx = context()
+        sd = split_deck(deck, K_e, fams, sctx)
         spath = deck_dir / "split.bdf"
         decks.append((spath.name, write_deck(sd.deck, "large")))
         spath.write_text(decks[-1][1])
         boundary = dm.boundary
         o_dofs = list(dict.fromkeys(list(study.measurements.all_dofs)))
-        member_ends = [d for dofs in sd.member_dofs.values() for d in dofs]
+        # rows the families' candidates need (the considered members' ends), in the deck's order
+        extra_rows = [d for fam in fams for d in fam.split_rows(sctx, sd)]
+        for lim in sctx.limits.values():
+            say(f"  {lim.sentence()}")
         say(f"split deck: {len(sd.pairs)} cut DOF pairs, {len(sd.connections)} connection candidates")
         sadapter = adapter_for(spath)
         if remote is not None:
@@ -339,7 +336,7 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
             # column chunks, one solver process per worker (blackbox.parallel.use_executor)
             sadapter = use_executor(sadapter, remote.executor)
         base = SplitBase(sadapter, study.loads, sd.pairs, list(dict.fromkeys(boundary + o_dofs)),
-                         list(dict.fromkeys(boundary + o_dofs + member_ends)), log, deck=spath.name)
+                         list(dict.fromkeys(boundary + o_dofs + extra_rows)), log, deck=spath.name)
         collect_declared()
 
     # ---- candidates (with the declared fit's residuals, as serially) ----------------------------
@@ -347,8 +344,10 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
     cands = list(sd.connections)
     for fam in fams:
         cands += fam.candidates(ctx, sd)
+    limits = {**sctx.limits, **ctx.limits}
     return Prepared(study, dm, fit_obs, hold_obs, tuple(dm.holdout), bool(declared_holdout), K_deck, ident,
-                    K_e, e_asym, sd, base, tuple(cands), tuple(decks), log, cost, eadapter, ecost)
+                    K_e, e_asym, sd, base, tuple(cands), tuple(decks), log, cost, eadapter,
+                    tuple(limits.values()))
 
 
 # --------------------------------------------------------------------------------------------
@@ -379,7 +378,7 @@ class DiagnosisResult:
         """``diagnosis.json`` (:mod:`blackbox.diagnosis.document`)."""
         pr = self.prepared
         doc = diagnosis_document(self.study.name, self.diagnosis, self.solver_json(), list(pr.holdout),
-                                 pr.declared_holdout, pr.ident)
+                                 pr.declared_holdout, pr.ident, limits=pr.limits)
         doc["wall_s"] = self.wall_s
         doc["notes"] = unmodelled_notes(pr.deck)     # what a deck with shells/solids leaves aside
         return doc
@@ -405,45 +404,52 @@ class DiagnosisResult:
 
 
 def check_options(alpha: float, max_steps: int, refit_top: int, max_joint_candidates: int,
-                  effects: Sequence[str] | None) -> None:
+                  effects: Sequence[str] | None, max_member_candidates: int = MAX_MEMBER_CANDIDATES) -> None:
     """The options' errors, before any work."""
     if not 0.0 < alpha < 1.0:
         raise DiagnosisError(f"alpha must be in (0, 1), got {alpha!r}")
     if max_steps < 0 or refit_top < 1:
         raise DiagnosisError(f"max_steps must be >= 0 and refit_top >= 1, got {max_steps!r}, {refit_top!r}")
-    if max_joint_candidates < 0:
-        raise DiagnosisError(f"max_joint_candidates must be >= 0, got {max_joint_candidates!r}")
+    if max_joint_candidates < 0 or max_member_candidates < 0:
+        raise DiagnosisError(f"max_joint_candidates and max_member_candidates must be >= 0, got "
+                             f"{max_joint_candidates!r}, {max_member_candidates!r}")
     families(effects)                          # unknown effect kinds: DiagnosisError
 
 
 def prepare(study: Study | str | Path, deck_dir: Path, *, adapter: str | None = None,
-            max_joint_candidates: int = 300, effects: Sequence[str] | None = None,
-            say: Callable[[str], None] | None = None, executor: Executor | None = None) -> Prepared:
+            max_joint_candidates: int = MAX_JOINT_CANDIDATES, max_member_candidates: int = MAX_MEMBER_CANDIDATES,
+            effects: Sequence[str] | None = None, say: Callable[[str], None] | None = None,
+            executor: Executor | None = None) -> Prepared:
     """:func:`prepare_study` with the study's adapter (or the one named) on each deck; the edited
     decks are written into ``deck_dir``, which must exist while the result's split run is used
-    (member refits run it again). ``executor`` with more than one worker: runs 1 and 2 on it
-    (module docstring); otherwise everything here, one run after the other."""
+    (member refits run it again). ``executor`` with more than one worker: run 1 on it and
+    run 3 in column chunks over it (module docstring); otherwise everything here, one run after
+    the other."""
     study = as_study(study, need_measurements=True)
     remote = Remote.of(study, executor, adapter) if executor is not None and executor.workers > 1 else None
     return prepare_study(study, lambda path: make_adapter_for(study, adapter, deck=path), deck_dir,
-                         max_joint_candidates=max_joint_candidates, effects=effects, say=say, remote=remote)
+                         max_joint_candidates=max_joint_candidates, max_member_candidates=max_member_candidates,
+                         effects=effects, say=say, remote=remote)
 
 
 def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float = 0.01, max_steps: int = 5,
-        refit_top: int = 6, max_joint_candidates: int = 300, effects: Sequence[str] | None = None,
+        refit_top: int = 6, max_joint_candidates: int = MAX_JOINT_CANDIDATES,
+        max_member_candidates: int = MAX_MEMBER_CANDIDATES, effects: Sequence[str] | None = None,
         plots: bool = True, progress: Callable[[str], None] | None = None,
         executor: Executor | None = None) -> DiagnosisResult:
     """Diagnose the study (module docstring). ``alpha``: the family-wise significance level of
     the whole search (alpha spending over rounds, Bonferroni within a round over the candidates
     and their variant upgrades; :mod:`blackbox.diagnosis.search`); ``max_steps``: effects added
-    at most; ``refit_top``: candidates refitted per round; ``max_joint_candidates``:
-    undeclared-joint grids considered at most (those nearest the residual beyond); ``effects``:
+    at most; ``refit_top``: candidates refitted per round; ``max_joint_candidates``,
+    ``max_member_candidates``: undeclared-joint grids and members considered at most (those
+    nearest the residual beyond; the document's ``settings.candidates_limited`` and a warning
+    say how many were left out); ``effects``:
     the families to consider (default: every registered one); ``plots``: whether
     :meth:`DiagnosisResult.write` draws the plots; ``progress(message)``; ``executor``: where
-    the declared condensation and the element run go (default: serially here; see
-    :func:`prepare`), the search loop runs here either way."""
+    the declared condensation, the split runs' column chunks and, when that pays, the loop's
+    refits go (default: serially here; module docstring)."""
     t0 = time.perf_counter()
-    check_options(alpha, max_steps, refit_top, max_joint_candidates, effects)
+    check_options(alpha, max_steps, refit_top, max_joint_candidates, effects, max_member_candidates)
     say = progress or (lambda msg: None)
     study = as_study(study, need_measurements=True)
 
@@ -454,14 +460,14 @@ def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float =
 
     with tempfile.TemporaryDirectory(prefix="blackbox-diagnose-") as tmp:
         pr = prepare(study, Path(tmp), adapter=adapter, max_joint_candidates=max_joint_candidates,
-                     effects=effects, say=say, executor=executor)
+                     max_member_candidates=max_member_candidates, effects=effects, say=say, executor=executor)
         xyz = {int(g): tuple(v) for g, v in pr.base.adapter.grid_xyz().items()}
         ident = pr.ident
         diag = diagnose(pr.base, pr.boundary, pr.K_deck, pr.joints,
                         ident.k if ident is not None else np.zeros(0), pr.fit_obs, pr.hold_obs,
                         pr.candidates, alpha=alpha, refit_top=refit_top, max_steps=max_steps,
                         declared_prediction=ident.predicted if ident is not None else None,
-                        xyz=xyz, progress=progress_step)
+                        xyz=xyz, progress=progress_step, executor=executor)
         say(f"verdict: {diag.verdict}: {verdict_detail(diag)}")
         cost = pr.solver_cost()
     return DiagnosisResult(study, diag, pr, pr.decks, cost, time.perf_counter() - t0, plots)

@@ -66,12 +66,14 @@ class IdentifyResult:
 
 def run(study: Study | str | Path, *, adapter: str | SolverAdapter | None = None, model: str | None = None,
         progress: Callable | None = None, stages: Callable[[str], None] | None = None,
-        **options) -> IdentifyResult:
+        executor=None, **options) -> IdentifyResult:
     """Identify the study's joints: one batched solver run, then the estimation in the condensed
     space. ``model`` overrides every joint's declared model; ``options`` override the study's
     ``[identification]`` options (``fixed_point``, ``max_iterations``, ``confidence``,
     ``bootstrap``, ``profile``, and the estimator's own keywords). ``progress(record)`` hears of
-    every iteration, ``stages(message)`` of the long stages after it (profiles, bootstrap)."""
+    every iteration, ``stages(message)`` of the long stages after it (profiles, bootstrap).
+    ``executor`` (:class:`blackbox.parallel.Executor`, ``--workers``/``--scheduler``): where the
+    bootstrap refits of ``[identification] bootstrap = N`` run (the same samples as serially)."""
     study = as_study(study, need_measurements=True)
     if not study.config.joints:
         raise StudyError("study.toml declares no [[joints]] to identify", file=str(study.root / "study.toml"))
@@ -81,5 +83,5 @@ def run(study: Study | str | Path, *, adapter: str | SolverAdapter | None = None
     cm = declared.condense(ad)
     fit_obs, hold = declared.observations(cm.c.cases)
     result = identification.identify(cm, fit_obs, declared.k0, holdout=hold, callback=progress,
-                                     progress=stages, **declared.options.kwargs(**options))
+                                     progress=stages, executor=executor, **declared.options.kwargs(**options))
     return IdentifyResult(study, declared, cm, fit_obs, hold, result, SolverCost.of_batch(cm.c, ad, before))

@@ -93,7 +93,10 @@ def unmodelled_notes(deck: Deck) -> list[str]:
 
 def element_deck(deck: Deck) -> tuple[Deck, dict[int, tuple[int, int]]]:
     """Every CBAR alone (same EID, PID, orientation; G0 turned into a vector), end a clamped.
-    Returns the deck and ``{eid: (grid_a, grid_b)}`` in it."""
+    Returns the deck and ``{eid: (grid_a, grid_b)}`` in it. Each member has its own two grids and
+    nothing else is in the deck (no spring, rigid element or shared grid), so the members are
+    separate structures: one load case can load every member at once
+    (:func:`blackbox.diagnosis.runs.element_flexibility`)."""
     e = Deck(pbars=dict(deck.pbars), mat1s=dict(deck.mat1s))
     members = {}
     for i, eid in enumerate(sorted(deck.cbars)):

@@ -95,7 +95,10 @@ def alternatives(step) -> list[dict]:
 
 
 def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: list[str],
-                       declared_holdout: bool, ident) -> dict:
+                       declared_holdout: bool, ident, limits=()) -> dict:
+    """The document (module docstring). ``limits``: the
+    :class:`~blackbox.diagnosis.effects.base.CandidateLimit` of every family that considered
+    fewer candidates than the study offers (``settings.candidates_limited``, and a warning each)."""
     first = diag.steps[0].scores if diag.steps else ()
     added = []
     for s in diag.steps:
@@ -147,12 +150,13 @@ def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: li
                                      "the *_bonferroni p-values are p x 2^r x M_r, compared with alpha",
                      "variants": "each accepted candidate refined through its family's richer variants "
                                  "(the same tests as a candidate, against the variant it extends)",
-                     "band": "99% band of chi2(n - p) / (n - p)", "candidates_by_effect": diag.n_candidates},
+                     "band": "99% band of chi2(n - p) / (n - p)", "candidates_by_effect": diag.n_candidates,
+                     "candidates_limited": [lim.to_json() for lim in limits]},
         "identify_check": None if ident is None else {
             "reduced_chi2": _num(ident.reduced_chi2), "converged": bool(ident.converged),
             "nesting_error_sigma": _num(diag.nesting_error)},
         "solver": runs,
-        "warnings": list(diag.warnings),
+        "warnings": [lim.sentence() for lim in limits] + list(diag.warnings),
         "method_wall_s": diag.wall_s,
         "verdict": diag.verdict,
         "verdict_detail": verdict_detail(diag),

@@ -64,8 +64,7 @@ from blackbox.joints import ComplexJoint, JointModel
 from solver_adapters.protocol import DofLabel
 
 __all__ = ["Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "VERDICTS", "verdict",
-           "refit_candidate", "refine",
-           "round_level", "diagnose"]
+           "refit_candidate", "refine", "round_level", "diagnose", "map_refits", "refits_pay"]
 
 
 REFINE_TOP = 3              # candidates refined per round (those whose refit lowers BIC, strongest
@@ -168,6 +167,52 @@ def refit_candidate(base: SplitBase, fit: Fit, e: Effect, om: ObsMap, hold: ObsM
         best = fit_model(m3, om, hold, x3)
         e = e2
     return best, e
+
+
+def _refit_task(item: tuple[Effect, np.ndarray], shared: tuple) -> tuple[Fit, Effect] | IdentificationError:
+    """:func:`refit_candidate` of one ``(effect, score step)`` against ``shared = (base, fit, om,
+    hold, boundary, K_deck, o_dofs)``, where the task runs; a failed refit is returned, not raised
+    (the round records it)."""
+    base, fit, om, hold, boundary, K_deck, o_dofs = shared
+    try:
+        return refit_candidate(base, fit, item[0], om, hold, boundary, K_deck, o_dofs, item[1])
+    except IdentificationError as exc:
+        return exc
+
+
+REFIT_PER_FIT = 3.0         # a candidate's refit takes ~1-10x the declared model's fit (2-3 starts from
+                            # a nested point, not one from the optimum): 3, the median measured on
+                            # the fixtures and a 1e3-DOF tube (docs/parallel.md)
+SHIP_S_PER_MB = 0.01        # sending the split base to the workers: 45 MB to 2 local workers in 0.08-0.46 s
+ROUND_OVERHEAD_S = 0.2      # a round's tasks through the scheduler and their results back
+
+
+def refits_pay(n: int, fit_s: float, base_mb: float, workers: int) -> bool:
+    """Whether ``n`` refits, each estimated at ``REFIT_PER_FIT * fit_s`` (``fit_s``: the declared
+    model's fit, timed here), finish at least 20 % sooner on ``workers`` workers, counting the
+    split base's trip (``base_mb``) and the round's overhead."""
+    serial = n * REFIT_PER_FIT * fit_s
+    mapped = serial / max(1, min(n, workers)) + base_mb * SHIP_S_PER_MB + ROUND_OVERHEAD_S
+    return mapped < 0.8 * serial
+
+
+def map_refits(base: SplitBase, fit: Fit, short: Sequence[CandidateScore], om: ObsMap, hold, boundary, K_deck,
+               o_dofs, executor=None, fit_s: float | None = None) -> list[tuple[Fit, Effect] | IdentificationError]:
+    """The round's refits (:func:`refit_candidate` of each short-listed candidate), in order: here,
+    or with ``executor`` (an object with ``workers``, ``share`` and ``map_shared``, e.g.
+    :class:`blackbox.parallel.DaskExecutor`) one task per candidate, the split base (without its
+    adapter: :meth:`SplitBase.detached`) and the fit sent to each worker once. With ``fit_s``
+    (the declared fit's time) only when that pays (:func:`refits_pay`); without, always. Each
+    task is the serial refit; only BLAS threading can make the numbers differ (single-threaded
+    on a worker)."""
+    items = [(c.effect, c.step_estimate) for c in short]
+    workers = getattr(executor, "workers", 1) if executor is not None else 1
+    if (workers <= 1 or len(items) < 2
+            or (fit_s is not None and not refits_pay(len(items), fit_s, base.detached_nbytes() / 1e6, workers))):
+        shared = (base, fit, om, hold, boundary, K_deck, o_dofs)
+        return [_refit_task(x, shared) for x in items]
+    with executor.share((base.detached(), fit, om, hold, boundary, K_deck, o_dofs)) as handle:
+        return executor.map_shared(_refit_task, handle, items)
 
 
 def _best_of(model: AugmentedModel, om: ObsMap, hold, starts, e: Effect) -> Fit:
@@ -337,11 +382,13 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
              obs_hold: Observations | None, candidates: Sequence[Effect], *, alpha: float = 0.01,
              refit_top: int = 6, refine_top: int = REFINE_TOP, max_steps: int = 5, band_level: float = 0.99,
              declared_prediction: np.ndarray | None = None, xyz: dict | None = None,
-             progress=None) -> Diagnosis:
+             progress=None, executor=None, always_map_refits: bool = False) -> Diagnosis:
     """The loop of the module docstring. ``k_start``: the declared joints' estimate (e.g. from
     :func:`blackbox.identification.identify`); ``declared_prediction``: that estimate's fit-row
     predictions on the original deck, to measure how exactly the split deck nests the declared
-    model (``nesting_error``, in sigma)."""
+    model (``nesting_error``, in sigma); ``executor``: where each round's refits run when that
+    pays (:func:`map_refits`, :func:`refits_pay`; ``always_map_refits``: whenever there is one);
+    default here."""
     t0 = time.perf_counter()
     boundary = tuple(boundary)
     o_dofs = tuple(dict.fromkeys(list(obs_fit.dofs) + [r for r in obs_fit.ref_dofs if r is not None]
@@ -361,7 +408,9 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         if nest > 1e-3:
             warnings.append(f"the split deck reproduces the declared model only to {nest:.2g} sigma "
                             "(rigid-state nesting); scores may be inaccurate")
+    t_fit = time.perf_counter()
     fit = fit_model(model, om, hold, x0)
+    fit_s = None if always_map_refits else time.perf_counter() - t_fit
     declared = fit
     val = Validation("holdout") if hold is not None else kfold(np.unique(om.case))
     checks = Checks(om, hold, val)
@@ -397,12 +446,12 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         if need:
             base.ensure_columns(need, f"member columns for refits (round {it + 1})")
         refits = []
-        for c in short:
-            try:
-                f2, e2 = refit_candidate(base, fit, c.effect, om, hold, boundary, K_deck, o_dofs, c.step_estimate)
-            except IdentificationError as exc:
-                refits.append(replace(c, reason=f"refit failed: {exc}"))
+        done_all = map_refits(base, fit, short, om, hold, boundary, K_deck, o_dofs, executor, fit_s)
+        for c, done in zip(short, done_all):
+            if isinstance(done, IdentificationError):
+                refits.append(replace(c, reason=f"refit failed: {done}"))
                 continue
+            f2, e2 = done
             refits.append(_judged(c, checks.judge(fit, f2, mult, alpha, len(f2.spec.effects) - 1),
                                   effect=e2, refit=f2, delta_bic_method="refit"))
         # the strongest candidates at the variant their data support, before they compete: every

@@ -139,7 +139,8 @@ class SplitBase:
             self.lam = self.Q @ self.P(self.U0)
             self.U_rigid = self.U0 - Zfull @ self.lam
             self.G_rigid = self.G_split - self.Y @ self.P(self.G_split)
-            self.condition = float(np.linalg.cond(S))
+            w = np.linalg.eigvalsh(S)                # S is SPD: cond = largest / smallest eigenvalue
+            self.condition = float(w[-1] / w[0])
         else:
             self.symmetry_error, self.condition = 0.0, 1.0
             self.Q = np.zeros((0, 0))
@@ -170,6 +171,8 @@ class SplitBase:
         new = [d for d in dict.fromkeys(tuple(x) for x in dofs) if d not in self.col_of]
         if not new:
             return 0
+        if self.adapter is None:
+            raise IdentificationError(f"{purpose}: a detached split base cannot run the split deck")
         V = solve(self.adapter, LoadMatrix.unit(new), self.rows, purpose, self.deck, self.log)
         start = self.G_split.shape[1]
         self.G_split = np.hstack([self.G_split, V])
@@ -180,3 +183,18 @@ class SplitBase:
 
     def conditioned(self, a: Sequence[int]) -> Conditioned:
         return Conditioned(self, np.asarray(list(a), dtype=int))
+
+    def detached_nbytes(self) -> int:
+        """The size of :meth:`detached`'s arrays (what a task on another process receives)."""
+        return sum(int(getattr(self, k).nbytes) for k in ("G_rigid", "Y", "Q", "lam", "U_rigid"))
+
+    def detached(self) -> "SplitBase":
+        """A copy with what models evaluate on it (the rigid state, ``Q``, ``Y``, the rows and
+        columns; the arrays shared, not copied) and without the adapter, the run log and the
+        split run's raw answer: what a task on another process needs, a fraction of the size.
+        :meth:`ensure_columns` on it is an error."""
+        twin = object.__new__(SplitBase)
+        twin.__dict__.update(self.__dict__)
+        twin.adapter, twin.log = None, []
+        twin.G_split = twin._Z = twin.U0 = twin._cho = None
+        return twin

@@ -133,7 +133,8 @@ def identify(model: CondensedModel, obs: Observations, k0, *, fixed_point: bool 
              max_iterations: int = 30, confidence: float = 0.95, holdout: Observations | None = None,
              xtol: float = 1e-8, ftol: float = 1e-10, callback: Callable[[IterationRecord], bool] | None = None,
              profile: bool = True, bootstrap: int = 0, seed: int = 0, scale_covariance: bool = False,
-             rank_rtol: float = 1e-8, progress: Callable[[str], None] | None = None) -> IdentificationResult:
+             rank_rtol: float = 1e-8, progress: Callable[[str], None] | None = None,
+             executor=None) -> IdentificationResult:
     """Weighted least-squares estimate of the joint parameters (Sec. 4.3) with its uncertainty.
 
     ``k0``: the start, the concatenated parameters of ``model.assembly`` (admissible: springs > 0,
@@ -146,6 +147,9 @@ def identify(model: CondensedModel, obs: Observations, k0, *, fixed_point: bool 
     ``max(1, reduced_chi2)`` and use Student's t (a sigma known only up to a factor);
     ``rank_rtol``: the numerical rank of the Jacobian (:func:`blackbox.fitting.statistics.covariance`).
     ``progress(message)`` hears of the long stages after the estimate (profiles, bootstrap).
+    ``executor`` (e.g. :class:`blackbox.parallel.DaskExecutor`, ``--workers``): where the
+    bootstrap refits run (:func:`~blackbox.identification.uncertainty.parametric_bootstrap`; the
+    same samples as here); everything else runs here.
     """
     k0, prob, holdout_prob = _check_inputs(model, obs, k0, confidence, max_iterations, xtol, ftol,
                                            bootstrap, holdout)
@@ -210,8 +214,10 @@ def identify(model: CondensedModel, obs: Observations, k0, *, fixed_point: bool 
                   f"{'; log-space for simple-model springs' if np.any(lg) and not profile else ''})")
     boot_ci = boot = None
     if bootstrap:
-        say(f"parametric bootstrap: {int(bootstrap)} refits")
-        boot = parametric_bootstrap(prob, fit, f, int(bootstrap), seed, int(max_iterations), xtol, ftol)
+        workers = getattr(executor, "workers", 1) if executor is not None else 1
+        say(f"parametric bootstrap: {int(bootstrap)} refits" + (f" on {workers} workers" if workers > 1 else ""))
+        boot = parametric_bootstrap(prob, fit, f, int(bootstrap), seed, int(max_iterations), xtol, ftol,
+                                    executor=executor)
         if len(boot) < bootstrap:
             warnings.append(f"{bootstrap - len(boot)} of {bootstrap} bootstrap refits did not converge")
         a = 100.0 * (1.0 - confidence) / 2.0

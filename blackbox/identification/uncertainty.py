@@ -27,6 +27,7 @@ the estimate with the declared sigma) with percentile intervals.
 from __future__ import annotations
 
 import math
+from typing import Sequence
 
 import numpy as np
 
@@ -61,17 +62,38 @@ def linear_intervals(k: np.ndarray, std: np.ndarray, z: float, log_mask: np.ndar
     return lin, half
 
 
+def _bootstrap_refits(ys: Sequence[np.ndarray], shared: tuple) -> list[np.ndarray | None]:
+    """Refits of the bootstrap data ``ys`` from the estimate (``shared = (prob, phi,
+    max_iterations, xtol, ftol)``), where the task runs; ``None``: that refit did not converge."""
+    prob, phi, max_iterations, xtol, ftol = shared
+    out = []
+    for y in ys:
+        b = _newton(prob, phi, y=y, max_iterations=int(max_iterations), xtol=xtol, ftol=ftol)
+        out.append(b.k if b.status in (1, 2, 3) else None)
+    return out
+
+
 def parametric_bootstrap(prob: _Problem, fit: _Fit, f: np.ndarray, n: int, seed: int, max_iterations: int,
-                         xtol: float, ftol: float) -> np.ndarray:
+                         xtol: float, ftol: float, executor=None) -> np.ndarray:
     """``n`` refits (from the estimate) of data simulated from the prediction ``f`` with the
-    declared sigma (``numpy.random.default_rng(seed)``); the converged estimates, one per row."""
+    declared sigma (``numpy.random.default_rng(seed)``, one draw per replicate in order); the
+    converged estimates, one per row, in replicate order. ``executor`` (an object with
+    ``workers``, ``share`` and ``map_shared``, e.g. :class:`blackbox.parallel.DaskExecutor`):
+    the refits in contiguous chunks (4 per worker), the problem and the estimate sent to each
+    worker once; every refit is the serial one from the same start and data, so the samples
+    are the serial ones."""
     rng = np.random.default_rng(seed)
-    samples = []
-    for _ in range(int(n)):
-        y_b = f + prob.sigma * rng.standard_normal(len(f))
-        b = _newton(prob, fit.phi, y=y_b, max_iterations=int(max_iterations), xtol=xtol, ftol=ftol)
-        if b.status in (1, 2, 3):
-            samples.append(b.k)
+    ys = [f + prob.sigma * rng.standard_normal(len(f)) for _ in range(int(n))]
+    shared = (prob, fit.phi, int(max_iterations), xtol, ftol)
+    workers = getattr(executor, "workers", 1) if executor is not None else 1
+    if workers <= 1 or len(ys) < 2:
+        ks = _bootstrap_refits(ys, shared)
+    else:
+        parts = np.array_split(np.arange(len(ys)), min(len(ys), 4 * workers))
+        with executor.share(shared) as handle:
+            done = executor.map_shared(_bootstrap_refits, handle, [[ys[i] for i in idx] for idx in parts])
+        ks = [k for part in done for k in part]
+    samples = [k for k in ks if k is not None]
     return np.array(samples).reshape(-1, prob.p)
 
 

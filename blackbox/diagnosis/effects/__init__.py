@@ -4,7 +4,7 @@ Registration order is listing order: the connection families cut the split deck 
 (their cut pairs and new grids are numbered so), then the others list their candidates.
 """
 
-from blackbox.diagnosis.effects.base import CandidateContext, Effect
+from blackbox.diagnosis.effects.base import CandidateContext, CandidateLimit, Effect
 from blackbox.diagnosis.effects.connection import Connection
 from blackbox.diagnosis.effects.registry import families, get, kinds, register
 
@@ -18,6 +18,6 @@ from blackbox.diagnosis.effects.load_scale import LoadScale  # noqa: E402
 from blackbox.diagnosis.effects.sensor_gain import SensorGain  # noqa: E402
 from blackbox.diagnosis.effects.sensor_offset import SensorOffset  # noqa: E402
 
-__all__ = ["CandidateContext", "Effect", "Connection", "register", "get", "kinds", "families",
+__all__ = ["CandidateContext", "CandidateLimit", "Effect", "Connection", "register", "get", "kinds", "families",
            "UndeclaredJoint", "JointTranslation", "SupportFlexibility", "JointCoupling", "MemberStiffness",
            "LoadScale", "SensorGain", "SensorOffset"]

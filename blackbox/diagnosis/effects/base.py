@@ -6,7 +6,10 @@ at grid 1, member 88...). Everything that differs between families lives on the 
 
 * **listing** -- :meth:`Effect.cut` edits the split deck (connections the split run must cut) and
   returns the candidates that cut makes possible; :meth:`Effect.candidates` lists the others once
-  the split run is done. Both read a :class:`CandidateContext`.
+  the split run is done, :meth:`Effect.split_rows` says which DOFs that run must report for them.
+  All read a :class:`CandidateContext`. A family with more candidates than its cap considers
+  those nearest the declared fit's residual (:meth:`CandidateContext.nearest_residual`) and says
+  so (:class:`CandidateLimit`).
 * **parameters** -- :attr:`Effect.names`, :attr:`Effect.nominal` (the value at which the effect is
   absent: the declared model), :attr:`Effect.bounds`, :attr:`Effect.one_sided` (the nested value
   is a bound, so the score test is one-sided).
@@ -46,7 +49,26 @@ if TYPE_CHECKING:
     from blackbox.joints import JointModel
     from solver_adapters.protocol import Deck
 
-__all__ = ["CandidateContext", "Effect", "finite_or_none"]
+__all__ = ["CandidateContext", "CandidateLimit", "Effect", "finite_or_none"]
+
+
+@dataclass(frozen=True)
+class CandidateLimit:
+    """A family that considers fewer candidates than the study offers: how many it considered, of
+    how many, how it chose them and the option that raises the limit (reported, never silent)."""
+    kind: str
+    considered: int
+    available: int
+    chosen_by: str
+    option: str
+
+    def to_json(self) -> dict:
+        return {"effect": self.kind, "considered": self.considered, "available": self.available,
+                "chosen_by": self.chosen_by, "option": self.option}
+
+    def sentence(self) -> str:
+        return (f"{self.kind}: {self.considered} of {self.available} candidates considered ({self.chosen_by}); "
+                f"raise {self.option} to consider more")
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,8 +77,9 @@ class CandidateContext:
     study's order), each member's black-box stiffness ``K_e``, the fitted rows, the load cases,
     the per-grid RMS of the declared fit's whitened residuals (``None`` without a declared fit),
     the cap on undeclared-joint candidates, each case's group from the optional ``group``
-    column of ``loads.csv`` (empty without it) and, from the declared fit, each fitted case's
-    least-squares scale of its predicted responses (``None`` without a declared fit)."""
+    column of ``loads.csv`` (empty without it), from the declared fit each fitted case's
+    least-squares scale of its predicted responses (``None`` without a declared fit), and the cap
+    on member candidates. A family that applies a cap records it in ``limits`` (:meth:`note_limit`)."""
     deck: "Deck"
     joints: tuple["JointModel", ...]
     K_e: dict[int, np.ndarray]
@@ -67,6 +90,40 @@ class CandidateContext:
     groups: dict[str, str] = field(default_factory=dict)
     case_scales: dict[str, tuple[float, float]] | None = None   # fitted case -> (scale - 1, std) of
                                                                 # its responses in the declared fit
+    max_member_candidates: int = 300
+    limits: dict[str, CandidateLimit] = field(default_factory=dict)
+
+    def note_limit(self, limit: CandidateLimit) -> None:
+        self.limits[limit.kind] = limit
+
+    def nearest_residual(self, points: dict, limit: int) -> list:
+        """At most ``limit`` keys of ``points`` (``{key: xyz}``, in their order): those nearest the
+        declared fit's residual concentration. Each point scores the largest per-grid residual RMS
+        of a measured grid discounted by ``exp(-distance / median member length)``; without a
+        declared fit (no joints) every measured grid weighs 1 (nearest the sensors). Ties keep
+        the order of ``points``."""
+        keys = list(points)
+        if len(keys) <= limit:
+            return keys
+        deck = self.deck
+        xyz = {g.id: np.array(g.xyz) for g in deck.grids.values()}
+        lengths = [np.linalg.norm(xyz[b.ga] - xyz[b.gb]) for b in deck.cbars.values()]
+        ell = float(np.median(lengths)) if lengths else 1.0
+        ell = ell or 1.0
+        weights = self.residual_rms if self.residual_rms is not None else \
+            {int(g): 1.0 for g, _ in self.fit_obs.dofs}
+        meas = [(xyz[g], v) for g, v in weights.items() if g in xyz]
+        if not meas:
+            return keys[:limit]
+        P = np.array([p for p, _ in meas])
+        w = np.array([v for _, v in meas])
+        X = np.array([np.asarray(points[k], float) for k in keys])
+        score = np.zeros(len(keys))
+        for a in range(0, len(keys), 4096):           # blocks: (keys x measured grids) distances
+            d = np.linalg.norm(X[a:a + 4096, None, :] - P[None, :, :], axis=2)
+            score[a:a + 4096] = np.max(w[None, :] * np.exp(-d / ell), axis=1)
+        chosen = set(np.argsort(-score, kind="stable")[:limit].tolist())
+        return [k for i, k in enumerate(keys) if i in chosen]
 
 
 def finite_or_none(v) -> float | None:
@@ -95,6 +152,12 @@ class Effect:
     def candidates(cls, ctx: CandidateContext, split: "SplitDeck") -> list["Effect"]:
         """Candidates that need no cut, listed after the split deck is built."""
         return []
+
+    @classmethod
+    def split_rows(cls, ctx: CandidateContext, split: "SplitDeck") -> tuple[DofLabel, ...]:
+        """DOFs the split run must report for this family's candidates, beyond those it always
+        reports (the joint boundary, the measured DOFs, both sides of every cut pair)."""
+        return ()
 
     # ---- identity and parameters ------------------------------------------------------------------
     @property

@@ -5,7 +5,9 @@ element from the element deck's run. Its score at ``alpha = 1`` needs only rows 
 flexibility at the member's DOFs under the unit loads at ``B`` and ``O`` (reciprocity), which the
 split run reports (:meth:`MemberStiffness.batch_columns`: every member scored without a run); its
 refit needs the member's own columns, one batched run for every short-listed member of a round.
-Candidates: every member.
+Candidates: every member; beyond ``max_member_candidates`` those nearest the declared fit's
+residual concentration (each considered member adds its 12 end DOFs to the split run's rows), and
+the diagnosis says how many it left out.
 
 Variants: "whole" (``alpha_E``: one factor on ``K_e``) and, when ``K_e`` splits cleanly,
 "sections" (``EA_E, EI1_E, EI2_E, GJ_E``: one factor on each of its axial, plane-1 bending,
@@ -18,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from blackbox.diagnosis.effects.base import Effect
+from blackbox.diagnosis.effects.base import CandidateLimit, Effect
 from blackbox.diagnosis.effects.registry import register
 from solver_adapters.protocol import DofLabel
 
@@ -111,9 +113,30 @@ class MemberStiffness(Effect):
         return int(self.where[0])
 
     @classmethod
+    def selected(cls, ctx) -> list[int]:
+        """The members considered: every member, or beyond ``ctx.max_member_candidates`` those
+        nearest the declared fit's residual (their midpoints; the limit noted in ``ctx``)."""
+        eids = sorted(ctx.K_e)
+        if len(eids) <= ctx.max_member_candidates:
+            return eids
+        xyz = {g.id: np.asarray(g.xyz, float) for g in ctx.deck.grids.values()}
+        mid = {e: 0.5 * (xyz[ctx.deck.cbars[e].ga] + xyz[ctx.deck.cbars[e].gb]) for e in eids}
+        chosen = ctx.nearest_residual(mid, ctx.max_member_candidates)
+        ctx.note_limit(CandidateLimit(cls.kind, len(chosen), len(eids),
+                                      "the members nearest the declared fit's residual" if ctx.residual_rms is not None
+                                      else "the members nearest the measured grids (no declared fit)",
+                                      "max_member_candidates"))
+        return chosen
+
+    @classmethod
+    def split_rows(cls, ctx, split) -> tuple[DofLabel, ...]:
+        """The end DOFs of the members considered: their score needs the split run's rows there."""
+        return tuple(d for eid in cls.selected(ctx) for d in split.member_dofs[eid])
+
+    @classmethod
     def candidates(cls, ctx, split) -> list["MemberStiffness"]:
         out = []
-        for eid in sorted(ctx.K_e):
+        for eid in cls.selected(ctx):
             v = orientation(ctx.deck, eid) if eid in ctx.deck.cbars else None
             parts = section_parts(ctx.K_e[eid], v) if v is not None else None
             out.append(cls((eid,), (f"alpha_{eid}",), "whole" if parts is not None else "",

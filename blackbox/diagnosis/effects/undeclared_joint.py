@@ -8,22 +8,27 @@ at the grid). Released, as the data support (:func:`~blackbox.diagnosis.effects.
 kz_G``: equal springs between every pair of branches about each axis) or "per-branch" (``kx_G_eE``
 ...: per axis, a spring from each member ``E``'s end to the joint's centre; three or more members).
 Candidates: grids of >= 2 members that are not a declared joint's, constrained, in an RBE2, on a
-spring or on an element the reader does not model (a shell, a solid); beyond ``max_joint_candidates`` those nearest the declared fit's residual concentration.
+spring or on an element the reader does not model (a shell, a solid); beyond ``max_joint_candidates``
+those nearest the declared fit's residual concentration
+(:meth:`~blackbox.diagnosis.effects.base.CandidateContext.nearest_residual`; without a declared
+fit, those nearest the measured grids), and the diagnosis says how many it left out. Each candidate
+grid costs ``3 (n - 1)`` right-hand sides of the split run (``n`` members), so the cap bounds that
+run on a large model.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from blackbox.diagnosis.decks import constrained_grids, members_at, rbe2_grids, unsplittable_grids
+from blackbox.diagnosis.effects.base import CandidateLimit
 from blackbox.diagnosis.effects.connection import GridConnection, branch_ladder
 from blackbox.diagnosis.effects.registry import register
 from solver_adapters.protocol import Deck, Rbe2
 
-__all__ = ["UndeclaredJoint", "joint_candidate_grids", "preselect"]
+__all__ = ["UndeclaredJoint", "joint_candidate_grids"]
 
 
 def joint_candidate_grids(deck: Deck, declared_grids: set[int]) -> list[int]:
@@ -37,21 +42,6 @@ def joint_candidate_grids(deck: Deck, declared_grids: set[int]) -> list[int]:
     return [g for g in sorted(at) if len(at[g]) >= 2 and g not in skip]
 
 
-def preselect(grids: list[int], limit: int, deck: Deck, residual_rms: dict[int, float]) -> list[int]:
-    """At most ``limit`` candidate grids: those nearest the residual concentration (each grid's
-    score is the largest measured-grid RMS discounted by exp(-distance / median member length))."""
-    if len(grids) <= limit:
-        return grids
-    xyz = {g.id: np.array(g.xyz) for g in deck.grids.values()}
-    lengths = [np.linalg.norm(xyz[b.ga] - xyz[b.gb]) for b in deck.cbars.values()]
-    ell = float(np.median(lengths)) or 1.0
-    meas = [(xyz[g], v) for g, v in residual_rms.items() if g in xyz]
-
-    def score(g):
-        return max((v * math.exp(-np.linalg.norm(xyz[g] - p) / ell) for p, v in meas), default=0.0)
-    return sorted(sorted(grids, key=score, reverse=True)[:limit])
-
-
 @register
 @dataclass(frozen=True, eq=False)
 class UndeclaredJoint(GridConnection):
@@ -62,8 +52,12 @@ class UndeclaredJoint(GridConnection):
     def cut(cls, editor, ctx) -> list["UndeclaredJoint"]:
         declared = {g for j in ctx.joints for g in j.grids}
         grids = joint_candidate_grids(ctx.deck, declared)
-        if len(grids) > ctx.max_joint_candidates and ctx.residual_rms is not None:
-            grids = preselect(grids, ctx.max_joint_candidates, ctx.deck, ctx.residual_rms)
+        if len(grids) > ctx.max_joint_candidates:
+            grids = ctx.nearest_residual({g: ctx.deck.grids[g].xyz for g in grids}, ctx.max_joint_candidates)
+            ctx.note_limit(CandidateLimit(
+                cls.kind, len(grids), len(joint_candidate_grids(ctx.deck, declared)),
+                "the grids nearest the declared fit's residual" if ctx.residual_rms is not None
+                else "the grids nearest the measured grids (no declared fit)", "max_joint_candidates"))
         at = editor.members_at
         d = editor.deck
         out = []
