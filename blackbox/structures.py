@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +17,7 @@ import numpy as np
 from blackbox.joints import frame_element_stiffness, make_joint, spring_network
 from blackbox.reference_tables import TABLE_3_1
 from solver_adapters.bdf_write import print_float_free
-from solver_adapters.deck import Deck, Spring
+from solver_adapters.deck import Deck, Grid, Rbe2, Spring
 
 
 @dataclass
@@ -231,6 +231,50 @@ class TruthDeck:
 
     def members_at(self, grid: int) -> list[int]:
         return sorted(e for e, b in self.deck.cbars.items() if grid in (b.ga, b.gb))
+
+    def unclamp(self, grid: int) -> str:
+        """Take ``grid`` out of every SPC1 set (a set left empty goes); returns the components
+        those sets constrained there, for the springs that replace them."""
+        comps, spcs = "", []
+        for s in self.deck.spc1s:
+            if grid in s.grids:
+                comps += s.components
+                rest = tuple(x for x in s.grids if x != grid)
+                if rest:
+                    spcs.append(replace(s, grids=rest))
+            else:
+                spcs.append(s)
+        self.deck.spc1s = spcs
+        return comps
+
+    def split_grid(self, grid: int) -> list[int]:
+        """Make ``grid`` a joint of its members: one new coincident grid per member after the
+        first, each member moved to its own grid, their translations tied to ``grid`` by an RBE2
+        CM=123 (as a study's joints). Returns the branch grids, ``grid`` first."""
+        d = self.deck
+        branches = [grid]
+        for e in self.members_at(grid)[1:]:
+            g = self.next_grid
+            self.next_grid += 1
+            d.grids[g] = Grid(g, d.grids[grid].xyz)
+            b = d.cbars[e]
+            d.cbars[e] = replace(b, ga=g if b.ga == grid else b.ga, gb=g if b.gb == grid else b.gb)
+            branches.append(g)
+        e = self.eid()
+        d.rbe2s[e] = Rbe2(e, grid, "123", tuple(branches[1:]))
+        return branches
+
+    def untie_translations(self, grids) -> None:
+        """Remove the other branch grids of a joint from the RBE2 that ties their translations to
+        the first (an RBE2 left with none goes)."""
+        g1, others = grids[0], set(grids[1:])
+        for r in list(self.deck.rbe2s.values()):
+            if r.gn == g1 and others & set(r.gm):
+                gm = tuple(g for g in r.gm if g not in others)
+                if gm:
+                    self.deck.rbe2s[r.eid] = replace(r, gm=gm)
+                else:
+                    del self.deck.rbe2s[r.eid]
 
     def k_diag(self, eid: int, grid: int) -> np.ndarray:
         """The diagonal (6) of member ``eid``'s global stiffness at its end ``grid``."""

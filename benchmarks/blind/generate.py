@@ -74,7 +74,7 @@ from blackbox.structures import (FrameBuilder, TruthDeck, random_loads, star_joi
                                  tube_body, write_study)
 from solver_adapters.bdf import read_deck_text                            # noqa: E402
 from solver_adapters.bdf_write import write_deck                          # noqa: E402
-from solver_adapters.deck import Deck, Grid, Mat1, PBar, Rbe2             # noqa: E402
+from solver_adapters.deck import Deck, Mat1, PBar                         # noqa: E402
 from solver_adapters.protocol import LoadMatrix                           # noqa: E402
 from solver_adapters.reference import ReferenceAdapter                   # noqa: E402
 
@@ -276,48 +276,21 @@ def plant_deck(truth: TruthDeck, kind: str, where, size: float, sign: float, ext
     d = truth.deck
     if kind == "support_flexibility":
         g = int(where)
-        comps = ""
-        spcs = []
-        for s in d.spc1s:
-            if g in s.grids:
-                comps += s.components
-                rest = tuple(x for x in s.grids if x != g)
-                if rest:
-                    spcs.append(replace(s, grids=rest))
-            else:
-                spcs.append(s)
-        d.spc1s = spcs
+        comps = truth.unclamp(g)
         local = sum(truth.k_diag(e, g) for e in truth.members_at(g))
         for c in sorted(set(comps)):
             truth.spring(local[int(c) - 1] / size, g, int(c))
     elif kind == "undeclared_joint":
         g = int(where)
-        eids = truth.members_at(g)
-        ref = np.min([truth.k_diag(e, g)[3:] for e in eids], axis=0)
-        branches = [g]
-        for e in eids[1:]:
-            ng = truth.next_grid
-            truth.next_grid += 1
-            d.grids[ng] = Grid(ng, d.grids[g].xyz)
-            b = d.cbars[e]
-            d.cbars[e] = replace(b, ga=ng if b.ga == g else b.ga, gb=ng if b.gb == g else b.gb)
-            branches.append(ng)
-        e = truth.eid()
-        d.rbe2s[e] = Rbe2(e, g, "123", tuple(branches[1:]))
+        ref = np.min([truth.k_diag(e, g)[3:] for e in truth.members_at(g)], axis=0)
+        branches = truth.split_grid(g)
         for c in (4, 5, 6):
             for i in range(len(branches)):
                 for j in range(i + 1, len(branches)):
                     truth.spring(ref[c - 4] / size, branches[i], c, branches[j], c)
     elif kind == "joint_translation":
         grids = extra["grids"]
-        g1, others = grids[0], set(grids[1:])
-        for r in list(d.rbe2s.values()):
-            if r.gn == g1 and others & set(r.gm):
-                gm = tuple(x for x in r.gm if x not in others)
-                if gm:
-                    d.rbe2s[r.eid] = replace(r, gm=gm)
-                else:
-                    del d.rbe2s[r.eid]
+        truth.untie_translations(grids)
         ref = np.min([truth.k_diag(truth.members_at(g)[0], g)[:3] for g in grids], axis=0)
         for c in (1, 2, 3):
             for i in range(len(grids)):
