@@ -240,17 +240,10 @@ def test_generated_load_scale_of_one_group(tmp_path, group_column):
     b = star_joint_frame(4, seed=0)
     loads = random_loads(b, 17, seed=3)
     study = _truth_study(tmp_path, b, b, loads, "star", 1.0e5, [100, 101, 102, 103], seed=5)
-    scaled = tmp_path / "scaled"
-    toml = (tmp_path / "truth.toml").read_text()
-    (tmp_path / "truth.toml").write_text(toml.replace('deck = "truth.bdf"', 'deck = "truth.bdf"\nforce_scale = 1.06'))
-    write_output(scaled, "simulate", simulate_command.run(tmp_path / "star_src", tmp_path / "truth.toml").write)
     cases = list(dict.fromkeys(c for c, *_ in loads))
     group_b = set(cases[1::2])                                   # L2, L4, ..., L16: 8 of 17
     assert len(cases) == 17 and len(group_b) == 8
-    rows = (study / "measurements.csv").read_text().splitlines()
-    rows_scaled = (scaled / "measurements.csv").read_text().splitlines()
-    merged = [rows[0]] + [s if r.split(",")[0] in group_b else r for r, s in zip(rows[1:], rows_scaled[1:])]
-    (study / "measurements.csv").write_text("\n".join(merged) + "\n")
+    _scale_cases(tmp_path, study, group_b, 1.06)
     if group_column:
         with (study / "loads.csv").open("w") as fh:
             fh.write("case,grid,component,value,group\n")
@@ -730,16 +723,37 @@ def _local(b, bar_ids, grid):
     return out
 
 
-def test_generated_star_frame_support_flexibility(tmp_path):
-    """A 4-branch star frame (``star_joint_frame(4)``): base grid 201, clamped in the study, is
-    elastic in the truth (2 x the leg's own stiffness in every component)."""
-    b = star_joint_frame(4, seed=0)
+def _elastic_base(b):
+    """``b`` with its base grid 201 no longer clamped but on grounded springs of 2 x the legs' own
+    stiffness there, every component."""
     truth = copy.deepcopy(b)
     del truth.spcs[201]
     legs = [e for e, ga, gb, _ in b.bars if 201 in (ga, gb)]
     local = _local(b, legs, 201)
     for c in range(6):
         truth.springs.append((201, c + 1, 0, 0, 2.0 * local[c]))
+    return truth
+
+
+def _scale_cases(tmp: Path, study: Path, cases: set[str], scale: float) -> None:
+    """The measurements of ``cases`` in ``study`` replaced by a second simulation of
+    ``_truth_study``'s source and truth with ``force_scale = scale`` (same seed, so the same noise
+    draws): those cases were run with loads ``scale`` x nominal."""
+    toml = (tmp / "truth.toml").read_text()
+    (tmp / "truth.toml").write_text(toml.replace('deck = "truth.bdf"', f'deck = "truth.bdf"\nforce_scale = {scale!r}'))
+    scaled = tmp / "scaled"
+    write_output(scaled, "simulate", simulate_command.run(tmp / f"{study.name}_src", tmp / "truth.toml").write)
+    rows = (study / "measurements.csv").read_text().splitlines()
+    rows_scaled = (scaled / "measurements.csv").read_text().splitlines()
+    merged = [rows[0]] + [s if r.split(",")[0] in cases else r for r, s in zip(rows[1:], rows_scaled[1:])]
+    (study / "measurements.csv").write_text("\n".join(merged) + "\n")
+
+
+def test_generated_star_frame_support_flexibility(tmp_path):
+    """A 4-branch star frame (``star_joint_frame(4)``): base grid 201, clamped in the study, is
+    elastic in the truth (2 x the leg's own stiffness in every component)."""
+    b = star_joint_frame(4, seed=0)
+    truth = _elastic_base(b)
     loads = random_loads(b, 15, seed=3)
     study = _truth_study(tmp_path, b, truth, loads, "star", 1.0e5, [100, 101, 102, 103], seed=5)
     d = diagnose_command.run(study, plots=False).document
@@ -784,23 +798,11 @@ def test_generated_support_and_a_scaled_test_day(tmp_path):
     simulated with ``force_scale = 1.06``. Both effects are added (the support at 201, the scale
     on exactly L1-L7 found from the data, 1.06 within 4 std) and the fit is back in its band."""
     b = star_joint_frame(4, seed=0)
-    truth = copy.deepcopy(b)
-    del truth.spcs[201]
-    legs = [e for e, ga, gb, _ in b.bars if 201 in (ga, gb)]
-    local = _local(b, legs, 201)
-    for c in range(6):
-        truth.springs.append((201, c + 1, 0, 0, 2.0 * local[c]))
+    truth = _elastic_base(b)
     loads = random_loads(b, 12, seed=3)
     study = _truth_study(tmp_path, b, truth, loads, "star", 1.0e5, [100, 101, 102, 103], seed=5)
-    toml = (tmp_path / "truth.toml").read_text()
-    (tmp_path / "truth.toml").write_text(toml.replace('deck = "truth.bdf"', 'deck = "truth.bdf"\nforce_scale = 1.06'))
-    scaled = tmp_path / "scaled"
-    write_output(scaled, "simulate", simulate_command.run(tmp_path / "star_src", tmp_path / "truth.toml").write)
     day = {f"L{i}" for i in range(1, 8)}
-    rows = (study / "measurements.csv").read_text().splitlines()
-    rows_scaled = (scaled / "measurements.csv").read_text().splitlines()
-    merged = [rows[0]] + [s if r.split(",")[0] in day else r for r, s in zip(rows[1:], rows_scaled[1:])]
-    (study / "measurements.csv").write_text("\n".join(merged) + "\n")
+    _scale_cases(tmp_path, study, day, 1.06)
     d = diagnose_command.run(study, plots=False).document
     assert d["validation"]["method"] == "kfold"
     found = {(a["effect"], tuple(sorted(map(str, a["where"])))): a for a in d["added"]}
