@@ -166,11 +166,9 @@ class Linear:
         return bool(np.all(np.isfinite(k)))
 
 
-@pytest.mark.parametrize("seed", range(5))
-def test_box_bounds_reach_the_bounded_least_squares_solution(seed):
-    """With ``0 <= k <= 2`` the core's active set ends at the bounded-variable least-squares
-    solution (scipy's ``lsq_linear``, BVLS; and ``nnls`` for the lower bound alone), with the
-    active parameters exactly at their bounds. Data drawn so that some bounds are active."""
+def _bounded_problem(seed):
+    """A weighted linear problem with ``0 <= k <= 2`` and some bounds active at its solution:
+    ``A, y, w, lo, hi`` and the bounded-variable least-squares solution (scipy's ``lsq_linear``)."""
     rng = np.random.default_rng(seed)
     A = rng.standard_normal((40, 5))
     k_true = np.array([-0.5, 0.3, 2.8, 1.0, -1.2])
@@ -178,6 +176,15 @@ def test_box_bounds_reach_the_bounded_least_squares_solution(seed):
     y = A @ k_true + 0.1 * rng.standard_normal(40) / w
     lo, hi = np.zeros(5), np.full(5, 2.0)
     ref = lsq_linear(A * w[:, None], y * w, bounds=(lo, hi), method="bvls", tol=1e-14).x
+    return A, y, w, lo, hi, ref
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_box_bounds_reach_the_bounded_least_squares_solution(seed):
+    """With ``0 <= k <= 2`` the core's active set ends at the bounded-variable least-squares
+    solution (scipy's ``lsq_linear``, BVLS; and ``nnls`` for the lower bound alone), with the
+    active parameters exactly at their bounds. Data drawn so that some bounds are active."""
+    A, y, w, lo, hi, ref = _bounded_problem(seed)
     res = levenberg_marquardt(Linear(A, y, w, BoxBounds(lo, hi)), np.full(5, 1.0), max_iterations=50)
     assert res.converged, res.message
     np.testing.assert_allclose(res.k, ref, atol=1e-9)          # BVLS to its tolerance
@@ -196,13 +203,7 @@ def test_projected_bounds_reach_the_bounded_least_squares_solution(seed):
     points clipped into the box, :data:`PROJECTED_SCHEDULE`) ends at the same BVLS solution on
     the problems above. Tolerance 1e-7: projected LM approaches the active face linearly and
     stops on a relative chi2 decrease of 1e-13, i.e. ~sqrt(1e-13 chi2) in whitened units."""
-    rng = np.random.default_rng(seed)
-    A = rng.standard_normal((40, 5))
-    k_true = np.array([-0.5, 0.3, 2.8, 1.0, -1.2])
-    w = 1.0 / rng.uniform(0.5, 2.0, 40)
-    y = A @ k_true + 0.1 * rng.standard_normal(40) / w
-    lo, hi = np.zeros(5), np.full(5, 2.0)
-    ref = lsq_linear(A * w[:, None], y * w, bounds=(lo, hi), method="bvls", tol=1e-14).x
+    A, y, w, lo, hi, ref = _bounded_problem(seed)
     res = levenberg_marquardt(Linear(A, y, w, ProjectedBoxBounds(lo, hi)), np.full(5, 1.0), max_iterations=200,
                               xtol=0.0, ftol=1e-13, geodesic=False, schedule=PROJECTED_SCHEDULE)
     assert res.status in (2, 4), res.message
