@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from blackbox.commands.output import check_out, write_output
-from blackbox.errors import BlackboxError
+from blackbox.errors import BlackboxError, EditedDeckError
 from solver_adapters.errors import ConsentError
 from solver_adapters.protocol import DeckFormatError, ModelError, SolverError, UnknownDofError
 
@@ -503,6 +503,8 @@ def _heartbeat(elapsed_s: float, last_line: str) -> None:
 def exit_code(exc: BaseException) -> int:
     """The documented exit code of an error that ended a command."""
     if isinstance(exc, SolverError) and not isinstance(exc, _BAD_INPUT_SOLVER_ERRORS + (ValueError,)):
+        return EXIT_SOLVER
+    if isinstance(exc, EditedDeckError):          # the solver's answer to an edited deck
         return EXIT_SOLVER
     return EXIT_BAD_INPUT
 

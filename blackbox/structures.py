@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from blackbox.diagnosis.decks import prune_spcadds
 from blackbox.joints import frame_element_stiffness, make_joint, spring_network
 from blackbox.reference_tables import TABLE_3_1
 from solver_adapters.bdf_write import print_float_free
@@ -233,9 +234,12 @@ class TruthDeck:
         return sorted(e for e, b in self.deck.cbars.items() if grid in (b.ga, b.gb))
 
     def unclamp(self, grid: int) -> str:
-        """Take ``grid`` out of every SPC1 set (a set left empty goes); returns the components
-        those sets constrained there, for the springs that replace them."""
-        comps, spcs = "", []
+        """Take ``grid`` out of every SPC1 set (a set left empty goes, and with it its name in
+        an SPCADD) and clear its GRID PS; returns the components those constrained there (in
+        the grid's CD system), for the springs that replace them."""
+        comps, spcs = self.deck.grids[grid].ps, []
+        if comps:
+            self.deck.grids[grid] = replace(self.deck.grids[grid], ps="")
         for s in self.deck.spc1s:
             if grid in s.grids:
                 comps += s.components
@@ -245,7 +249,8 @@ class TruthDeck:
             else:
                 spcs.append(s)
         self.deck.spc1s = spcs
-        return comps
+        prune_spcadds(self.deck)
+        return "".join(sorted(set(comps)))
 
     def split_grid(self, grid: int) -> list[int]:
         """Make ``grid`` a joint of its members: one new coincident grid per member after the
@@ -256,7 +261,7 @@ class TruthDeck:
         for e in self.members_at(grid)[1:]:
             g = self.next_grid
             self.next_grid += 1
-            d.grids[g] = Grid(g, d.grids[grid].xyz)
+            d.grids[g] = Grid(g, d.grids[grid].xyz, cd=d.grids[grid].cd)
             b = d.cbars[e]
             d.cbars[e] = replace(b, ga=g if b.ga == grid else b.ga, gb=g if b.gb == grid else b.gb)
             branches.append(g)
@@ -277,14 +282,18 @@ class TruthDeck:
                     del self.deck.rbe2s[r.eid]
 
     def k_diag(self, eid: int, grid: int) -> np.ndarray:
-        """The diagonal (6) of member ``eid``'s global stiffness at its end ``grid``."""
+        """The diagonal (6) of member ``eid``'s stiffness at its end ``grid``, in the components
+        of the grid's displacement system (CD)."""
         d = self.deck
         b = d.cbars[eid]
         p = d.pbars[b.pid]
         m = d.mat1s[p.mid]
-        K = frame_element_stiffness(d.grids[b.ga].xyz, d.grids[b.gb].xyz, m.e, m.g, p.a, p.i2, p.i1, p.j, b.x)
+        x = b.x if b.g0 is None else np.subtract(d.grids[b.g0].xyz, d.grids[b.ga].xyz)
+        K = frame_element_stiffness(d.grids[b.ga].xyz, d.grids[b.gb].xyz, m.e, m.g, p.a, p.i2, p.i1, p.j, x)
         end = 0 if b.ga == grid else 1
-        return np.diag(K)[6 * end:6 * end + 6]
+        R = d.displacement_frames([grid])[0]
+        blk = K[6 * end:6 * end + 6, 6 * end:6 * end + 6]
+        return np.concatenate([np.diag(R @ blk[:3, :3] @ R.T), np.diag(R @ blk[3:, 3:] @ R.T)])
 
     def joint(self, name: str, grids, model: str, params) -> None:
         for s in spring_network(make_joint(name, grids, model), params):

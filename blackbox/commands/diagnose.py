@@ -54,7 +54,7 @@ import numpy as np
 from blackbox.adapters import make_adapter_for
 from blackbox.commands.common import as_study
 from blackbox.declared import DeclaredModel, SolverCost, declared_model
-from blackbox.diagnosis.decks import SplitDeck, element_deck, split_deck, unmodelled_notes
+from blackbox.diagnosis.decks import SplitDeck, cards_at, element_deck, split_deck, unmodelled_notes
 from blackbox.diagnosis.document import diagnosis_document, verdict_detail
 from blackbox.diagnosis.effects import CandidateContext, CandidateLimit, Effect, MemberStiffness, families
 from blackbox.diagnosis.effects.load_scale import case_scales
@@ -62,7 +62,7 @@ from blackbox.diagnosis.effects.undeclared_joint import UndeclaredJoint, joint_c
 from blackbox.diagnosis.runs import RunRecord, element_stiffness
 from blackbox.diagnosis.search import Diagnosis, diagnose
 from blackbox.diagnosis.split import SplitBase
-from blackbox.errors import DiagnosisError
+from blackbox.errors import DiagnosisError, EditedDeckError
 from blackbox.identification import IdentificationResult, Observations, identify
 from blackbox.parallel import Executor, StudyPackage, pack_study, use_executor
 from blackbox.study import Study, read_load_groups
@@ -254,7 +254,7 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
     fit_obs, hold_obs = dm.observations(study.loads.cases)
 
     decks = []
-    edeck, emembers = element_deck(deck)
+    edeck, emembers, etips = element_deck(deck)
     epath = deck_dir / "elements.bdf"
     decks.append((epath.name, write_deck(edeck, "large")))
     epath.write_text(decks[-1][1])
@@ -291,7 +291,7 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
         # six right-hand sides however many members: one solver run, never cut into chunks (each
         # chunk would repeat the reading and assembly of the whole deck)
         eadapter = adapter_for(epath)
-        K_e, e_asym = element_stiffness(eadapter, emembers, log, deck=epath.name)
+        K_e, e_asym = element_stiffness(eadapter, emembers, log, deck=epath.name, tips=etips)
         if cost is None:
             cost = SolverCost(eadapter.name)
 
@@ -403,6 +403,23 @@ class DiagnosisResult:
         return files
 
 
+def _nesting_cards(pr: Prepared, rows) -> str:
+    """What a nesting failure involves: the study deck's cards at the grids where the split
+    deck differs most, and where the split deck was cut (the edits that can make it another
+    structure)."""
+    grids = list(dict.fromkeys(g for g, *_ in rows))[:3]
+    parts = [f"cards at grid {g}: {', '.join(cards_at(pr.deck, g)) or 'none'}" for g in grids]
+    cuts: dict[str, list] = {}
+    for e in pr.split.connections:
+        cuts.setdefault(e.kind, []).extend(e.where_json())
+    if cuts:
+        parts.append("the split deck cuts " + "; ".join(
+            f"{k} at {', '.join(map(str, v[:12]))}{' ...' if len(v) > 12 else ''}" for k, v in cuts.items()))
+    return ("; ".join(parts) + ". A diagnosis on this split deck would describe another structure, so "
+            "none is made; the deck editing does not handle something in this deck: please report it "
+            "with the deck")
+
+
 def check_options(alpha: float, max_steps: int, refit_top: int, max_joint_candidates: int,
                   effects: Sequence[str] | None, max_member_candidates: int = MAX_MEMBER_CANDIDATES) -> None:
     """The options' errors, before any work."""
@@ -463,11 +480,14 @@ def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float =
                      max_member_candidates=max_member_candidates, effects=effects, say=say, executor=executor)
         xyz = {int(g): tuple(v) for g, v in pr.base.adapter.grid_xyz().items()}
         ident = pr.ident
-        diag = diagnose(pr.base, pr.boundary, pr.K_deck, pr.joints,
-                        ident.k if ident is not None else np.zeros(0), pr.fit_obs, pr.hold_obs,
-                        pr.candidates, alpha=alpha, refit_top=refit_top, max_steps=max_steps,
-                        declared_prediction=ident.predicted if ident is not None else None,
-                        xyz=xyz, progress=progress_step, executor=executor)
+        try:
+            diag = diagnose(pr.base, pr.boundary, pr.K_deck, pr.joints,
+                            ident.k if ident is not None else np.zeros(0), pr.fit_obs, pr.hold_obs,
+                            pr.candidates, alpha=alpha, refit_top=refit_top, max_steps=max_steps,
+                            declared_prediction=ident.predicted if ident is not None else None,
+                            xyz=xyz, progress=progress_step, executor=executor)
+        except EditedDeckError as exc:
+            raise EditedDeckError(f"{exc}. {_nesting_cards(pr, exc.rows)}", exc.rows) from None
         say(f"verdict: {diag.verdict}: {verdict_detail(diag)}")
         cost = pr.solver_cost()
     return DiagnosisResult(study, diag, pr, pr.decks, cost, time.perf_counter() - t0, plots)

@@ -55,7 +55,9 @@ class JointTranslation(Connection):
             for c in (1, 2, 3):
                 ks = []
                 for gi in jc.grids[1:]:
-                    k0 = min(editor.kdiag(br[gi], gi, c), editor.kdiag(br[g1], g1, c))
+                    pair = (editor.kdiag(br[gi], gi, c), editor.kdiag(br[g1], g1, c))
+                    # a pin flag releasing a translation leaves that member nothing there
+                    k0 = min(pair) if min(pair) > 1e-6 * max(pair) else max(pair)
                     idx.append(editor.connect(k0, (gi, c), (g1, c)))
                     ks.append(k0)
                 k_ref.append(float(np.mean(ks)))

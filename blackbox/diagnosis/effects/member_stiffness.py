@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from blackbox.diagnosis.decks import in_member_frames
 from blackbox.diagnosis.effects.base import CandidateLimit, Effect
 from blackbox.diagnosis.effects.registry import register
 from solver_adapters.protocol import DofLabel
@@ -138,9 +139,14 @@ class MemberStiffness(Effect):
         out = []
         for eid in cls.selected(ctx):
             v = orientation(ctx.deck, eid) if eid in ctx.deck.cbars else None
+            # the parts from K_e in basic (the element axes are read there), both then in the
+            # components of the member's grids (their CD systems), as the split deck has them
             parts = section_parts(ctx.K_e[eid], v) if v is not None else None
+            K = in_member_frames(ctx.deck, eid, ctx.K_e[eid])
+            if parts is not None:
+                parts = in_member_frames(ctx.deck, eid, parts)
             out.append(cls((eid,), (f"alpha_{eid}",), "whole" if parts is not None else "",
-                           dofs=split.member_dofs[eid], K_e=ctx.K_e[eid], parts=parts))
+                           dofs=split.member_dofs[eid], K_e=K, parts=parts))
         return out
 
     @property
