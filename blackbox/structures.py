@@ -303,3 +303,34 @@ class TruthDeck:
 def coupled_kc(grids, simple_values, rho: np.ndarray, t: float) -> np.ndarray:
     """``K_C = S^1/2 (I + t rho) S^1/2``: the simple model's ``K_C`` (``S``) coupled by the
     symmetric zero-diagonal ``rho`` of spectral norm 1; positive definite for ``t < 1``."""
+
+
+def gap_response(adapter, name: str, grids, k, r: float, loads, report, max_iterations: int = 30):
+    """The displacements at ``report`` (``(len(report), cases)``) of the structure of ``adapter``
+    with the simple-model joint ``name`` (branch ``grids``, springs ``k`` in the model's
+    parameter order) given play: in each case each spring acts as ``k`` when its relative
+    rotation (branch ``i`` minus branch ``j`` about its axis) is ``>= 0`` and as ``r k`` when it
+    is ``< 0``, the sides found by solving the case again until they settle. The definition of
+    the ``joint_gap`` effect (``blackbox.diagnosis.effects.joint_gap``), simulated without the
+    diagnosis: one solver run per case and iteration through ``adapter.with_springs``. Raises
+    ``RuntimeError`` when the sides keep changing (a gap that chatters between two states)."""
+    springs = spring_network(make_joint(name, grids, "simple"), k)
+    ends = [d for s in springs for d in (s.a, s.b) if d is not None]
+    rows = list(dict.fromkeys(list(report) + ends))
+    idx = {d: i for i, d in enumerate(rows)}
+    out = np.zeros((len(report), loads.n_cases))
+    for c in range(loads.n_cases):
+        case = loads.select([c])
+        side = np.ones(len(springs), bool)
+        for _ in range(max_iterations):
+            net = [replace(s, k=s.k * (1.0 if up else r)) for s, up in zip(springs, side)]
+            u = adapter.with_springs(net).solve(case, rows).values[:, 0]
+            rel = np.array([u[idx[s.a]] - (u[idx[s.b]] if s.b is not None else 0.0) for s in springs])
+            new = rel >= 0.0
+            if np.array_equal(new, side):
+                break
+            side = new
+        else:
+            raise RuntimeError(f"joint {name}: the gap's sides do not settle in case {loads.cases[c]}")
+        out[:, c] = u[[idx[d] for d in report]]
+    return out

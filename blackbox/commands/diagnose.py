@@ -403,6 +403,19 @@ class DiagnosisResult:
         return files
 
 
+def load_magnitudes(loads) -> tuple[float, float]:
+    """The study's typical force and moment: the median magnitude of its nonzero force and moment
+    entries (1 for a kind it has none of) -- the size of the load cases a report proposes."""
+    F = loads.values.tocsr()
+    comps = np.array([c for _, c in loads.dofs], dtype=int)
+    out = []
+    for kind in (comps <= 3, comps >= 4):
+        vals = np.abs(F[np.flatnonzero(kind)].data) if kind.any() else np.zeros(0)
+        vals = vals[vals > 0]
+        out.append(float(np.median(vals)) if vals.size else 1.0)
+    return out[0], out[1]
+
+
 def _nesting_cards(pr: Prepared, rows) -> str:
     """What a nesting failure involves: the study deck's cards at the grids where the split
     deck differs most, and where the split deck was cut (the edits that can make it another
@@ -474,6 +487,8 @@ def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float =
         a = step.added
         say(f"  added {a.effect.label()[:70]}: reduced chi2 {step.before.reduced_chi2:.4g} -> "
             f"{step.after.reduced_chi2:.4g}, delta BIC {a.delta_bic:.4g}")
+        for e, _ in step.removed:
+            say(f"  removed {e.label()[:70]}: the addition made it unnecessary")
 
     with tempfile.TemporaryDirectory(prefix="blackbox-diagnose-") as tmp:
         pr = prepare(study, Path(tmp), adapter=adapter, max_joint_candidates=max_joint_candidates,
@@ -485,7 +500,8 @@ def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float =
                             ident.k if ident is not None else np.zeros(0), pr.fit_obs, pr.hold_obs,
                             pr.candidates, alpha=alpha, refit_top=refit_top, max_steps=max_steps,
                             declared_prediction=ident.predicted if ident is not None else None,
-                            xyz=xyz, progress=progress_step, executor=executor)
+                            xyz=xyz, progress=progress_step, executor=executor,
+                            load_magnitudes=load_magnitudes(study.loads))
         except EditedDeckError as exc:
             raise EditedDeckError(f"{exc}. {_nesting_cards(pr, exc.rows)}", exc.rows) from None
         say(f"verdict: {diag.verdict}: {verdict_detail(diag)}")

@@ -188,18 +188,28 @@ class MemberStiffness(Effect):
         out = np.zeros((len(om.y), len(effects)))
         if any(e.variant == "sections" for e in effects):
             return None
+        # G_OE by reciprocity needs unit-load columns at the observed DOFs; the DOFs only a mix
+        # may read (a neighbour of a sensor) have none until an effect that reads them is added
+        # (the search loads them then), so until then their rows are not used and stay 0
+        loaded = [i for i, d in enumerate(model.o_dofs) if d in cond.base.col_of]
+        o_loaded = [model.o_dofs[i] for i in loaded]
+        groups = st.each()
         for q, e in enumerate(effects):
             E = list(e.dofs)
             G_ES = cond.G(E, model.S) if nS else np.zeros((len(E), 0))
             Z_E = cond.Z(E)
-            u_E = cond.u0(E) - G_ES @ (st.dK @ st.u_S) - Z_E @ st.f
-            F = e.K_e @ u_E                                           # (12, L)
-            rhs = np.vstack([G_ES.T @ F, IDK @ (Z_E.T @ F)])
-            dz = -st.Ainv @ rhs
-            du_S, df = dz[:nS], dz[nS:]
-            G_OE = cond.G(model.o_dofs, E)
-            dU = -model.Gos @ (st.dK @ du_S) - G_OE @ F - model.Zo @ df
-            out[:, q] = om.pick(dU)
+            G_OE = np.zeros((len(model.o_dofs), len(E)))
+            G_OE[loaded] = cond.G(o_loaded, E)
+            u0E = cond.u0(E)
+            dU = np.zeros_like(st.U_O)
+            for cols, dK, Ainv, _ in groups:         # cases with their own joint stiffness (a gap)
+                u_E = u0E[:, cols] - G_ES @ (dK @ st.u_S[:, cols]) - Z_E @ st.f[:, cols]
+                F = e.K_e @ u_E                                           # (12, cases)
+                rhs = np.vstack([G_ES.T @ F, IDK @ (Z_E.T @ F)])
+                dz = -Ainv @ rhs
+                du_S, df = dz[:nS], dz[nS:]
+                dU[:, cols] = -model.Gos @ (dK @ du_S) - G_OE @ F - model.Zo @ df
+            out[:, q] = model.pick(dU, x, om)
         return out * model.multiplier(x, om)[:, None]
 
     def marker_points(self, xyz, deck):
