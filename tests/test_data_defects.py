@@ -229,3 +229,49 @@ def test_holdout_veto_is_calibrated():
         f2 = SimpleNamespace(holdout_predicted=d, holdout_chi2=float((y - d) @ (y - d)))
         vetoed += holdout_worse(fit, f2, hold) is not None
     assert vetoed >= 970
+
+
+def test_separating_measurements(cube_prepared):
+    """Two explanations of the same support (its springs, or the stiffness of member 1 that ends
+    there), each refitted: the sensors and loads ``separating_measurements`` proposes are the
+    DOFs where the two fitted models differ most, best first, in units of the measured channels'
+    median sigma of that kind; checked against the two models evaluated directly at the top
+    sensor (every case) and under the top load (a unit load's response scaled to the study's
+    size; the study's sensors), to 1e-10 relative (the same arithmetic in another order)."""
+    from blackbox.commands.diagnose import load_magnitudes
+    from blackbox.diagnosis.effects import MemberStiffness, SupportFlexibility
+    from blackbox.diagnosis.search import refit_candidate
+    from blackbox.diagnosis.separation import separating_measurements, unit_load_view
+
+    pr = cube_prepared
+    o = list(dict.fromkeys(pr.study.measurements.all_dofs))
+    om = dg.ObsMap.of(pr.fit_obs, {d: i for i, d in enumerate(o)})
+    declared = dg.fit_model(dg.AugmentedModel(pr.base, dg.ModelSpec(tuple(pr.joints)), pr.boundary, pr.K_deck, o),
+                            om, None, pr.ident.k)
+    sup = next(e for e in pr.candidates if isinstance(e, SupportFlexibility) and e.where == (1,))
+    mem = next(e for e in pr.candidates if isinstance(e, MemberStiffness) and 1 in (pr.deck.cbars[e.eid].ga,
+                                                                                   pr.deck.cbars[e.eid].gb))
+    pr.base.ensure_columns(mem.refit_columns(), "test")
+    fa, _ = refit_candidate(pr.base, declared, sup, om, None, pr.boundary, pr.K_deck, o, np.zeros(sup.n_params))
+    fb, _ = refit_candidate(pr.base, declared, mem, om, None, pr.boundary, pr.K_deck, o, np.zeros(mem.n_params))
+    mags = load_magnitudes(pr.study.loads)
+    sep = separating_measurements(pr.base, fa, fb, pr.boundary, pr.K_deck, om, mags)
+    s = sep["sensors"]
+    assert len(s) == 3 and s[0]["separation_sigma"] >= s[1]["separation_sigma"] >= s[2]["separation_sigma"] > 0
+    sig_t = float(np.median(om.sigma[om.comp <= 3]))
+    sig_r = float(np.median(om.sigma[om.comp >= 4]))
+    d = (s[0]["grid"], s[0]["component"])
+    Ua = dg.AugmentedModel(pr.base, fa.spec, pr.boundary, pr.K_deck, [d]).state(fa.x).U_O[0]
+    Ub = dg.AugmentedModel(pr.base, fb.spec, pr.boundary, pr.K_deck, [d]).state(fb.x).U_O[0]
+    want = np.sqrt(np.mean(((Ua - Ub) / (sig_t if d[1] <= 3 else sig_r)) ** 2))
+    assert s[0]["separation_sigma"] == pytest.approx(want, rel=1e-10)
+    ld = sep["loads"][0]
+    dl = (ld["grid"], ld["component"])
+    view = unit_load_view(pr.base, [dl])
+    chan = list(dict.fromkeys(zip(om.grid.tolist(), om.comp.tolist())))
+    Va = dg.AugmentedModel(view, fa.spec, pr.boundary, pr.K_deck, chan).state(fa.x).U_O[:, 0]
+    Vb = dg.AugmentedModel(view, fb.spec, pr.boundary, pr.K_deck, chan).state(fb.x).U_O[:, 0]
+    csig = np.array([sig_t if c <= 3 else sig_r for _, c in chan])
+    size = mags[0] if dl[1] <= 3 else mags[1]
+    assert ld["value"] == size
+    assert ld["separation_sigma"] == pytest.approx(np.linalg.norm((Va - Vb) / csig) * size, rel=1e-10)
