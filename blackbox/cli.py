@@ -213,6 +213,23 @@ def cmd_design(args) -> int:
     return EXIT_OK
 
 
+def cmd_measurements(args) -> int:
+    """``blackbox measurements READINGS --channels CHANNELS.csv --study STUDY --out DIR``: rig readings
+    become measurements.csv (docs/measurements.md)."""
+    from blackbox.commands import measurements
+
+    out = check_out(args.out, "measurements", protect=(args.study,) if args.study.is_dir() else ())
+    res = measurements.run(args.readings, args.channels, args.study)
+    write_output(out, "measurements", res.write)
+    doc = res.to_json()
+    print(f"{doc['rows']} measurement row(s) from {len(res.channels)} channel(s) over "
+          f"{len({r[0] for r in res.rows})} case(s)"
+          + (f", {doc['rows_without_sigma']} without sigma" if doc["rows_without_sigma"] else "")
+          + f" -> {out / 'measurements.csv'}")
+    _warn(list(res.notes))
+    return EXIT_OK
+
+
 def cmd_import(args) -> int:
     """``blackbox import DECK --out STUDY``: a NASTRAN input file becomes a study folder (docs/import.md)."""
     from blackbox.commands import import_deck
@@ -365,6 +382,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--joint", action="append", default=[], metavar="NAME:G1,G2,...",
                    help="declare a flexible joint: its branch-end grids, the RBE2's GN first (repeatable)")
     s.set_defaults(func=cmd_import)
+
+    s = sub.add_parser("measurements", help="rig readings (channels, repeats, zero scans) become measurements.csv")
+    s.add_argument("readings", type=Path, help="CSV case,<channel>,...: one row per scan, 'zero' rows unloaded")
+    s.add_argument("--channels", type=Path, required=True,
+                   help="channel map CSV channel,grid,component,sign,gain,reference_grid,units[,accuracy]")
+    s.add_argument("--study", type=Path, required=True, help="the study the measurements are for")
+    s.add_argument("--out", type=Path, required=True, help="folder for measurements.csv and the report")
+    s.set_defaults(func=cmd_measurements)
 
     s = _study_command(sub, "solve", "solve the study's load cases, no joint model added", cmd_solve)
     add_parallel_options(s)

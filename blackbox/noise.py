@@ -40,12 +40,25 @@ import numpy as np
 from scipy import stats
 
 __all__ = ["SIGMA_SOURCES", "ChannelNoise", "NoiseModel", "Readings", "sigma_interval", "reduce_readings",
-           "RECTANGULAR"]
+           "RECTANGULAR", "pooled_scatter"]
 
 RECTANGULAR = math.sqrt(3.0)
 """A +-a bound read as a rectangular distribution has the standard deviation a / sqrt(3)."""
 
 SIGMA_SOURCES = ("given", "repeats", "accuracy", "repeats+accuracy", "fit")
+
+
+def pooled_scatter(blocks: Sequence[np.ndarray]) -> tuple[float, int]:
+    """``(s, nu)``: the pooled standard deviation of readings that should be equal within each
+    block (repeated scans of one state), ``s^2 = sum_b sum (x - mean_b)^2 / nu``,
+    ``nu = sum_b (n_b - 1)``; ``(nan, 0)`` without a block of two readings."""
+    ss, nu = 0.0, 0
+    for b in blocks:
+        b = np.asarray(b, float)
+        if b.size >= 2:
+            ss += float(np.sum((b - b.mean()) ** 2))
+            nu += b.size - 1
+    return (math.sqrt(ss / nu) if nu else math.nan), nu
 
 
 def sigma_interval(s: float, dof: float, confidence: float) -> tuple[float, float]:
