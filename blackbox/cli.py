@@ -129,6 +129,11 @@ def cmd_identify(args) -> int:
     for name, value, lo, hi in zip(r.param_names, r.k, r.ci_low, r.ci_high):
         if len(r.param_names) <= 6:
             print(f"  {name} = {value:.5g}  [{lo:.4g}, {hi:.4g}] ({100 * r.confidence:g}%)")
+    if res.scaled is not None and len(r.param_names) <= 6:
+        sc = res.scaled
+        print(f"  the chi-square test fails; with sigma scaled to the residuals (x {sc.covariance_scale ** 0.5:.3g}, "
+              "Student t): " + ", ".join(f"{n} [{lo:.4g}, {hi:.4g}]"
+                                         for n, lo, hi in zip(sc.param_names, sc.ci_low, sc.ci_high)))
     _warn(list(r.warnings))
     if not res.ok:
         why = [] if r.converged else ["the estimation did not converge"]

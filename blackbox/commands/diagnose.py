@@ -409,13 +409,18 @@ class DiagnosisResult:
 
     def write(self, out: Path) -> list[str]:
         from blackbox.reports.diagnose import diagnosis_plots, diagnosis_report
+        from blackbox.reports.response import amplitude_before_after
 
         out = Path(out)
         (out / "diagnosis.json").write_text(json.dumps(self.document, indent=2))
         files = ["diagnosis.json"]
         if self.plots:
             files += diagnosis_plots(self.diagnosis, self.prepared.deck, out)
-        (out / "report.md").write_text(diagnosis_report(self.study, self.document, files))
+        text = diagnosis_report(self.study, self.document, files)
+        d, fo = self.diagnosis, self.prepared.fit_obs
+        if len(d.declared.residuals) == len(fo) == len(d.final.residuals):
+            text += amplitude_before_after(fo.values, fo.sigma, d.declared.residuals, d.final.residuals)
+        (out / "report.md").write_text(text)
         files.append("report.md")
         (out / "decks").mkdir()
         for name, text in self.decks:
