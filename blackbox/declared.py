@@ -43,8 +43,8 @@ if TYPE_CHECKING:
     from blackbox.simulation import TruthConfig
 
 __all__ = ["RIGID_FACTOR", "SolverCost", "FitOptions", "DeclaredModel", "declared_model",
-           "joint_model", "constrained_springs", "deck_with_springs", "rigid_pair_penalty", "read_truth", "read_truth_record", "truth_values", "truth_joints",
-           "stub_params"]
+           "joint_model", "constrained_springs", "deck_with_springs", "rigid_pair_penalty", "read_truth",
+           "read_truth_record", "truth_values", "truth_joints", "stub_params"]
 
 RIGID_FACTOR = 1e6
 """A rigid pair's penalty: 1e6 times the stiffest rotational stiffness the structure offers at
@@ -190,7 +190,8 @@ class DeclaredModel:
         for j, ks in zip(self.joints, self.deck_stiffness):
             if ks:
                 continue
-            ref = SimpleJoint(j.name, tuple(j.grids), constrained_springs=constrained_springs(self.study.deck, j.grids))
+            ref = SimpleJoint(j.name, tuple(j.grids),
+                              constrained_springs=constrained_springs(self.study.deck, j.grids))
             if not ref.n_params:
                 continue
             k = initial.get(j.name, 1.0e3)
@@ -273,10 +274,15 @@ class DeclaredModel:
             if mine:
                 shown = ", ".join(f"{g}:{c}" for g, c in mine[:12])
                 parts.append(f"joint {j.name!r} moves at {shown} (grid:component)")
-        where = ("; ".join(parts) + ": springs across a joint only join its branches' rotations, so the "
-                 "branches together must still be held by the structure (a support the joint needs is "
-                 "missing, e.g. the footing grid clamped in translation only)") if parts else \
-            "no joint DOF is among the DOFs that move: a support or a tie elsewhere is missing"
+        if parts:
+            where = ("; ".join(parts) + ": springs across a joint only join its branches' rotations, so the "
+                     "branches together must still be held by the structure (a support the joint needs is "
+                     "missing, e.g. the footing grid clamped in translation only)")
+        elif moving:
+            where = "no joint DOF is among the DOFs that move: a support or a tie elsewhere is missing"
+        else:
+            where = ("the solver does not say which DOFs move: a support or tie is missing, at a joint (one "
+                     "whose branches together nothing else holds) or elsewhere")
         names = ", ".join(f"{n!r} ({k:g})" for n, k in used.items())
         return StudyError(f"the structure is a mechanism with its joints released, and it still is with "
                           f"reference springs across joint(s) {names}: {where}. The solver said: {exc}",

@@ -89,7 +89,8 @@ def leverages(model: CondensedModel, obs: Observations, k: np.ndarray, rtol: flo
 
 def identify_with_fit_sigma(model: CondensedModel, obs: Observations, k0, fit_rows: np.ndarray, *,
                             holdout: Observations | None = None, holdout_fit_rows: np.ndarray | None = None,
-                            other_dof: float = math.inf, **options) -> tuple[IdentificationResult, FitSigma, Observations, Observations | None]:
+                            other_dof: float = math.inf,
+                            **options) -> tuple[IdentificationResult, FitSigma, Observations, Observations | None]:
     """:func:`blackbox.identification.identify` with the sigma of ``fit_rows`` (their values in
     ``obs`` are placeholders) estimated from the fit (module docstring). ``other_dof``: the
     fewest degrees of freedom among the other rows' sigmas (repeats; ``inf``: known).
