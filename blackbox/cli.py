@@ -101,9 +101,10 @@ def cmd_identify(args) -> int:
     study = load_study(args.study, need_measurements=True)
     print(f"identify {study.name}: {len(study.measurements)} measurements, joints "
           f"{[j.name for j in study.config.joints]}", flush=True)
+    cases = [c.strip() for c in args.cases.split(",") if c.strip()] if args.cases is not None else None
     with _executor(args, "solver chunks, bootstrap refits") as ex:
         res = identify.run(study, adapter=_chunked(study, args, ex), model=args.model, progress=progress,
-                           stages=_Throttled(), executor=ex)
+                           stages=_Throttled(), executor=ex, cases=cases)
     print("  writing the report and plots", flush=True)
     files = write_output(out, "identify", res.write)
     r, cost = res.result, res.solver
@@ -112,6 +113,27 @@ def cmd_identify(args) -> int:
           + (f" + {cost.cached_batches} batch(es) from the cache" if cost.cached_batches else "")
           + f", {cost.right_hand_sides} right-hand sides, adapter {cost.adapter!r} -> {out}"
           + ("" if any(f.endswith(".png") for f in files) else " (no plots: install matplotlib)"))
+    if res.patterns:
+        sel = res.selection_json()
+        print(f"  fitted the {sel['fitted_cases']} case(s) matching {list(res.patterns)}; "
+              f"{sel['excluded_cases']} other case(s) predicted"
+              + (f", RMS error {sel['excluded_rms_error']:.4g}" if sel["excluded_rms_error"] is not None else ""))
+    if res.fit_sigma is not None:
+        fs = res.fit_sigma
+        print("  sigma estimated from this fit (" + ", ".join(
+            f"{k} {s:.4g}, {100 * fs.confidence:g}% interval [{lo:.4g}, {hi:.4g}]"
+            for k, s, lo, hi in zip(fs.kinds, fs.sigma, fs.ci_low, fs.ci_high))
+            + "): the chi-square test of the model is off")
+    elif res.noise is not None and res.noise.estimated:
+        print("  sigma from " + ", ".join(f"{k}: {v} row(s)" for k, v in res.noise.counts().items()))
+    for name, value, lo, hi in zip(r.param_names, r.k, r.ci_low, r.ci_high):
+        if len(r.param_names) <= 6:
+            print(f"  {name} = {value:.5g}  [{lo:.4g}, {hi:.4g}] ({100 * r.confidence:g}%)")
+    if res.scaled is not None and len(r.param_names) <= 6:
+        sc = res.scaled
+        print(f"  the chi-square test fails; with sigma scaled to the residuals (x {sc.covariance_scale ** 0.5:.3g}, "
+              "Student t): " + ", ".join(f"{n} [{lo:.4g}, {hi:.4g}]"
+                                         for n, lo, hi in zip(sc.param_names, sc.ci_low, sc.ci_high)))
     _warn(list(r.warnings))
     if not res.ok:
         why = [] if r.converged else ["the estimation did not converge"]
@@ -193,6 +215,23 @@ def cmd_design(args) -> int:
     if not p.identifiable.all():
         print(f"blackbox design: the plan does not determine every parameter (exit {EXIT_UNUSABLE})", file=sys.stderr)
         return EXIT_UNUSABLE
+    return EXIT_OK
+
+
+def cmd_measurements(args) -> int:
+    """``blackbox measurements READINGS --channels CHANNELS.csv --study STUDY --out DIR``: rig readings
+    become measurements.csv (docs/measurements.md)."""
+    from blackbox.commands import measurements
+
+    out = check_out(args.out, "measurements", protect=(args.study,) if args.study.is_dir() else ())
+    res = measurements.run(args.readings, args.channels, args.study)
+    write_output(out, "measurements", res.write)
+    doc = res.to_json()
+    print(f"{doc['rows']} measurement row(s) from {len(res.channels)} channel(s) over "
+          f"{len({r[0] for r in res.rows})} case(s)"
+          + (f", {doc['rows_without_sigma']} without sigma" if doc["rows_without_sigma"] else "")
+          + f" -> {out / 'measurements.csv'}")
+    _warn(list(res.notes))
     return EXIT_OK
 
 
@@ -349,6 +388,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="declare a flexible joint: its branch-end grids, the RBE2's GN first (repeatable)")
     s.set_defaults(func=cmd_import)
 
+    s = sub.add_parser("measurements", help="rig readings (channels, repeats, zero scans) become measurements.csv")
+    s.add_argument("readings", type=Path, help="CSV case,<channel>,...: one row per scan, 'zero' rows unloaded")
+    s.add_argument("--channels", type=Path, required=True,
+                   help="channel map CSV channel,grid,component,sign,gain,reference_grid,units[,accuracy]")
+    s.add_argument("--study", type=Path, required=True, help="the study the measurements are for")
+    s.add_argument("--out", type=Path, required=True, help="folder for measurements.csv and the report")
+    s.set_defaults(func=cmd_measurements)
+
     s = _study_command(sub, "solve", "solve the study's load cases, no joint model added", cmd_solve)
     add_parallel_options(s)
 
@@ -370,6 +417,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_parallel_options(s)
     s.add_argument("--model", choices=["simple", "complex"], default=None,
                    help="override every joint's declared model")
+    s.add_argument("--cases", default=None, metavar="PATTERN[,PATTERN...]",
+                   help="fit only these cases (labels or glob patterns, e.g. 's00[1-4]-*'); the others are "
+                        "predicted. Overrides [identification] cases")
 
     _study_command(sub, "compare", "simple vs complex joint model, MDSE loading (Ch. 6)", cmd_compare)
 

@@ -118,7 +118,7 @@ def noise_model(study: Study) -> tuple[NoiseConfig, str]:
             raise StudyError(f"noise of truth.json is not a noise model: {exc}", file=str(study.root / "truth.json"))
     m = study.measurements
     if m is not None:
-        ok = np.abs(m.values) > 0
+        ok = (np.abs(m.values) > 0) & np.isfinite(m.sigma)      # a blank sigma (estimated later) says nothing
         if ok.any():
             rel = float(np.median(m.sigma[ok] / np.abs(m.values[ok])))
             return NoiseConfig(relative=rel), f"median relative sigma of measurements.csv ({rel:.4g}), floor 0.02"

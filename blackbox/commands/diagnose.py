@@ -53,7 +53,7 @@ import numpy as np
 
 from blackbox.adapters import make_adapter_for
 from blackbox.commands.common import as_study
-from blackbox.declared import DeclaredModel, SolverCost, declared_model
+from blackbox.declared import DeclaredModel, SolverCost, declared_model, deck_with_springs
 from blackbox.diagnosis.decks import SplitDeck, cards_at, element_deck, split_deck, unmodelled_notes
 from blackbox.diagnosis.document import diagnosis_document, verdict_detail
 from blackbox.diagnosis.effects import CandidateContext, CandidateLimit, Effect, MemberStiffness, families
@@ -68,7 +68,7 @@ from blackbox.parallel import Executor, StudyPackage, pack_study, use_executor
 from blackbox.study import Study, read_load_groups
 from solver_adapters.bdf_write import write_deck
 from solver_adapters.deck import Deck
-from solver_adapters.protocol import DofLabel, SolverAdapter
+from solver_adapters.protocol import DofLabel, SolverAdapter, UnstableStructureError
 
 __all__ = ["DiagnosisResult", "Prepared", "PrepareTask", "Remote", "run", "prepare", "prepare_study",
            "prepare_run", "check_options", "MAX_JOINT_CANDIDATES", "MAX_MEMBER_CANDIDATES"]
@@ -259,8 +259,15 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
     decks.append((epath.name, write_deck(edeck, "large")))
     epath.write_text(decks[-1][1])
 
+    # the deck the split run cuts: the study's, plus the reference springs run 1 had to add
+    # across the joints when they are the structure's only support (DeclaredModel.condense);
+    # K_deck counts them, so the diagnosis sees what a deck with those springs written in sees
+    held = {"deck": deck}
+
     def fit_declared(c) -> tuple[np.ndarray, IdentificationResult, RunRecord]:
         """The declared model's identification on run 1's condensation (here, as serially)."""
+        if c.added_springs:
+            held["deck"] = deck_with_springs(deck, c.added_springs)
         cm = dm.condensed_model(c)
         rec = RunRecord("declared model: condensation", study.deck_path.name, cost.right_hand_sides, c.wall_s)
         ident = identify(cm, fit_obs, dm.k0, holdout=hold_obs, **dm.options.kwargs(profile=False, bootstrap=0))
@@ -310,7 +317,7 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
 
         # ---- 3. the split deck -----------------------------------------------------------------
         def context() -> CandidateContext:
-            return CandidateContext(deck, tuple(dm.joints), K_e, fit_obs, tuple(study.loads.cases),
+            return CandidateContext(held["deck"], tuple(dm.joints), K_e, fit_obs, tuple(study.loads.cases),
                                     _residual_rms(fit_obs, ident.residuals) if ident is not None else None,
                                     max_joint_candidates, read_load_groups(study.root / "loads.csv"),
                                     case_scales=(case_scales(fit_obs.case_index, fit_obs.values, fit_obs.sigma,
@@ -318,25 +325,39 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
                                                  if ident is not None else None),
                                     max_member_candidates=max_member_candidates)
         # without the fit yet, the cuts and the rows do not read the residuals (checked above)
-        sctx = context()
-        sd = split_deck(deck, K_e, fams, sctx)
-        spath = deck_dir / "split.bdf"
-        decks.append((spath.name, write_deck(sd.deck, "large")))
-        spath.write_text(decks[-1][1])
-        boundary = dm.boundary
-        o_dofs = list(dict.fromkeys(list(study.measurements.all_dofs)))
-        # rows the families' candidates need (the considered members' ends), in the deck's order
-        extra_rows = [d for fam in fams for d in fam.split_rows(sctx, sd)]
-        for lim in sctx.limits.values():
-            say(f"  {lim.sentence()}")
-        say(f"split deck: {len(sd.pairs)} cut DOF pairs, {len(sd.connections)} connection candidates")
-        sadapter = adapter_for(spath)
-        if remote is not None:
-            # an external solver's split runs (this one and the loop's later columns) cut into
-            # column chunks, one solver process per worker (blackbox.parallel.use_executor)
-            sadapter = use_executor(sadapter, remote.executor)
-        base = SplitBase(sadapter, study.loads, sd.pairs, list(dict.fromkeys(boundary + o_dofs)),
-                         list(dict.fromkeys(boundary + o_dofs + extra_rows)), log, deck=spath.name)
+        def split_run():
+            sctx = context()
+            sd = split_deck(held["deck"], K_e, fams, sctx)
+            spath = deck_dir / "split.bdf"
+            text = write_deck(sd.deck, "large")
+            spath.write_text(text)
+            boundary = dm.boundary
+            o_dofs = list(dict.fromkeys(list(study.measurements.all_dofs)))
+            # rows the families' candidates need (the considered members' ends), in the deck's order
+            extra_rows = [d for fam in fams for d in fam.split_rows(sctx, sd)]
+            for lim in sctx.limits.values():
+                say(f"  {lim.sentence()}")
+            say(f"split deck: {len(sd.pairs)} cut DOF pairs, {len(sd.connections)} connection candidates")
+            sadapter = adapter_for(spath)
+            if remote is not None:
+                # an external solver's split runs (this one and the loop's later columns) cut into
+                # column chunks, one solver process per worker (blackbox.parallel.use_executor)
+                sadapter = use_executor(sadapter, remote.executor)
+            base = SplitBase(sadapter, study.loads, sd.pairs, list(dict.fromkeys(boundary + o_dofs)),
+                             list(dict.fromkeys(boundary + o_dofs + extra_rows)), log, deck=spath.name)
+            return sctx, sd, base, (spath.name, text)
+
+        try:
+            sctx, sd, base, split_text = split_run()
+        except UnstableStructureError:
+            # run 1 still on a worker: whether it needed reference springs is known only now
+            if pending is None:
+                raise
+            collect_declared()
+            if held["deck"] is deck:
+                raise
+            sctx, sd, base, split_text = split_run()
+        decks.append(split_text)
         collect_declared()
 
     # ---- candidates (with the declared fit's residuals, as serially) ----------------------------
@@ -388,13 +409,18 @@ class DiagnosisResult:
 
     def write(self, out: Path) -> list[str]:
         from blackbox.reports.diagnose import diagnosis_plots, diagnosis_report
+        from blackbox.reports.response import amplitude_before_after
 
         out = Path(out)
         (out / "diagnosis.json").write_text(json.dumps(self.document, indent=2))
         files = ["diagnosis.json"]
         if self.plots:
             files += diagnosis_plots(self.diagnosis, self.prepared.deck, out)
-        (out / "report.md").write_text(diagnosis_report(self.study, self.document, files))
+        text = diagnosis_report(self.study, self.document, files)
+        d, fo = self.diagnosis, self.prepared.fit_obs
+        if len(d.declared.residuals) == len(fo) == len(d.final.residuals):
+            text += amplitude_before_after(fo.values, fo.sigma, d.declared.residuals, d.final.residuals)
+        (out / "report.md").write_text(text)
         files.append("report.md")
         (out / "decks").mkdir()
         for name, text in self.decks:
