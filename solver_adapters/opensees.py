@@ -385,12 +385,13 @@ class OpenSeesDialect:
 
     name = "opensees"
 
-    def __init__(self, python: str | os.PathLike | None = None):
-        self.python = str(python) if python is not None else sys.executable
+    def __init__(self):
         self._cache: tuple[int, Translation] | None = None
 
     def command(self, deck_path: Path) -> list[str]:
-        return [self.python, str(RUNNER), "{deck}"]
+        """The runner under this Python (installed code: no consent needed); another Python is
+        given as the command ``[python, RUNNER, "{deck}"]`` (:class:`OpenSeesAdapter`'s ``python``)."""
+        return [sys.executable, str(RUNNER), "{deck}"]
 
     def translation(self, model) -> Translation:
         if self._cache is None or self._cache[0] != id(model):
@@ -431,7 +432,8 @@ class OpenSeesDialect:
                 "without stiffness, which NASTRAN's AUTOSPC would constrain and OpenSees does not)"
                 f"\n--- solver log tail ---\n{record.log_tail()}", dofs)
         if record.returncode == 5:
-            raise fail(f"openseespy is not installed for {self.python}; install it with: {INSTALL}")
+            raise fail(f"openseespy is not installed for {record.command[0]}; install it into that "
+                       f"Python with: {INSTALL}")
         if record.returncode != 0:
             raise fail("the run failed")
         if "NORMAL END" not in text:
@@ -481,9 +483,13 @@ class OpenSeesDialect:
 class OpenSeesAdapter(CommandAdapter):
     """OpenSees through :class:`OpenSeesDialect`: ``OpenSeesAdapter("model.bdf").solve(loads, report)``.
 
-    ``python``: the interpreter that runs the runner (default: this one); it must have openseespy.
-    Other keyword arguments go to :class:`CommandAdapter` (``keep_failed``, ``workdir_root``, ...).
-    Raises :class:`UnsupportedFeatureError` at construction for a deck OpenSees cannot express.
+    ``python``: the interpreter that runs the runner, e.g. a virtual environment's
+    ``bin/python`` that has openseespy (default: this one, which then must have it). Another
+    interpreter is a program like any other: it runs only with the user's consent
+    (``trusted`` / ``--trust-command``, or listed in the user's ``trusted_commands``), and as
+    named, so a virtual environment's interpreter runs inside its environment. Other keyword
+    arguments go to :class:`CommandAdapter` (``keep_failed``, ``workdir_root``, ...). Raises
+    :class:`UnsupportedFeatureError` at construction for a deck OpenSees cannot express.
     """
 
     rtol = 1e-9
@@ -495,7 +501,8 @@ class OpenSeesAdapter(CommandAdapter):
         if python is None and importlib.util.find_spec("openseespy") is None:
             raise PluginLoadError(f"adapter 'opensees' needs openseespy in this Python ({sys.executable}); "
                                   f"install it with: {INSTALL}")
-        dialect = OpenSeesDialect(python)
+        if python is not None:
+            kw["command"] = [str(python), str(RUNNER), "{deck}"]
         kw.setdefault("name", "opensees")
-        kw.setdefault("dialect", dialect)
+        kw.setdefault("dialect", OpenSeesDialect())
         super().__init__(deck_path, timeout_s=timeout_s, **kw)

