@@ -1203,10 +1203,14 @@ def check_feature(s: Suite, feature: str) -> str:
         worst = _compare(U, R, s.rtol * _scale(R), f"{feature} vs reference", report, loads.cases)
         detail = f"{loads.n_cases} cases, worst {worst:.2g} of the tolerance"
         if feature == "spring_cases":
+            # the batch's last cases, each alone: a case that kept forces of the cases before it
+            # in the run differs (the first case has nothing before it)
+            last = list(range(max(1, loads.n_cases - 4), loads.n_cases))
             singles = np.column_stack([_solve(a, loads.select([j]), report, f"case {loads.cases[j]!r} alone")
-                                       .values[:, 0] for j in range(loads.n_cases)])
-            w2 = _compare(U, singles, 2 * s.rtol * _scale(R), "cases in one run vs each alone", report, loads.cases)
-            detail += (f"; {loads.n_cases} cases in one run equal each case alone within {w2:.2g} "
+                                       .values[:, 0] for j in last])
+            w2 = _compare(U[:, last], singles, 2 * s.rtol * _scale(R[:, last]), "cases in one run vs each alone",
+                          report, [loads.cases[j] for j in last])
+            detail += (f"; its last {len(last)} cases equal each case solved alone within {w2:.2g} "
                        f"of the tolerance ({len(extra)} springs added by with_springs)")
         try:
             ign = s.reference_factory(ignored_deck)
