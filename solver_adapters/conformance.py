@@ -92,7 +92,7 @@ import numpy as np
 import psutil
 import scipy.sparse as sp
 
-from solver_adapters.errors import CheckFailure
+from solver_adapters.errors import CheckFailure, FeatureRefused
 from solver_adapters.protocol import (DofLabel, LoadMatrix, ScalarSpring, SolverAdapter, SolverError,
                                       SolverTimeoutError, UnknownDofError)
 
@@ -1170,10 +1170,6 @@ def feature_deck(folder: str | Path, feature: str) -> tuple[Path, LoadMatrix, Pa
     return deck, base_loads.hstack(LoadMatrix.unit([(g, c) for g in grids for c in range(1, 7)], prefix="at")), other
 
 
-class _Refused(Exception):
-    """A feature check passed by a typed refusal (carries the detail)."""
-
-
 def check_feature(s: Suite, feature: str) -> str:
     """The adapter on :func:`feature_deck` agrees with the reference solver (normwise per case, to
     ``rtol``), or refuses the deck with an :class:`~solver_adapters.errors.UnsupportedFeatureError`.
@@ -1197,7 +1193,7 @@ def check_feature(s: Suite, feature: str) -> str:
         except UnsupportedFeatureError as exc:
             if not exc.features:
                 raise _fail(f"raised UnsupportedFeatureError naming no card: {exc}") from None
-            raise _Refused(f"refused by the adapter (UnsupportedFeatureError naming {', '.join(exc.cards[:4])}"
+            raise FeatureRefused(f"refused by the adapter (UnsupportedFeatureError naming {', '.join(exc.cards[:4])}"
                            f"{' ...' if len(exc.cards) > 4 else ''}): {exc.features[0][2][:100]}") from None
         R = ref.solve(loads, report).values
         worst = _compare(U, R, s.rtol * _scale(R), f"{feature} vs reference", report, loads.cases)
@@ -1313,7 +1309,7 @@ def run_check(name: str, fn: Callable[[], str]) -> CheckResult:
     t0 = time.perf_counter()
     try:
         detail, ok = fn(), True
-    except _Refused as exc:
+    except FeatureRefused as exc:
         return CheckResult(name, True, str(exc), time.perf_counter() - t0, refused=True)
     except CheckFailure as exc:
         detail, ok = str(exc), False
@@ -1498,7 +1494,7 @@ class AdapterConformance:
         suite = self._suite("generated", tmp_path)
         try:
             print(check_feature(suite, conformance_feature))
-        except _Refused as exc:
+        except FeatureRefused as exc:
             print(f"REFUSED: {exc}")
 
     def test_mechanism(self, tmp_path):

@@ -29,6 +29,7 @@ Hierarchy::
     CorruptEntry (ValueError)      a run-cache file that cannot be used (recomputed)
     +-- UnauthenticEntry           ... whose authentication does not verify
     CheckFailure (AssertionError)  a conformance check failed
+    FeatureRefused                 a conformance feature check passed by a typed refusal
     NumberFieldError (ValueError)  deck reader internal, always re-raised as DeckFormatError
     TableFormatError (ValueError)  a CSV table (loads) that cannot be used
     InsecureFileError (PermissionError)  a user configuration file others could change
@@ -175,6 +176,12 @@ class CheckFailure(AssertionError):
     """A conformance check saw the adapter break the protocol (message: what and where)."""
 
 
+class FeatureRefused(Exception):
+    """A conformance feature check that the adapter passed by refusing the deck with an
+    :class:`UnsupportedFeatureError` (message: what it refused); the suite reports it as
+    ``REFUSED``, a pass."""
+
+
 class NumberFieldError(ValueError):
     """A field's text is not the number its field needs (message says why). Internal to the deck
     reader, which re-raises it as :class:`DeckFormatError` with the file, line and card."""
@@ -208,7 +215,7 @@ __all__ = ["located", "COMPONENT_NAMES", "SolverError", "DeckFormatError", "Mode
            "UnsupportedFeatureError", "UnstableStructureError",
            "UnknownDofError", "SolverRunError", "SolverTimeoutError", "FactorizationError",
            "RegistryError", "UnknownPluginError", "PluginLoadError", "PluginConflictError",
-           "OptionError", "AdapterNotFound", "CorruptEntry", "UnauthenticEntry", "CheckFailure", "NumberFieldError",
+           "OptionError", "AdapterNotFound", "CorruptEntry", "UnauthenticEntry", "CheckFailure", "FeatureRefused", "NumberFieldError",
            "TableFormatError", "InsecureFileError"]
 
 
