@@ -45,3 +45,24 @@ def test_a_worked_example_prints_what_the_readme_shows(command, printed, tmp_pat
         assert main(words) == 0
         assert "0 solver run(s) + 1 batch(es) from the cache" in capsys.readouterr().out
         assert "(A second run says `0 solver run(s) + 1 batch(es) from the cache`.)" in (ROOT / "README.md").read_text()
+
+
+def test_the_readme_bench_figures_are_those_of_docs_bench():
+    """README's Performance paragraph quotes docs/bench/bench.json (one run of `blackbox bench`):
+    run counts and wall-time ratios of the finite differences, per adapter."""
+    import json
+
+    rows = json.loads((ROOT / "docs" / "bench" / "bench.json").read_text())
+    text = " ".join((ROOT / "README.md").read_text().split())
+
+    def span(adapter, method, key, digits=False):
+        vals = [r[key] for r in rows if r["adapter"] == adapter and r["method"] == method]
+        lo, hi = min(vals), max(vals)
+        return (f"{lo}-{hi}" if not digits else f"{round(lo)}-{round(hi)}")
+
+    assert (f"forward differences {span('reference', 'forward', 'solver_runs')} runs and "
+            f"{span('reference', 'forward', 'ratio_to_blackbox', True)} times the wall time") in text
+    assert (f"central differences {span('reference', 'central', 'solver_runs')} runs and "
+            f"{span('reference', 'central', 'ratio_to_blackbox', True)} times") in text
+    mys = [r["ratio_to_blackbox"] for r in rows if r["adapter"] == "mystran" and r["method"] != "blackbox"]
+    assert f"the factors are {round(min(mys))}-{round(max(mys))}" in text
