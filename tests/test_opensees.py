@@ -21,7 +21,7 @@ import blackbox
 from blackbox.cli import main
 from solver_adapters import conformance as cf
 from solver_adapters.bdf import read_deck
-from solver_adapters.protocol import LoadMatrix, ScalarSpring, UnstableStructureError, UnsupportedFeatureError
+from solver_adapters.protocol import LoadMatrix, ScalarSpring, UnsupportedFeatureError
 from solver_adapters.reference import ReferenceAdapter
 
 from conftest import FIXTURES, HAVE_OPENSEES, copy_fixture
