@@ -331,12 +331,15 @@ def cmd_conformance(args) -> int:
                 others = cf.conformance_decks(tmp)
                 deck_name = "cube" if "cube" in others else "generated"
                 deck, loads = others[deck_name]
-        misbehaviour = None if args.no_misbehaviour else cf.builtin_misbehaviour(name, args.misbehave_timeout)
         print(f"conformance of adapter {name!r} on {deck} ({'+'.join([deck_name, *(n for n in others if n != deck_name)])})")
+        if args.no_misbehaviour:
+            misbehaviour = None
+        else:
+            misbehaviour, which = cf.misbehaviour_for(factory, Path(deck), name, args.misbehave_timeout)
+            print(f"misbehaviour checks: {which}")
 
         def progress(check):
-            print(f"{'PASS' if check.passed else 'FAIL'}  {check.name:<34} {check.wall_s:7.2f} s  {check.detail}",
-                  flush=True)
+            print(cf.check_line(check), flush=True)
 
         report = cf.run_conformance(factory, deck, loads, misbehaviour=misbehaviour, rtol=args.rtol,
                                     agreement_decks=others, deck_name=deck_name, progress=progress)
@@ -485,6 +488,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--misbehave-timeout", type=float, default=2.0,
                    help="timeout of the 'hang' misbehaviour check (s)")
     s.add_argument("--no-misbehaviour", action="store_true", help="skip the misbehaviour checks")
+    s.add_argument("--trust-command", action="store_true",
+                   help="consent, for this run, to start the study's external command (adapter \"command\")")
     s.set_defaults(func=cmd_conformance)
     return p
 

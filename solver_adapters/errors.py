@@ -15,6 +15,7 @@ Hierarchy::
     SolverError
     +-- DeckFormatError            unreadable deck: file, line, card, field
     +-- ModelError                 readable but inconsistent model
+    |   +-- UnsupportedFeatureError  a card the adapter's code cannot express (refused before a run)
     +-- UnstableStructureError     singular stiffness (mechanism, missing support)
     +-- UnknownDofError            a load or output label the adapter does not have
     +-- SolverRunError             an external run failed (exit code, log tail, kept run dir)
@@ -28,6 +29,7 @@ Hierarchy::
     CorruptEntry (ValueError)      a run-cache file that cannot be used (recomputed)
     +-- UnauthenticEntry           ... whose authentication does not verify
     CheckFailure (AssertionError)  a conformance check failed
+    FeatureRefused                 a conformance feature check passed by a typed refusal
     NumberFieldError (ValueError)  deck reader internal, always re-raised as DeckFormatError
     TableFormatError (ValueError)  a CSV table (loads) that cannot be used
     InsecureFileError (PermissionError)  a user configuration file others could change
@@ -67,6 +69,23 @@ class DeckFormatError(SolverError):
 
 class ModelError(SolverError):
     """A deck that reads fine but describes an inconsistent model (missing IDs, conflicts)."""
+
+
+class UnsupportedFeatureError(ModelError):
+    """The adapter's code cannot express a feature of the deck (a card, or a field of one: a pin
+    flag, an offset, a coordinate system), so it refuses the deck before running rather than
+    solve another structure. ``code`` names the code; ``features`` lists ``(card, where, why)``
+    (``card`` e.g. ``"CBAR 12"``, ``where`` ``"file:line"``), every one in the message."""
+
+    def __init__(self, code: str, features: Sequence[tuple[str, str, str]], hint: str = ""):
+        self.code = code
+        self.features = tuple((str(c), str(w), str(y)) for c, w, y in features)
+        self.cards = tuple(c for c, _, _ in self.features)
+        shown = "; ".join(f"{c}{f' ({w})' if w else ''}: {y}" for c, w, y in self.features[:20])
+        more = f"; ... and {len(self.features) - 20} more" if len(self.features) > 20 else ""
+        super().__init__(f"{code} cannot express {len(self.features)} feature(s) of this deck, so it "
+                         f"refuses the deck instead of solving another structure: {shown}{more}"
+                         + (f". {hint}" if hint else ""))
 
 
 class UnstableStructureError(SolverError):
@@ -157,6 +176,12 @@ class CheckFailure(AssertionError):
     """A conformance check saw the adapter break the protocol (message: what and where)."""
 
 
+class FeatureRefused(Exception):
+    """A conformance feature check that the adapter passed by refusing the deck with an
+    :class:`UnsupportedFeatureError` (message: what it refused); the suite reports it as
+    ``REFUSED``, a pass."""
+
+
 class NumberFieldError(ValueError):
     """A field's text is not the number its field needs (message says why). Internal to the deck
     reader, which re-raises it as :class:`DeckFormatError` with the file, line and card."""
@@ -186,10 +211,11 @@ class InsecureFileError(PermissionError):
     how to fix it. A ``PermissionError`` (so an ``OSError``): the file cannot be used."""
 
 
-__all__ = ["located", "COMPONENT_NAMES", "SolverError", "DeckFormatError", "ModelError", "UnstableStructureError",
+__all__ = ["located", "COMPONENT_NAMES", "SolverError", "DeckFormatError", "ModelError",
+           "UnsupportedFeatureError", "UnstableStructureError",
            "UnknownDofError", "SolverRunError", "SolverTimeoutError", "FactorizationError",
            "RegistryError", "UnknownPluginError", "PluginLoadError", "PluginConflictError",
-           "OptionError", "AdapterNotFound", "CorruptEntry", "UnauthenticEntry", "CheckFailure", "NumberFieldError",
+           "OptionError", "AdapterNotFound", "CorruptEntry", "UnauthenticEntry", "CheckFailure", "FeatureRefused", "NumberFieldError",
            "TableFormatError", "InsecureFileError"]
 
 
