@@ -240,10 +240,42 @@ def _combination(c) -> LoadCombination:
     return LoadCombination(sid, s, tuple(terms), c.src, c)
 
 
+def _bulk_points(cards) -> dict[int, PointLoad]:
+    """FORCE and MOMENT cards of one card table read all at once (``id(card)`` -> its load), as
+    :func:`_point` reads each; the cards it leaves (any other layout, a bad field) are read by
+    :func:`_point`, which names the error."""
+    from solver_adapters.bdf.numbers import int_column, real_column
+    from solver_adapters.bdf.table import TableCard
+    picked = [c for c in cards if c.name in ("FORCE", "MOMENT")]
+    if not picked or not all(isinstance(c, TableCard) and c.table is picked[0].table for c in picked):
+        return {}
+    table = picked[0].table
+    idx = np.array([c.index for c in picked], np.int64)
+    M = table.matrix(idx, 7)                    # columns 1-7: fields 2-8
+    ok = ~(M[:, 8:] != b"").any(axis=1)
+    sid, k = int_column(M[:, 1]); ok &= k
+    g, k = int_column(M[:, 2]); ok &= k
+    cid, k = int_column(M[:, 3], 0, 0); ok &= k
+    f, k = real_column(M[:, 4]); ok &= k
+    n = np.empty((len(idx), 3))
+    for j in range(3):
+        n[:, j], k = real_column(M[:, 5 + j], 0.0); ok &= k
+    v = f[:, None] * n
+    out = {}
+    rows = np.flatnonzero(ok).tolist()
+    for i, s, gg, c, ff, vec in zip(rows, sid[rows].tolist(), g[rows].tolist(), cid[rows].tolist(),
+                                    f[rows].tolist(), map(tuple, v[rows].tolist())):
+        card = picked[i]
+        out[id(card)] = PointLoad(card.name, s, gg, c, ff, vec, (), card.src, card)
+    return out
+
+
 def read_load_cards(cards) -> LoadCards:
     """The load cards among ``cards`` (from :func:`solver_adapters.bdf.bulk_cards`), by set;
     the cards of other kinds are skipped. Errors name the file, line, card and field."""
     out = LoadCards()
+    cards = list(cards)
+    made = _bulk_points(cards)
     for c in cards:
         if c.name == "LOAD":
             combo = _combination(c)
@@ -252,7 +284,7 @@ def read_load_cards(cards) -> LoadCards:
                                  f"{out.combinations[combo.sid].src})")
             out.combinations[combo.sid] = combo
         elif c.name in LOAD_CARDS:
-            p = _point(c)
+            p = made.get(id(c)) or _point(c)
             out.point.setdefault(p.sid, []).append(p)
         elif c.name in OTHER_LOAD_CARDS:
             sid = _int(c, 2)
@@ -269,22 +301,25 @@ def read_load_cards(cards) -> LoadCards:
 @dataclass(frozen=True)
 class InputFile:
     """A whole NASTRAN input file: its case control (``None`` for bulk data only), every bulk
-    card as read (:func:`solver_adapters.bdf.bulk_cards`), the files read, and the load cards by set."""
+    card as read (:func:`solver_adapters.bdf.read_bulk`), the files read, the load cards by set,
+    and the reading itself (``bulk``: the included files' texts as read)."""
     path: str
     case_control: object
     cards: list
     files: list
     loads: LoadCards
+    bulk: object = None
 
 
-def read_input_file(path, text: str | None = None) -> InputFile:
+def read_input_file(path, text: str | None = None, include_dirs=()) -> InputFile:
     """Read the input file ``path`` (``text``: its content, if already read): the case control
     (:mod:`solver_adapters.casecontrol`), the bulk cards and the load cards. The model itself is
     made from a chosen subset of the cards with :func:`solver_adapters.bdf.deck_from_cards`
-    (``blackbox import`` leaves out the load cards and the constraint sets not selected)."""
+    (``blackbox import`` leaves out the load cards and the constraint sets not selected).
+    INCLUDEs read only files inside the input file's folder tree or ``include_dirs``."""
     from pathlib import Path
 
-    from solver_adapters.bdf import bulk_cards
+    from solver_adapters.bdf import read_bulk
     from solver_adapters.casecontrol import read_case_control
 
     p = Path(path)
@@ -294,6 +329,6 @@ def read_input_file(path, text: str | None = None) -> InputFile:
         except OSError as exc:
             raise DeckFormatError(f"cannot read the deck: {exc.strerror or exc}", file=str(p)) from None
     cc = read_case_control(text, str(p))
-    cards, files = bulk_cards(p, text)
-    loads = read_load_cards(c for c in cards if c.name in LOAD_CARDS or c.name in OTHER_LOAD_CARDS)
-    return InputFile(str(p), cc, cards, files, loads)
+    bulk = read_bulk(p, text, include_dirs)
+    loads = read_load_cards(c for c in bulk.cards if c.name in LOAD_CARDS or c.name in OTHER_LOAD_CARDS)
+    return InputFile(str(p), cc, bulk.cards, bulk.files, loads, bulk)

@@ -176,15 +176,7 @@ def _bulk_cards(path: Path):
     ``fields`` (``fields[0]`` the name, then NASTRAN fields 2, 3, ... with the continuation
     markers left out). One reading of the text for both the model and the pass-through."""
     from solver_adapters import bdf
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8", errors="replace")
-    except OSError as exc:
-        raise DeckFormatError(f"cannot read the deck: {exc.strerror or exc}", file=str(p)) from None
-    reader = bdf._Reader()
-    reader.deck.files.append(str(p))
-    reader.stack.append(p.resolve())
-    return reader, reader.cards(reader.lines(text, str(p), p.parent))
+    return bdf.bulk_cards(Path(path))[0]
 
 
 def read_model(path: str | os.PathLike, unmodelled: str = "error"):
@@ -205,7 +197,7 @@ def needs_passthrough(model) -> bool:
     unmodelled cards that :func:`read_model` let pass, or any card the reader models that this
     writer does not know (the scan then names it: :func:`passthrough_cards`)."""
     from solver_adapters import bdf
-    if set(bdf._PARSERS) - WRITTEN - RAW_MODELLED:
+    if set(bdf.SUPPORTED) - WRITTEN - RAW_MODELLED:
         return True
     if getattr(model, "no_effect", None) or any(getattr(model, f, None) for f in ("rbe3s", "bushes", "pbushes")):
         return True
@@ -257,14 +249,14 @@ def passthrough_cards(path: str | os.PathLike) -> list[RawCard]:
     (PARAM, CONM2, ...) and those of :data:`RAW_MODELLED`. A card the reader models that is in
     neither :data:`WRITTEN` nor :data:`RAW_MODELLED` is an error (never dropped, never doubled)."""
     from solver_adapters import bdf
-    _, cards = _bulk_cards(Path(path))
+    cards = _bulk_cards(Path(path))
     out = []
     for c in cards:
         if c.name in WRITTEN:
             continue
         if c.name in _not_passable():
             raise c.error(1, f"{c.name} cannot be handed to MYSTRAN: {_not_passable()[c.name]}")
-        if c.name in bdf._PARSERS and c.name not in RAW_MODELLED:
+        if c.name in bdf.SUPPORTED and c.name not in RAW_MODELLED:
             raise c.error(1, f"the MYSTRAN run deck does not write {c.name} yet (the reader models it; "
                              f"passing it as written could duplicate what the model holds)")
         out.append(RawCard(c.name, tuple(f.text for f in c.fields[1:]), c.src))
@@ -276,13 +268,13 @@ def raw_card_text(card: RawCard, fmt: str = RUN_FORMAT) -> str:
     real re-printed exactly (:func:`~solver_adapters.bdf_write.print_float_16`: the shortest
     digits that round-trip, so nothing a 16-character field held is lost). A word longer than 16
     characters cannot be written (MYSTRAN rejects such fields too): :class:`DeckFormatError`."""
-    from solver_adapters import bdf
+    from solver_adapters.bdf.numbers import _INT, _real_or_none
     from solver_adapters.bdf_write import format_card, print_float_16
     out: list[str | None] = []
     for i, text in enumerate(card.fields, start=2):
         t = text.strip().upper()
-        if t and not bdf._INT.fullmatch(t):
-            value = bdf._real_or_none(t)
+        if t and not _INT.fullmatch(t):
+            value = _real_or_none(t)
             if value is not None and math.isfinite(value):
                 t = print_float_16(value)
         if len(t) > FIELD_WIDTH:
