@@ -167,3 +167,18 @@ def test_mutated_decks_agree(seed, tmp_path):
         for _ in range(rng.randint(1, 3)):
             text = _mutate(text, rng)
         assert_same(text, tmp_path, keep=rng.random() < 0.3)
+
+
+def test_includes_read_the_same_on_both_paths(tmp_path):
+    """Nested INCLUDEs (cards before, between and after them), and an ENDDATA inside an included
+    file that ends the whole reading."""
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "a.bdf").write_text("GRID,3,,1.,1.,0.\nINCLUDE 'b.bdf'\nCBAR,2,7,2,3,0.,0.,1.\n")
+    (tmp_path / "sub" / "b.bdf").write_text("$ b\nGRID    4               2.      1.      0.\n")
+    main = ("GRID,1,,0.,0.,0.\nGRID,2,,1.,0.,0.\nINCLUDE 'sub/a.bdf'\nCBAR,1,7,1,2,0.,0.,1.\n"
+            "CBAR,3,7,3,4,0.,0.,1.\nPBAR,7,1,1.E-3,2.E-6,3.E-6,4.E-6\nMAT1,1,2.1E11,,.3\n")
+    assert_same(main, tmp_path, must_read=True)
+    (tmp_path / "sub" / "b.bdf").write_text("GRID,4,,2.,1.,0.\nENDDATA\nthis is never read\n")
+    fast, slow = both(main, tmp_path)
+    assert not isinstance(slow, Exception) and ordered(fast) == ordered(slow)
+    assert set(fast.cbars) == set() and set(fast.grids) == {1, 2, 3, 4}

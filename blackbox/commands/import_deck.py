@@ -159,10 +159,11 @@ def _study_toml(name: str, source: Path, cases, joints, deck: Deck) -> str:
 # --------------------------------------------------------------------------------------------
 def _card_image(raw: str) -> str:
     """A fixed-field line cut at column 80 (a card image is 80 columns; NASTRAN reads no further:
-    decks put remarks there). Free-field lines (commas) are left as they are."""
+    decks put remarks there). Free-field lines (commas) and INCLUDE statements (a path may be
+    longer) are left as they are."""
     if len(raw) <= 80 and "\t" not in raw:
         return raw
-    if "," in raw.partition("$")[0]:
+    if "," in raw.partition("$")[0] or raw.lstrip()[:7].upper() == "INCLUDE":   # no card image
         return raw
     body, dollar, comment = raw.partition("$")
     wide = body.expandtabs(8)
@@ -189,7 +190,7 @@ def _model_body(lines: list[str], shown: str, start: int, bulk, kept: dict, drop
     as its kept cards, each without its comment: import copies nothing of an included file
     that it did not read as a card. INCLUDE lines are replaced by what they include, between
     comment lines naming them (the files' texts as the reader read them, never read again)."""
-    own = True
+    own = start is not None
     drop = dropped.get(shown, set())
     keep = kept.get(shown, set())
     for k in range(start or 0, len(lines)):
@@ -257,8 +258,12 @@ def _spc_members(sid: int, sets: dict[int, list]) -> set[int]:
     return members
 
 
-def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = ()) -> ImportResult:
-    """Read the NASTRAN input file ``deck_path`` and make the study's files (not written yet)."""
+def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
+        include_dirs: list | tuple = ()) -> ImportResult:
+    """Read the NASTRAN input file ``deck_path`` and make the study's files (not written yet).
+    INCLUDEs read regular files inside the input file's folder tree only, or inside one of
+    ``include_dirs`` (``--include-dir``) or the user's configured ``include_dirs``."""
+    from solver_adapters.userconfig import configured_include_dirs
     path = Path(deck_path)
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
@@ -270,7 +275,8 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = ()) -> I
     images = [_card_image(r) for r in raw_lines] if any(len(r) > 80 or "\t" in r for r in raw_lines) \
         else raw_lines
     cut = sum(a != b for a, b in zip(raw_lines, images))
-    source = read_input_file(path, "\n".join(images))
+    source = read_input_file(path, "\n".join(images), (*include_dirs, *configured_include_dirs()))
+
     cc: CaseControl | None = source.case_control
     cards, files, loads = source.cards, source.files, source.loads
     load_cards = [c for c in cards if c.name in LOAD_CARDS or c.name in OTHER_LOAD_CARDS]
@@ -386,6 +392,11 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = ()) -> I
                      f"(a card image ends at column 80)")
     if debug:
         notes.append(f"dropped {_plural(len(debug), 'DEBUG card')} (MYSTRAN debug printout, no effect on the solution)")
+    if deck.no_effect:
+        notes.append("accepted with no effect on a linear static solution (kept in model.bdf, never "
+                     "a reason for another adapter): " + ", ".join(
+                         f"{n} x{k}" for n, (k, _) in sorted(deck.no_effect.items())))
+    notes += [f"note: {n}" for n in deck.notes]
 
     model_lines = [f"$ Bulk data of {path.name}, made by `blackbox import`: load cards removed (the "
                    f"load cases are in loads.csv),", "$ only the constraint sets the case control "

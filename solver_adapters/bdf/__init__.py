@@ -69,6 +69,11 @@ def _text_of(p: Path) -> str:
 
 
 def _policy(base: Path, include_dirs) -> IncludePolicy:
+    """INCLUDE may read inside ``base``'s folder tree and ``include_dirs`` (None: the folders
+    of the user's configuration, ``include_dirs`` of :mod:`solver_adapters.userconfig`)."""
+    if include_dirs is None:
+        from solver_adapters.userconfig import configured_include_dirs
+        include_dirs = configured_include_dirs()
     return IncludePolicy(base.resolve(), tuple(Path(d).resolve() for d in include_dirs))
 
 
@@ -78,20 +83,22 @@ def _includes(policy: IncludePolicy, top: Path) -> Includes:
     return inc
 
 
-def read_deck(path: str | Path, unmodelled: str = "error", include_dirs=()) -> Deck:
+def read_deck(path: str | Path, unmodelled: str = "error", include_dirs=None) -> Deck:
     """Read and :func:`validate` the bulk data of ``path`` (INCLUDEs relative to its folder, and
-    only inside its folder tree or one of ``include_dirs``). ``unmodelled``: see :data:`UNMODELLED`."""
+    only regular files inside its folder tree or one of ``include_dirs``, default the user's
+    configured folders). ``unmodelled``: see :data:`UNMODELLED`."""
     p = Path(path)
     return read_deck_text(_text_of(p), name=str(p), base_dir=p.parent, unmodelled=unmodelled,
                           include_dirs=include_dirs)
 
 
 def read_deck_text(text: str, name: str = "<string>", base_dir: Path | None = None,
-                   unmodelled: str = "error", include_dirs=()) -> Deck:
+                   unmodelled: str = "error", include_dirs=None) -> Deck:
     """Read and :func:`validate` bulk data given as text; ``name`` is the file named in errors.
 
     INCLUDEs are resolved relative to ``base_dir`` (default: the current directory), and only
-    inside its folder tree or one of ``include_dirs``. ``unmodelled``: see :data:`UNMODELLED`.
+    regular files inside its folder tree or one of ``include_dirs`` (default: the user's
+    configured folders) are read. ``unmodelled``: see :data:`UNMODELLED`.
     """
     if unmodelled not in UNMODELLED:
         raise ValueError(f"unmodelled must be one of {UNMODELLED}, got {unmodelled!r}")
@@ -142,7 +149,7 @@ class BulkInput:
         return out
 
 
-def read_bulk(path: str | Path, text: str | None = None, include_dirs=()) -> BulkInput:
+def read_bulk(path: str | Path, text: str | None = None, include_dirs=None) -> BulkInput:
     """The :class:`BulkInput` of the input file ``path`` (INCLUDEs resolved within its folder
     tree or ``include_dirs``, executive and case control skipped). ``text``: the file's text,
     if already read."""
@@ -161,7 +168,7 @@ def read_bulk(path: str | Path, text: str | None = None, include_dirs=()) -> Bul
     return BulkInput(cards, inc.files, inc.texts, inc.included)
 
 
-def bulk_cards(path: str | Path, text: str | None = None, include_dirs=()):
+def bulk_cards(path: str | Path, text: str | None = None, include_dirs=None):
     """``(cards, files)``: every bulk-data card of the input file ``path`` as read, not interpreted
     (INCLUDEs resolved, executive and case control skipped), and the files read. For readers of
     cards this module does not model, such as the load cards of :mod:`solver_adapters.loadcards`

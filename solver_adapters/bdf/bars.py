@@ -15,17 +15,19 @@ from solver_adapters.deck import CBar, PBar
 
 _CBAR_KEYS = ("eid", "pid", "ga", "gb", "x", "g0", "src", "pa", "pb", "wa", "wb", "card")
 
-OFFT_BASIC = ("GGG", "BGG")
-"""OFFT values whose offsets are in the grids' displacement systems (or basic)."""
+OFFT = ("GGG", "BGG", "GGO", "BGO", "GOG", "BOG", "GOO", "BOO")
+"""The OFFT values of NASTRAN's CBAR and CBEAM (MSC QRG, CBAR remark 8): orientation vector
+in GA's displacement system (G) or basic (B), then each end's offset in its grid's
+displacement system (G) or in the offset system (O); converted to basic by
+``_Reader.resolve_bars``."""
 
 
 def _offt(c) -> None:
-    """OFFT (field 9): GGG (the default: orientation vector in GA's CD system, offsets in the CD
-    systems of GA and GB) or BGG (orientation vector in basic); the reader converts both to basic
-    (``resolve_coordinates``). Offsets in the element system (an ``O``) are not supported."""
-    if c.text(9) not in ("", "GGG", "BGG"):
-        raise c.error(9, "offset option OFFT not supported: only GGG (default) or BGG, offsets "
-                         "in the basic system")
+    """OFFT (field 9): one of :data:`OFFT` (blank: BAROR's, else GGG)."""
+    if c.text(9) not in ("", *OFFT):
+        raise c.error(9, f"offset option OFFT must be one of {', '.join(OFFT)} (orientation vector "
+                         f"in GA's displacement system G or basic B, then each end's offset in its "
+                         f"grid's displacement system G or in the offset system O)")
 
 
 def _cbar(r, c) -> None:

@@ -77,6 +77,31 @@ def parse_real(text: str) -> float:
         raise DeckFormatError(str(exc), value=text) from None
 
 
+def print_halfwidth(text: str) -> float:
+    """Half the unit of the last digit a real field was printed with (``"0.005208"``: 5e-7,
+    ``"5.2-3"``: 5e-5): how far the value it stands for may lie from the printed one."""
+    m = _REAL.fullmatch(text.strip().upper())
+    if m is None:
+        return 0.0
+    mantissa, explicit, implicit = m.groups()
+    decimals = len(mantissa.partition(".")[2])
+    return 0.5 * 10.0 ** (int(explicit or implicit or 0) - decimals)
+
+
+SAME_PRINTED_RTOL = 1e-3
+"""Two prints of one value differ by the rounding of the shorter one, which keeps at least four
+significant digits in any 8-column field of a pre-processor (5e-4 relative at worst)."""
+
+
+def same_printed(text_a: str, a: float, text_b: str, b: float) -> bool:
+    """Whether two printed reals may stand for one value: they differ by no more than the
+    rounding of the less precise print and by at most :data:`SAME_PRINTED_RTOL` of the larger
+    (``0.005208`` and ``0.0052083`` do; ``1.`` and ``1.4``, ``0.`` and ``.1`` do not)."""
+    diff = abs(a - b)
+    return (diff <= max(print_halfwidth(text_a), print_halfwidth(text_b)) * (1.0 + 1e-9)
+            and diff <= SAME_PRINTED_RTOL * max(abs(a), abs(b)))
+
+
 def typed(text: str) -> int | float | str | None:
     """A field's value as NASTRAN reads it: blank -> None, an integer, a real (any spelling,
     ``1.-3`` too), else the word (upper case)."""

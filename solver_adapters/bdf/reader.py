@@ -19,7 +19,7 @@ from dataclasses import replace
 import numpy as np
 
 from solver_adapters.bdf.catalog import (BULK, ELEMENT_GRIDS, NOT_PASSABLE, PARSERS,
-                                         _connects_nothing, unsupported_error)
+                                         _connects_nothing, known, unsupported_error)
 from solver_adapters.bdf.fields import _components, _int, _orientation
 from solver_adapters.bdf.grids import coord_from_points
 from solver_adapters.bdf.numbers import typed
@@ -68,6 +68,8 @@ class _Reader:
         # bulk path: per collection, (card indices, keys, entities) of each converter's cards
         self.bulk_parts: dict[str, list[tuple[np.ndarray, list, list]]] = {}
         self.bulk_ids: dict[str, list[tuple[np.ndarray, list]]] = {}
+        self.frames: dict[int, np.ndarray] = {}       # grid -> its CD directions (CD != 0)
+        self.notes: dict[str, list[str]] = {}         # message -> the cards it concerns
 
     # ---- cards into the deck ------------------------------------------------------------
     def add(self, card) -> None:
@@ -79,7 +81,7 @@ class _Reader:
             return
         parser = PARSERS.get(card.name)
         if parser is None:
-            if self.keep_unmodelled and card.name not in NOT_PASSABLE:
+            if self.keep_unmodelled and card.name not in NOT_PASSABLE and known(card.name):
                 self.keep(card)
                 return
             entry = self.unsupported.setdefault(card.name, [0, card])
@@ -92,6 +94,11 @@ class _Reader:
         the deck, their IDs claimed in ``id_space`` (checked for duplicates in :func:`read_table`)."""
         self.bulk_parts.setdefault(collection, []).append((cards, keys, entities))
         self.bulk_ids.setdefault(id_space, []).append((cards, keys))
+
+    def note(self, card, message: str) -> None:
+        """A note on something read but not modelled as written (Deck.notes: one line per
+        message, naming every card it concerns)."""
+        self.notes.setdefault(message, []).append(f"{card.name} {card.text(2)} at {card.src}")
 
     def note_blank(self, key: str, card: int, gid: int) -> None:
         if self.first_blank[key] is None:
@@ -206,26 +213,61 @@ class _Reader:
                                  f"refer to each other, directly or through grids)")
         with_cd = [gid for gid, g in deck.grids.items() if g.cd]
         try:
-            frames = dict(zip(with_cd, deck.displacement_frames(with_cd)))
+            self.frames = dict(zip(with_cd, deck.displacement_frames(with_cd)))
         except ValueError as exc:
             message, gid = exc.args
             raise self.grid_card(gid).error(7, message) from None
-        if not frames:
-            return
+
+    def resolve_bars(self) -> None:
+        """Every bar's orientation vector and offsets into basic, as its OFFT says (MSC QRG,
+        CBAR remark 8): the first letter is the orientation vector's system (G: GA's
+        displacement system, B: basic), the second and third those of the offsets at ends A
+        and B (G: the grid's displacement system; O: the offset system, whose x axis runs from
+        GA to GB, the grids themselves, with y in the plane of x and the orientation vector and
+        z = x cross v). A blank OFFT of a CBAR is BAROR's, else GGG."""
+        deck, frames = self.deck, self.frames
         offt_default = self.baror.text(9) if self.baror is not None else ""
+        in_offset = {eid for eid, o in self.cbar_offt.items() if "O" in o[1:]}
+        if "O" in offt_default[1:]:
+            in_offset |= {e for e, b in deck.cbars.items() if b.card == "CBAR" and e not in self.cbar_offt}
+        if not frames and not in_offset:
+            return
         for eid, b in deck.cbars.items():
             fa, fb = frames.get(b.ga), frames.get(b.gb)
-            if fa is None and fb is None:
+            if fa is None and fb is None and eid not in in_offset:
                 continue
-            offt = self.cbar_offt.get(eid) or offt_default or "GGG"
+            offt = self.cbar_offt.get(eid) or (offt_default if b.card == "CBAR" else "") or "GGG"
             x, wa, wb = b.x, b.wa, b.wb
             if fa is not None and x is not None and offt[0] == "G":
                 x = tuple((fa.T @ np.array(x)).tolist())       # GA's CD components -> basic
-            if fa is not None and wa is not None:
-                wa = tuple((fa.T @ np.array(wa)).tolist())
-            if fb is not None and wb is not None:
-                wb = tuple((fb.T @ np.array(wb)).tolist())
+            axes = self._offset_axes(b, x) if "O" in offt[1:] else None
+            if wa is not None:
+                if offt[1] == "O":
+                    wa = tuple((np.array(wa) @ axes).tolist())
+                elif fa is not None:
+                    wa = tuple((fa.T @ np.array(wa)).tolist())
+            if wb is not None:
+                if offt[2] == "O":
+                    wb = tuple((np.array(wb) @ axes).tolist())
+                elif fb is not None:
+                    wb = tuple((fb.T @ np.array(wb)).tolist())
             deck.cbars[eid] = replace(b, x=x, wa=wa, wb=wb)
+
+    def _offset_axes(self, b, x) -> np.ndarray:
+        """Rows x, y, z of a bar's offset system in basic (``x``: its orientation vector in basic)."""
+        grids = self.deck.grids
+        if b.ga not in grids or b.gb not in grids or (b.g0 is not None and b.g0 not in grids):
+            return np.eye(3)                       # a missing grid: validate() names it
+        xa, xb = np.array(grids[b.ga].xyz), np.array(grids[b.gb].xyz)
+        v = np.array(grids[b.g0].xyz) - xa if b.g0 is not None else np.array(x)
+        ex = xb - xa
+        ez = np.cross(ex, v)
+        if np.linalg.norm(ex) == 0.0 or np.linalg.norm(ez) <= 1e-9 * np.linalg.norm(ex) * np.linalg.norm(v):
+            raise ModelError(f"1 model error(s):\n  {b.src}: {b.card} {b.eid}: offsets in the offset "
+                             f"system (OFFT) need GA and GB apart and an orientation vector not "
+                             f"parallel to GA -> GB")
+        ex, ez = ex / np.linalg.norm(ex), ez / np.linalg.norm(ez)
+        return np.array([ex, np.cross(ez, ex), ez])
 
     def finish(self) -> Deck:
         """GRDSET defaults into the GRIDs; SPC1 ``G1 THRU G2`` expanded (as in NASTRAN, grids of
@@ -252,6 +294,7 @@ class _Reader:
             if cid not in self.deck.coords:
                 raise c.error(9, f"CID {cid}: coordinate system {cid} is not defined")
         self.apply_baror()
+        self.resolve_bars()
         ordered = None
         for sid, comps, items, src in self.spc1_pending:
             grids: list[int] = []
@@ -265,6 +308,8 @@ class _Reader:
                     grids.append(item)
             if grids:
                 self.deck.spc1s.append(Spc1(sid, comps, tuple(grids), src))
+        self.deck.notes = [f"{', '.join(cards[:5])}{f' and {len(cards) - 5} more' if len(cards) > 5 else ''}: "
+                           f"{message}" for message, cards in self.notes.items()]
         return self.deck
 
 
@@ -316,7 +361,7 @@ def _read_table(table, keep_unmodelled, validate, cards):
                     _param(r, TableCard(table, c, name))
         elif name in BULK:
             bulk[name] = idx
-        elif name in PARSERS or (keep_unmodelled and name not in NOT_PASSABLE):
+        elif name in PARSERS or (keep_unmodelled and name not in NOT_PASSABLE and known(name)):
             one_by_one.append(idx)
         else:
             raise Fallback(name)                # unsupported: the reference path names them all

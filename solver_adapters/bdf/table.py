@@ -22,8 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from solver_adapters.bdf.numbers import strings
-from solver_adapters.bdf.tokens import (BEGIN_BULK, Includes, _Card, _split, _strip_comment,
-                                        bulk_start, card_error, card_from_lines, is_include)
+from solver_adapters.bdf.tokens import (BEGIN_BULK, CARD_NAME, Includes, _Card, _split,
+                                        _strip_comment, bulk_start, card_error, card_from_lines,
+                                        is_include, not_bulk_data)
 from solver_adapters.protocol import DeckFormatError
 
 
@@ -96,7 +97,7 @@ class _Builder:
         self.chunks: list[_Chunk] = []
         self.ended = False
 
-    def file(self, text: str, file: str, base_dir: Path, fidx: int) -> None:
+    def file(self, text: str, file: str, base_dir: Path, fidx: int, included: bool = False) -> None:
         raw = text.removeprefix("\ufeff").splitlines()
         if "$" in text:
             bodies = [_strip_comment(r) if "$" in r else r for r in raw]
@@ -104,7 +105,7 @@ class _Builder:
         else:
             bodies, joined = raw, text
         low = joined.lower()
-        start = bulk_start(bodies, file) if "cend" in low else 0
+        start = bulk_start(bodies, file) if "cend" in low and not included else 0
         n = len(bodies)
         skip: set[int] = set()
         includes: list[int] = []
@@ -154,6 +155,13 @@ class _Builder:
                 first[i], cont[i], nd[i] = a, c, len(d)
                 data[i, :len(d)] = d
                 data[i, len(d):] = b""
+        if included and end:               # every line of an included file must be bulk data
+            used = first[:end][~blank[:end]]
+            bad = [n for n in np.unique(used).tolist()
+                   if not CARD_NAME.fullmatch(n.decode("utf-8", "replace"))]
+            if bad:
+                i = int(np.flatnonzero(np.isin(first[:end], bad) & ~blank[:end])[0])
+                raise not_bulk_data(file, int(rows[i]) + 1)
         # the include lines cut the file into chunks (a card never continues across them)
         cuts = np.searchsorted(rows, [k for k in includes])
         lo = 0
@@ -178,7 +186,7 @@ class _Builder:
         text, shown, path = self.inc.open(stripped, file, lineno, base_dir)
         self.inc.files.append(shown)
         self.inc.stack.append(path)
-        self.file(text, shown, path.parent, len(self.inc.files) - 1)
+        self.file(text, shown, path.parent, len(self.inc.files) - 1, included=True)
         self.inc.stack.pop()
 
 

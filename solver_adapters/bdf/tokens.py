@@ -137,6 +137,17 @@ def _split(raw: str, file: str, lineno: int) -> _Line:
 
 BOUNDARY = object()  # between files: a card never continues across an INCLUDE
 _INCLUDE = re.compile(r"INCLUDE\s*(?:'([^']*)'|\"([^\"]*)\"|([^\s'\"]+))\s*", re.IGNORECASE)
+CARD_NAME = re.compile(r"[A-Z][A-Z0-9]{0,7}\*?|[+*].{0,7}|")
+"""Field 1 of a bulk-data line: a card name (a letter, then letters and digits, at most 8;
+``*`` for large field) or a continuation (blank, ``+...`` or ``*...``)."""
+
+
+def not_bulk_data(file: str, lineno: int) -> DeckFormatError:
+    """The error for a line of an included file that is no bulk-data card: it names the line,
+    never what the line holds (the file may be anything a deck points to)."""
+    return DeckFormatError("the included file is not bulk data: this line is no card (field 1 "
+                           "is neither a card name nor a continuation); its content is not shown",
+                           file=file, line=lineno, field=1)
 BEGIN_BULK = re.compile(r"BEGIN\s+BULK\b.*", re.IGNORECASE)
 
 
@@ -209,6 +220,9 @@ class Includes:
             text = path.read_text(encoding="utf-8", errors="replace")
         except OSError as exc:
             raise fail(f"cannot read included file {path}: {exc.strerror or exc}") from None
+        if any(_strip_comment(u).strip().upper() == "CEND" for u in text.splitlines()):
+            raise fail(f"included file {path} is not bulk data: it has a CEND line (executive and "
+                       f"case control belong in the input file itself)")
         shown = str(base_dir / name)
         self.texts[shown] = text
         self.included[(file, lineno)] = shown
@@ -222,10 +236,10 @@ class LineReader:
         self.inc = includes
         self.ended = False
 
-    def lines(self, text: str, file: str, base_dir: Path):
+    def lines(self, text: str, file: str, base_dir: Path, included: bool = False):
         raw_lines = text.removeprefix("\ufeff").splitlines()
         uncommented = [_strip_comment(r) for r in raw_lines]
-        start = bulk_start(uncommented, file)
+        start = 0 if included else bulk_start(uncommented, file)
         for k in range(start, len(raw_lines)):
             body, lineno = uncommented[k], k + 1
             stripped = body.strip()
@@ -242,13 +256,15 @@ class LineReader:
             if line.first.rstrip("*") == "ENDDATA":
                 self.ended = True
                 return
+            if included and not CARD_NAME.fullmatch(line.first):
+                raise not_bulk_data(file, lineno)
             yield line
 
     def include(self, stripped: str, file: str, lineno: int, base_dir: Path):
         text, shown, path = self.inc.open(stripped, file, lineno, base_dir)
         self.inc.files.append(shown)
         self.inc.stack.append(path)
-        yield from self.lines(text, shown, path.parent)
+        yield from self.lines(text, shown, path.parent, included=True)
         self.inc.stack.pop()
 
 
