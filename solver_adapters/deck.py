@@ -135,7 +135,7 @@ class PBar:
 
 @dataclass(frozen=True)
 class Mat1:
-    """MAT1: MID, E, G, NU as completed by the reader (NASTRAN's rule, see ``bdf._mat1``)."""
+    """MAT1: MID, E, G, NU as completed by the reader (NASTRAN's rule, see ``bdf.materials._mat1``)."""
     mid: int
     e: float
     g: float

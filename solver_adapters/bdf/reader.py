@@ -26,14 +26,11 @@ from solver_adapters.bdf.numbers import typed
 from solver_adapters.bdf.params import NO_EFFECT, _param
 from solver_adapters.bdf.table import CardTable, Irregular, TableCard
 from solver_adapters.deck import Deck, Spc1, Unmodelled
+from solver_adapters.errors import ReaderFallback as Fallback
 from solver_adapters.protocol import DeckFormatError, ModelError
 
 _MERGED = ("grids", "cbars", "rods")
 """Deck collections that both the bulk converters and the parsers fill (kept in deck order)."""
-
-
-class Fallback(Exception):
-    """The bulk path met something only the reference path reports right."""
 
 
 class _Reader:

@@ -25,12 +25,9 @@ from solver_adapters.bdf.numbers import strings
 from solver_adapters.bdf.tokens import (BEGIN_BULK, CARD_NAME, Includes, _Card, _split,
                                         _strip_comment, bulk_start, card_error, card_from_lines,
                                         is_include, not_bulk_data)
+from solver_adapters.errors import IrregularTable as Irregular   # the table cannot be built
 from solver_adapters.protocol import DeckFormatError
 
-
-
-class Irregular(Exception):
-    """The table cannot be built; the reference tokenizer reads the deck (and raises)."""
 
 
 class _Chunk:

@@ -29,15 +29,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from solver_adapters.errors import ElementLoadError as LoadError  # args: (field, message)
 from solver_adapters.reference import frame
 
 TYPES = ("FX", "FY", "FZ", "MX", "MY", "MZ", "FXE", "FYE", "FZE", "MXE", "MYE", "MZE")
 SCALES = ("LE", "FR", "LEPR", "FRPR")
 _GAUSS = (np.array([-np.sqrt(0.6), 0.0, np.sqrt(0.6)]), np.array([5.0, 8.0, 5.0]) / 9.0)
-
-
-class LoadError(ValueError):
-    """A load that cannot be applied: ``args = (field, message)`` (NASTRAN field of its card)."""
 
 
 @dataclass(frozen=True)
