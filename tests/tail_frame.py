@@ -19,7 +19,7 @@ The frame (``FRAME``): columns, beams and a brace between seven grids, clamped a
 :func:`mystran_deck` writes the same structure as MYSTRAN runs it, each step a definition of
 the card it replaces, computed here independently of the reader: offsets in the basic system
 (the offset system built from the grids), the CBEAM as two CBARs (the axial stiffness on the
-neutral axis through rigid offsets, bending, torsion and the mass on the shear-centre axis; its PBEAM has
+neutral axis through rigid offsets, bending, torsion and mass on the shear-centre axis; its PBEAM has
 K1 = K2 = 0.0, no shear flexibility, which a bending bar of negligible area then reproduces),
 every PLOAD1 as point loads (FORCE, MOMENT) on grids added along its bar (a distributed load
 on its three Gauss points: exact for a linear load on a bar whose end loads are cubic in the
@@ -67,7 +67,7 @@ PLOAD1 = [
     (17, "MY", "FRPR", 0.6, 250.0, None, None),       # projected concentrated: not projected
 ]
 GRAV = (200, 9, 9.81, (0.2, -0.3, -1.0))      # GRAV SID CID A N, in CORD2R 9
-CORD9 = ((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, 1.0, 0.0))    # A, B, C: x9 = basic -y?
+CORD9 = ((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, 1.0, 0.0))    # A, B, C: x9 = y, y9 = -x, z9 = z
 WTMASS = 0.8
 CONM2 = (21, 7, 35.0, (0.1, -0.2, 0.15))      # EID G M offset (basic)
 CONM1 = (22, 5, 12.0)                         # EID G m (diagonal translational mass)
