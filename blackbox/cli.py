@@ -240,7 +240,7 @@ def cmd_import(args) -> int:
     from blackbox.commands import import_deck
 
     out = check_out(args.out, "import")
-    res = import_deck.run(args.deck, joints=args.joint)
+    res = import_deck.run(args.deck, joints=args.joint, include_dirs=args.include_dir)
     write_output(out, "import", res.write)
     for note in res.notes:
         print(f"  {note}")
@@ -389,6 +389,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", type=Path, required=True, help="the study folder to write")
     s.add_argument("--joint", action="append", default=[], metavar="NAME:G1,G2,...",
                    help="declare a flexible joint: its branch-end grids, the RBE2's GN first (repeatable)")
+    s.add_argument("--include-dir", action="append", default=[], type=Path, metavar="DIR",
+                   help="a folder outside the deck's own folder tree that its INCLUDEs may read "
+                        "(repeatable; also include_dirs in the user configuration)")
     s.set_defaults(func=cmd_import)
 
     s = sub.add_parser("measurements", help="rig readings (channels, repeats, zero scans) become measurements.csv")

@@ -31,6 +31,8 @@ Hierarchy::
     CheckFailure (AssertionError)  a conformance check failed
     FeatureRefused                 a conformance feature check passed by a typed refusal
     NumberFieldError (ValueError)  deck reader internal, always re-raised as DeckFormatError
+    IrregularTable, ReaderFallback  deck reader internal: the bulk path hands over to the reference path
+    ElementLoadError (ValueError)  element-load internal, always re-raised as a located DeckFormatError
     TableFormatError (ValueError)  a CSV table (loads) that cannot be used
     InsecureFileError (PermissionError)  a user configuration file others could change
     ConsentError                   an external command would run without the user's consent
@@ -185,6 +187,21 @@ class FeatureRefused(Exception):
 class NumberFieldError(ValueError):
     """A field's text is not the number its field needs (message says why). Internal to the deck
     reader, which re-raises it as :class:`DeckFormatError` with the file, line and card."""
+
+
+class IrregularTable(Exception):
+    """The deck reader's card table cannot be built (the reference tokenizer reads the deck, and
+    raises the located error). Internal to solver_adapters.bdf."""
+
+
+class ReaderFallback(Exception):
+    """The deck reader's bulk path met something only its reference path reports right.
+    Internal to solver_adapters.bdf."""
+
+
+class ElementLoadError(ValueError):
+    """A load on an element that cannot be applied: ``args = (field, message)``, the NASTRAN
+    field of its card; re-raised by the card's reader as a located DeckFormatError."""
 
 
 def located(message: str, file: str | None = None, line: int | None = None, column: str | None = None) -> str:

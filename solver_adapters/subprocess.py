@@ -822,6 +822,14 @@ class CommandAdapter:
                                     external_hint=False,
                                     lead=f"the {self.dialect.name!r} dialect writes its decks from the "
                                          f"modelled cards alone and cannot hand these to its solver; ")
+        runs = getattr(self.dialect, "runs_cards", None)
+        if runs is not None:
+            cannot = [(n, k, src) for n, (k, src) in model.unmodelled_counts().items() if n not in runs]
+            if cannot:
+                raise unsupported_error(cannot, external_hint=False, keeping=True,
+                                        lead=f"the {self.name or self.dialect.name} adapter cannot run "
+                                             f"these cards (its solver does not read them; "
+                                             f"refused before it runs): ")
         return model
 
     # ---- protocol ------------------------------------------------------------------------
