@@ -117,6 +117,8 @@ def unsupported_features(m) -> list[tuple[str, str, str]]:
                                                     "Euler-Bernoulli)"))
         if p.i12:
             out.append((f"{p.card} {p.pid}", p.src, f"product of inertia I12 = {p.i12:g}"))
+        if getattr(p, "n1", 0.0) or getattr(p, "n2", 0.0):
+            out.append((f"{p.card} {p.pid}", p.src, "a neutral axis off the shear centre (PBEAM N1/N2)"))
     for r in sorted(m.rods.values(), key=lambda r: r.eid):
         out.append((f"{r.card} {r.eid}", r.src, "rods (FRAMESOLVE has beams only)"))
     for r in sorted(m.rbe3s.values(), key=lambda r: r.eid):

@@ -250,3 +250,26 @@ def test_another_python_needs_consent():
     with pytest.raises(ConsentError):
         OpenSeesAdapter(FIXTURES / "cube" / "model.bdf", python="/usr/bin/python3")
     assert isinstance(OpenSeesAdapter(FIXTURES / "cube" / "model.bdf", python=sys.executable), OpenSeesAdapter)
+
+
+def test_a_neutral_axis_offset_is_refused_by_opensees_and_framesolve(tmp_path):
+    """A PBEAM with N1/N2 (the neutral axis off the shear centre, modelled by the reference
+    solver since the deck tail): neither OpenSees's elastic beam nor FRAMESOLVE's can say it, so
+    both refuse the card before any run instead of solving another structure."""
+    from solver_adapters.legacy import unsupported_features
+    deck, _, _ = cf.feature_deck(tmp_path, "rods")
+    pbeam = ("PBEAM   18      1       1.-4    1.-8    1.-8    0.      2.-8\n"
+             "        0.      0.      0.      0.      0.      0.      0.      0.\n"
+             "        YESA    1.\n"
+             "        0.      0.\n"
+             "                                        .01     0.      .01     0.\n"
+             "CBEAM   78      18      9       11      0.      0.      1.\n")
+    text = deck.read_text().replace("ENDDATA", pbeam + "ENDDATA")
+    deck.write_text(text)
+    from solver_adapters.bdf import read_deck
+    model = read_deck(deck)
+    assert model.pbars[18].n1 == 0.01
+    with pytest.raises(UnsupportedFeatureError) as info:
+        OpenSeesAdapter(deck)
+    assert "PBEAM 18" in info.value.cards and "neutral axis" in str(info.value)
+    assert any(c == "PBEAM 18" and "neutral axis" in why for c, _, why in unsupported_features(model))
