@@ -31,7 +31,7 @@ from pydantic import ValidationError
 from blackbox.condensation import Condensed, CondensedModel, condense
 from blackbox.errors import StudyError
 from blackbox.joints import ComplexJoint, JointModel, SimpleJoint, actual_joint_stub_kc, make_joint
-from blackbox.study import Study, joint_branches, read_text
+from blackbox.study import Study, joint_branches, read_text, study_file
 from solver_adapters.protocol import DofLabel, LoadMatrix, SolverAdapter
 
 if TYPE_CHECKING:
@@ -313,8 +313,9 @@ def read_truth(path: Path) -> "TruthConfig":
 def read_truth_record(study: Study) -> dict | None:
     """``truth.json`` written by ``blackbox simulate`` into a study (``None`` for real data)."""
     p = study.root / "truth.json"
-    if not p.exists():
+    if not p.exists() and not p.is_symlink():
         return None
+    study_file(study.root, "truth.json")
     try:
         rec = json.loads(read_text(p))
     except json.JSONDecodeError as exc:

@@ -39,7 +39,8 @@ from solver_adapters.errors import (COMPONENT_NAMES, located, AdapterNotFound, C
                                     InsecureFileError, ModelError, OptionError, PluginConflictError,
                                     PluginLoadError, RegistryError, SolverError, SolverRunError,
                                     SolverTimeoutError, TableFormatError, UnauthenticEntry,
-                                    UnknownDofError, UnknownPluginError, UnstableStructureError)
+                                    UnknownDofError, UnknownPluginError, UnsafeCacheFolder, UnsafeEntry,
+                                    UnstableStructureError)
 
 DofLabel = tuple[int, int]
 """``(grid id, component 1..6)``."""

@@ -8,7 +8,11 @@ The folder is ``$BLACKBOX_CONFIG_DIR`` when set (tests point it at a temporary f
 
 ``config.toml`` (optional)::
 
-    trusted_commands = ["/opt/solver/bin/solve", "/usr/local/bin/mystran"]
+    # whole command lines (program and arguments as the study gives them), or a program alone,
+    # which then runs only with the deck as its argument (see solver_adapters.subprocess)
+    trusted_commands = [["/usr/bin/python3", "/opt/solver/solve.py", "{deck}"], "/usr/local/bin/mystran"]
+    # folders outside a study that its files (deck, loads, ...) may lie in
+    allow_outside = ["/data/shared-decks"]
 
 Files here are only used when they are owned by the user and (for the key) not readable by
 group or others, (for the configuration) not writable by group or others; otherwise
@@ -98,3 +102,25 @@ def read_config(folder: str | os.PathLike | None = None) -> dict[str, Any]:
         return tomllib.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise ValueError(f"{path}: not a valid TOML file: {exc}") from None
+
+
+ALLOW_OUTSIDE_KEY = "allow_outside"
+
+
+def allowed_outside(folder: str | os.PathLike | None = None) -> list[Path]:
+    """The folders listed under ``allow_outside`` in the user's ``config.toml`` (absolute,
+    symlink-free): a study's files may lie in them although they are outside the study folder.
+    ``ValueError`` for an entry that is not an absolute path."""
+    cfg = read_config(folder)
+    listed = cfg.get(ALLOW_OUTSIDE_KEY, [])
+    where = config_file(folder)
+    if not isinstance(listed, list) or not all(isinstance(x, str) for x in listed):
+        raise ValueError(f"{where}: {ALLOW_OUTSIDE_KEY} must be a list of strings (absolute paths of folders)")
+    out = []
+    for entry in listed:
+        p = Path(entry).expanduser()
+        if not p.is_absolute():
+            raise ValueError(f"{where}: {ALLOW_OUTSIDE_KEY} entry {entry!r} is not an absolute path; "
+                             f"write the full path of the folder")
+        out.append(p.resolve())
+    return out

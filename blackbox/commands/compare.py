@@ -38,7 +38,7 @@ from blackbox.errors import StudyError
 from blackbox.identification import IdentificationResult
 from blackbox.joints import ComplexJoint, JointModel, complex_param_names, simple_to_complex_params
 from blackbox.simulation import TruthConfig
-from blackbox.study import Study, load_study
+from blackbox.study import Study, load_study, study_file
 from solver_adapters.protocol import SolverAdapter
 
 __all__ = ["CompareResult", "Stage", "run", "truth_toml", "mdse_cases"]
@@ -129,7 +129,9 @@ def _mdse_truth(rec: dict, study: Study, truth: dict, cases: list[str]) -> Truth
     deck = rec.get("deck")
     if deck:
         base = Path(rec.get("truth_file") or study.root).parent
-        deck_path = (base / deck).resolve()
+        # a path truth.json gives: read only inside the study or a folder the user allows
+        deck_path = study_file(study.root, base / deck, f"the truth deck {deck!r} of truth.json",
+                               named_in=study.root / "truth.json")
         if not deck_path.is_file():
             raise StudyError(f"truth deck {deck!r} of truth.json not found at {deck_path}",
                              file=str(study.root / "truth.json"))
