@@ -125,6 +125,25 @@ def test_the_user_allows_a_folder_by_flag_or_own_configuration(cube, config, tmp
         load_study(cube)
 
 
+def test_a_truth_deck_named_by_truth_json_is_read_only_where_allowed(cube, secret):
+    """compare re-simulates the MDSE case from the truth deck truth.json names; a study's
+    truth.json pointing outside it is not followed (the MDSE case is then reported as not
+    simulated, with the reason), unless the user allows the folder."""
+    from blackbox.commands.compare import _truth_deck_refused
+    from blackbox.study import ALLOW_OUTSIDE
+
+    study = load_study(cube)
+    rec = {"truth_file": str(cube / "truth.toml"), "deck": str(secret)}
+    why = _truth_deck_refused(study, rec)
+    assert why and "leads outside the study folder" in why and "SECRET" not in why
+    assert _truth_deck_refused(study, {**rec, "deck": "model.bdf"}) is None
+    token = ALLOW_OUTSIDE.set((secret.parent,))
+    try:
+        assert _truth_deck_refused(study, rec) is None
+    finally:
+        ALLOW_OUTSIDE.reset(token)
+
+
 def test_a_study_file_that_is_no_regular_file_is_refused_unread(cube, tmp_path):
     """A named pipe as the deck would block the reader forever: refused from its type alone.
     (Run as a child with a time limit, so a regression fails instead of hanging.)"""
