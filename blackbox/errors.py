@@ -48,7 +48,12 @@ class DesignError(BlackboxError, ValueError):
     that carry no information); says what was given."""
 
 
-__all__ = ["DesignError", "BlackboxError", "StudyError", "IdentificationError", "JointModelError", "ComparisonError",
+class PopulationError(BlackboxError, ValueError):
+    """Studies that cannot be pooled into one population (different joints or parameters, a
+    joint model the population does not model, too few studies); says which and what was given."""
+
+
+__all__ = ["PopulationError", "DesignError", "BlackboxError", "StudyError", "IdentificationError", "JointModelError", "ComparisonError",
            "DiagnosisError", "SolverError", "DeckFormatError", "ModelError", "UnstableStructureError",
            "UnknownDofError", "SolverRunError", "SolverTimeoutError", "FactorizationError",
            "RegistryError", "UnknownPluginError", "PluginLoadError", "PluginConflictError", "OptionError"]
