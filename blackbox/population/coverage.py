@@ -30,7 +30,7 @@ from blackbox.condensation import CondensedModel
 from blackbox.identification import Observations
 from blackbox.population.fit import fit_population
 from blackbox.population.likelihood import TabulatedLikelihood
-from blackbox.population.specimen import fit_specimen
+from blackbox.population.specimen import QUADRATIC_RTOL, fit_specimen
 from blackbox.simulation import NoiseConfig, noise_sigma
 
 __all__ = ["CoverageTable", "population_coverage", "simulate_specimen", "binomial_band"]
@@ -86,14 +86,15 @@ class CoverageTable:
 
 
 def _chunk(args) -> list[tuple]:
-    (model, dofs, cases, noise, centre, spread, k0, S, seeds, confidence, shrinkage, differ) = args
+    (model, dofs, cases, noise, centre, spread, k0, S, seeds, confidence, shrinkage, differ, qrtol) = args
     mu = np.log(np.asarray(centre, float))
     tau = np.sqrt(np.log1p(np.asarray(spread, float) ** 2))
     out = []
     for seed in seeds:
         rng = np.random.default_rng(seed)
         truths = np.exp(mu[None, :] + tau[None, :] * rng.standard_normal((S, mu.size)))
-        fits = [fit_specimen(model, simulate_specimen(model, k, dofs, cases, noise, rng), k0) for k in truths]
+        fits = [fit_specimen(model, simulate_specimen(model, k, dofs, cases, noise, rng), k0, quadratic_rtol=qrtol)
+                for k in truths]
         pf = fit_population(fits, model.assembly.param_joint, model.assembly.param_names, confidence=confidence,
                             shrinkage=shrinkage, outliers=False, differ=differ)
         ch = np.array([P.mu_ci[0] <= m <= P.mu_ci[1] for P, m in zip(pf.parameters, mu)])
@@ -113,12 +114,15 @@ def _chunk(args) -> list[tuple]:
 def population_coverage(model: CondensedModel, dofs, cases, centre, spread, n_specimens: int, *, k0=None,
                         replicates: int = 200, noise: NoiseConfig | float = 0.05, seed: int = 2024,
                         confidence: float = 0.95, shrinkage: bool = False, differ: bool = False,
-                        executor=None, chunks: int | None = None) -> CoverageTable:
+                        quadratic_rtol: float = QUADRATIC_RTOL, executor=None,
+                        chunks: int | None = None) -> CoverageTable:
     """The coverage study of the module docstring: ``centre`` and ``spread`` per parameter (of
     ``model.assembly``), ``n_specimens`` per population, ``replicates`` populations; ``k0`` the
     specimens' start (default: 1/10 of the centre, as a user's rough guess). ``noise``: a
     :class:`~blackbox.simulation.NoiseConfig` or its relative part. ``executor``: where the
-    chunks of replicates run (default serial); the result does not depend on it."""
+    chunks of replicates run (default serial); the result does not depend on it.
+    ``quadratic_rtol``: the check of the specimens' quadratic likelihoods (``inf``: never
+    tabulate the exact profile, to see what the exact likelihood changes)."""
     noise = noise if isinstance(noise, NoiseConfig) else NoiseConfig(relative=float(noise))
     centre = np.asarray(centre, float)
     k0 = 0.1 * centre if k0 is None else np.asarray(k0, float)
@@ -126,7 +130,7 @@ def population_coverage(model: CondensedModel, dofs, cases, centre, spread, n_sp
     n_chunks = chunks or (4 * workers if workers > 1 else 1)
     seeds = [[int(seed), r] for r in range(int(replicates))]
     tasks = [(model, tuple(tuple(d) for d in dofs), tuple(cases), noise, centre, np.asarray(spread, float), k0,
-              int(n_specimens), [seeds[i] for i in idx], confidence, shrinkage, differ)
+              int(n_specimens), [seeds[i] for i in idx], confidence, shrinkage, differ, float(quadratic_rtol))
              for idx in np.array_split(np.arange(len(seeds)), min(n_chunks, len(seeds))) if idx.size]
     t0 = time.perf_counter()
     parts = executor.map(_chunk, tasks) if executor is not None else [_chunk(t) for t in tasks]

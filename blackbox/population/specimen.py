@@ -54,7 +54,7 @@ R_TAIL = 6.0
 """A profile side is tabulated until its signed root reaches 6 (a likelihood ratio of e^-18);
 beyond, it continues as a Gaussian tail with the last slope."""
 
-_OFFSETS = (0.75, 1.5, 2.5, 3.5, 5.0, 6.5)   # in linearised standard deviations, then doubling
+_OFFSETS = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.5, 8.0)   # in linearised standard deviations, then doubling
 _REFIT_ITERATIONS = 8
 _CHECK_T = (-3.0, -1.5, 1.5, 3.0)
 TABLE_NODES = 81
@@ -281,10 +281,21 @@ def _tabulate(prob: _Problem, phi_fit: np.ndarray, k: np.ndarray, chi2_min: floa
     thetas = th0 + hs
     if max(abs(rs[0]), abs(rs[-1])) < 1.0:
         return GaussianLikelihood(th0, math.inf), n, failed                 # flat: no information
-    # a dense table: r is smooth and monotone in theta (monotone cubic through the points)
-    spline = interpolate.PchipInterpolator(thetas, rs)
-    dense = np.linspace(thetas[0], thetas[-1], TABLE_NODES)
-    r_dense = spline(dense)
+    # a dense table: r is smooth and monotone in theta: a cubic spline through the points, or the
+    # monotone cubic (PCHIP) where the spline would not be monotone
+    # nodes where L changes: equally spaced in r on each side (24 each), and equally spaced in
+    # theta over the whole table (the rest), so a long open side does not thin out the peak
+    fine = np.linspace(thetas[0], thetas[-1], 4001)
+    r_fine = interpolate.CubicSpline(thetas, rs)(fine)
+    if np.any(np.diff(r_fine) < 0.0):
+        r_fine = interpolate.PchipInterpolator(thetas, rs)(fine)
+    n_side = 24
+    at_r = np.concatenate([np.interp(np.linspace(rs[0], 0.0, n_side + 1)[:-1], r_fine, fine), [th0],
+                           np.interp(np.linspace(0.0, rs[-1], n_side + 1)[1:], r_fine, fine)])
+    dense = np.sort(np.concatenate([at_r, np.linspace(thetas[0], thetas[-1], TABLE_NODES - at_r.size)]))
+    gap = 1e-9 * max(thetas[-1] - thetas[0], 1e-12)
+    dense = dense[0] + np.maximum.accumulate(dense - dense[0] + gap * np.arange(dense.size))
+    r_dense = np.interp(dense, fine, r_fine)
     log_L = -0.5 * r_dense ** 2
     slopes = []
     for side, (a, b) in ((-1, (0, 1)), (1, (-1, -2))):
