@@ -267,7 +267,8 @@ def cmd_population(args) -> int:
     if not res.ok:
         why = []
         if res.undetermined:
-            why.append(f"the population of {', '.join(res.undetermined)} is not determined by these specimens")
+            why.append(f"these specimens do not determine the centre or bound the spread of "
+                       f"{', '.join(res.undetermined)} (see the notes)")
         if res.not_converged:
             why.append(f"the estimate of {', '.join(res.not_converged)} did not converge")
         print(f"blackbox population: result not usable as it stands: {'; '.join(why)} (exit {EXIT_UNUSABLE})",

@@ -144,6 +144,19 @@ class PopulationResult:
         return [f"{j}.{n}" for j, n, P in zip(self.fit.param_joint, self.fit.param_names, self.fit.parameters)
                 if not P.determined]
 
+    def open_sides(self, j: int) -> tuple[list[str], list[str]]:
+        """The specimens whose likelihood of parameter ``j`` stays flat toward 0 (the spring may
+        vanish) and toward rigid (it may be as stiff as the structure allows), by name."""
+        low, high = [], []
+        for o in self.outcomes:
+            L = o.fit.likelihoods[j]
+            if isinstance(L, TabulatedLikelihood):
+                if L.left_slope == 0.0:
+                    low.append(o.name)
+                if L.right_slope == 0.0:
+                    high.append(o.name)
+        return low, high
+
     @property
     def not_converged(self) -> list[str]:
         return [o.name for o in self.outcomes if not o.fit.converged]
@@ -151,6 +164,17 @@ class PopulationResult:
     @property
     def ok(self) -> bool:
         return not self.undetermined and not self.not_converged
+
+    def _open_note(self, j: int) -> list[str]:
+        low, high = self.open_sides(j)
+        out = []
+        if low:
+            out.append(f"the data of {', '.join(low)} do not bound it from below (the spring may be 0 there): "
+                       "the population's spread is then bounded only by the other specimens")
+        if high:
+            out.append(f"the data of {', '.join(high)} do not bound it from above (rigid relative to the structure "
+                       "is possible there)")
+        return out
 
     def solver_totals(self) -> dict:
         keys = ("runs", "right_hand_sides", "cached_batches")
@@ -172,7 +196,7 @@ class PopulationResult:
                 "log_sd": _num(P.tau), "log_sd_ci": [_num(v) for v in P.tau_ci],
                 "specimens_share_value": {"statistic": _num(P.common_statistic), "df": max(P.n_specimens - 1, 0),
                                           "p_value": _num(P.common_p)},
-                "centre_dof": _num(P.dof), "notes": list(P.notes)})
+                "centre_dof": _num(P.dof), "notes": list(P.notes) + self._open_note(j)})
         specimens = []
         for s, o in enumerate(self.outcomes):
             sp = []
@@ -353,15 +377,15 @@ def _toml_value(v) -> str:
 
 def simulate_specimens(study: str | Path, out: str | Path, n: int, centre, spread, *, seed: int = 1,
                    prefix: str = "specimen", noise: dict | None = None, measure: dict | None = None,
-                   outliers: dict[int, float] | None = None) -> list[Path]:
+                   outliers: dict[int, dict[str, float]] | None = None) -> list[Path]:
     """``n`` specimen studies of one joint design, simulated from a log-normal population: copies
     of ``study`` in ``out/<prefix>_01`` ... whose measurements ``blackbox simulate`` makes (the
     study's noise model and measured DOFs from its ``truth.toml`` when it has one, else 5 % on
     the joints' DOFs; ``noise``/``measure`` override them) at joint parameters drawn per specimen
     and per parameter from ``log k ~ N(log centre, log(1 + spread^2))`` (``centre``/``spread``:
     one value or one per parameter of the study's declared model; seeded by ``seed``).
-    ``outliers``: ``{specimen index: factor}`` multiplies that specimen's first parameter (a
-    specimen that does not belong). ``out/population_truth.json`` records the population and
+    ``outliers``: ``{specimen index: {"JOINT.name": factor}}`` multiplies those parameters of
+    that specimen (a specimen that does not belong). ``out/population_truth.json`` records the population and
     every specimen's truth. Returns the folders."""
     from blackbox.commands import simulate
     from blackbox.declared import declared_model
@@ -386,8 +410,11 @@ def simulate_specimens(study: str | Path, out: str | Path, n: int, centre, sprea
     folders, record = [], []
     for s in range(n):
         k = np.exp(np.log(centre) + tau * rng.standard_normal(p))
-        if outliers and s in outliers:
-            k[0] *= outliers[s]
+        for label, factor in (outliers or {}).get(s, {}).items():
+            key = tuple(label.split(".", 1))
+            if key not in labels:
+                raise PopulationError(f"outliers: {label!r} is not a parameter of the study ({labels})")
+            k[labels.index(key)] *= factor
         lines = [f"seed = {seed * 1000 + s}", ""]
         for jname in dict.fromkeys(j for j, _ in labels):
             vals = {name: float(v) for (j, name), v in zip(labels, k) if j == jname}

@@ -176,7 +176,11 @@ class _Model:
                 # every tabulated specimen's own maximum over u, all at once: a grid about its
                 # estimate, a finer one about the best node, a parabola
                 m = np.array([L.m for L in tabs])[:, None]
-                half = (3.0 * np.minimum([L.c for L in tabs], 10.0) + 3.0 * t)[:, None]
+                # a likelihood open on one side (flat to the end of the spring's range) has its
+                # own centre searched about its estimate only: the flat side would let it move
+                # off to where no population of finite spread puts the others
+                open_ = np.array([L.left_slope == 0.0 or L.right_slope == 0.0 for L in tabs])
+                half = (3.0 * np.minimum([L.c for L in tabs], 10.0) + np.where(open_, 0.0, 3.0 * t))[:, None]
                 u = m + half * np.linspace(-1.0, 1.0, 25)[None, :]
                 v = stack.log_integral(u, t)
                 i = np.clip(np.argmax(v, axis=1), 1, 23)
