@@ -133,7 +133,7 @@ def car_part(workers: int, n_specimens: int, say) -> dict:
                        "centres": [p["center"] for p in doc["parameters"]],
                        "spreads": [p["spread"] for p in doc["parameters"]],
                        "command": "blackbox population " + " ".join(f.name for f in folders[:n][:2])
-                                  + f" ... --out OUT --no-cache" + (f" --workers {w}" if w else "")}
+                                  + " ... --out OUT --no-cache" + (f" --workers {w}" if w else "")}
                 runs.append(row)
                 say(f"car: {n} specimens, {row['executor']}: {wall:.1f} s (command; specimens "
                     f"{doc['wall_s']['specimens']:.1f} s, population fit {doc['wall_s']['population']:.1f} s), "
@@ -143,6 +143,34 @@ def car_part(workers: int, n_specimens: int, say) -> dict:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
+def markdown(doc: dict) -> str:
+    """The coverage table and the car table of docs/population.md, from the JSON."""
+    out = []
+    cov = doc.get("coverage")
+    if cov:
+        out += ["| structure | specimens | noise | likelihoods | exact | replicates | centre | spread | band (pooled) | "
+                "centre per parameter | spread per parameter | band (per parameter) | median centre hi/lo | "
+                "median spread high |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        for r in cov["rows"]:
+            cp, sp, b1, b2 = r["centre_per_parameter"], r["spread_per_parameter"], r["band_pooled"], r["band_per_parameter"]
+            out.append(f"| {r['structure']} ({r['joints']} joint{'s' if r['joints'] > 1 else ''}, {r['parameters']} springs) "
+                       f"| {r['specimens']} | {100 * r['noise']:g} % | {r['likelihoods']} | {r['exact_share']:.2f} | "
+                       f"{r['replicates']} | {r['centre_coverage']:.3f} | {r['spread_coverage']:.3f} | "
+                       f"{b1[0]:.3f}-{b1[1]:.3f} | {min(cp):.2f}-{max(cp):.2f} | {min(sp):.2f}-{max(sp):.2f} | "
+                       f"{b2[0]:.2f}-{b2[1]:.2f} | {r['median_centre_ratio']:.2f} | {100 * r['median_spread_high']:.0f} % |")
+        out += ["", f"({cov['executor']}; {doc['machine']['cpus']} CPUs, load average at the start "
+                    f"{doc['machine']['load_average_at_start'][0]:.1f}.)", ""]
+    car = doc.get("car")
+    if car:
+        out += ["| specimens | executor | command wall (s) | specimens stage (s) | population fit (s) | solver runs | "
+                "right-hand sides | solver wall (s) | exact likelihoods | exit |", "|---|---|---|---|---|---|---|---|---|---|"]
+        for r in car["runs"]:
+            out.append(f"| {r['specimens']} | {r['executor']} | {r['wall_s_command']:.1f} | {r['wall_s']['specimens']:.1f} | "
+                       f"{r['wall_s']['population']:.1f} | {r['solver_runs']} | {r['right_hand_sides']} | "
+                       f"{r['solver_wall_s']:.2f} | {r['exact_likelihoods']} | {r['exit']} |")
+    return "\n".join(out) + "\n"
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workers", type=int, default=2)
@@ -150,7 +178,11 @@ def main(argv=None) -> int:
     ap.add_argument("--specimens", type=int, default=30)
     ap.add_argument("--part", choices=["coverage", "car", "all"], default="all")
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "population.json")
+    ap.add_argument("--markdown", action="store_true", help="print the tables of docs/population.md from --out")
     args = ap.parse_args(argv)
+    if args.markdown:
+        print(markdown(json.loads(args.out.read_text())), end="")
+        return 0
 
     def say(s):
         print(s, flush=True)

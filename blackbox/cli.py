@@ -448,7 +448,7 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("population", help="many specimens of one joint design: the population's centre and "
                                           "spread per joint parameter, each specimen shrunk toward it")
     s.add_argument("studies", type=Path, nargs="+", metavar="STUDY", help="one study folder per specimen")
-    s.add_argument("--out", type=Path, required=True)
+    s.add_argument("--out", type=Path, required=True, help="the output folder")
     s.add_argument("--adapter", default=None, help="override every study's [solver] adapter")
     s.add_argument("--confidence", type=float, default=None,
                    help="of every interval (default: the studies' [identification] confidence)")

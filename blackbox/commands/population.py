@@ -406,6 +406,9 @@ def simulate_specimens(study: str | Path, out: str | Path, n: int, centre, sprea
     noise = noise if noise is not None else base.get("noise", {"relative": 0.05})
     measure = measure if measure is not None else base.get("measure", {"joint": True})
     out = Path(out)
+    taken = [out / f"{prefix}_{s + 1:02d}" for s in range(n) if (out / f"{prefix}_{s + 1:02d}").exists()]
+    if taken:
+        raise PopulationError(f"{taken[0]} exists already: give a new folder (nothing is overwritten)")
     out.mkdir(parents=True, exist_ok=True)
     folders, record = [], []
     for s in range(n):

@@ -367,7 +367,6 @@ def shrink(liks: Sequence[SpecimenLikelihood], pop: ParameterPopulation, confide
     mus, taus, w = mus[keep], taus[keep], w[keep] / w[keep].sum()
     tt = np.maximum(taus, 1e-9)
     a = (1.0 - confidence) / 2.0
-    spread = float(np.max(mus + 6.0 * tt) - np.min(mus - 6.0 * tt))
     for i, L in enumerate(liks):
         if isinstance(L, GaussianLikelihood) or not L.informative:
             out[i] = _gaussian_mixture_quantiles(L, mus, tt, w, (0.5, a, 1.0 - a))

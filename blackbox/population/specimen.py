@@ -281,9 +281,8 @@ def _tabulate(prob: _Problem, phi_fit: np.ndarray, k: np.ndarray, chi2_min: floa
     thetas = th0 + hs
     if max(abs(rs[0]), abs(rs[-1])) < 1.0:
         return GaussianLikelihood(th0, math.inf), n, failed                 # flat: no information
-    # a dense table: r is smooth and monotone in theta: a cubic spline through the points, or the
-    # monotone cubic (PCHIP) where the spline would not be monotone
-    # nodes where L changes: equally spaced in r on each side (24 each), and equally spaced in
+    # r is smooth and monotone in theta: a cubic spline through the points, or the monotone cubic
+    # (PCHIP) where the spline would not be monotone; the table's nodes go where L changes: equally spaced in r on each side (24 each), and equally spaced in
     # theta over the whole table (the rest), so a long open side does not thin out the peak
     fine = np.linspace(thetas[0], thetas[-1], 4001)
     r_fine = interpolate.CubicSpline(thetas, rs)(fine)
