@@ -252,8 +252,9 @@ def cmd_population(args) -> int:
     sol, d = doc["solver"], doc["specimens_differ"]
     print(f"population of {len(res.outcomes)} specimens: {sol['runs']} solver run(s)"
           + (f" + {sol['cached_batches']} from the cache" if sol["cached_batches"] else "")
-          + f", {res.wall_s:.1f} s on {res.executor}; specimens differ: p = {d['p_value']:.3g} "
-          f"(chi2 = {d['statistic']:.4g}, {d['df']} df) -> {out}"
+          + f", {res.wall_s:.1f} s on {res.executor}; specimens differ: "
+          + (f"p = {d['p_value']:.3g} (chi2 = {d['statistic']:.4g}, {d['df']} df)" if d and d["p_value"] is not None
+             else "not tested (no degrees of freedom)") + f" -> {out}"
           + ("" if any(f.endswith(".png") for f in files) else " (no plots: install matplotlib)"))
     for p in doc["parameters"]:
         hi = p["center_ci_high"]

@@ -53,7 +53,8 @@ class PopulationError(BlackboxError, ValueError):
     joint model the population does not model, too few studies); says which and what was given."""
 
 
-__all__ = ["PopulationError", "DesignError", "BlackboxError", "StudyError", "IdentificationError", "JointModelError", "ComparisonError",
+__all__ = ["DesignError", "BlackboxError", "StudyError", "IdentificationError", "JointModelError", "ComparisonError",
            "DiagnosisError", "SolverError", "DeckFormatError", "ModelError", "UnstableStructureError",
            "UnknownDofError", "SolverRunError", "SolverTimeoutError", "FactorizationError",
-           "RegistryError", "UnknownPluginError", "PluginLoadError", "PluginConflictError", "OptionError"]
+           "RegistryError", "UnknownPluginError", "PluginLoadError", "PluginConflictError", "OptionError",
+           "PopulationError"]
