@@ -275,6 +275,48 @@ def cmd_batch(args) -> int:
     return EXIT_OK
 
 
+def cmd_population(args) -> int:
+    """``blackbox population STUDY...``: many specimens of one joint design pooled into one
+    population (docs/population.md); exit 4 when a parameter's population is not determined or a
+    specimen's estimate did not converge."""
+    from blackbox.commands import population
+
+    out = check_out(args.out, "population", protect=tuple(Path(s) for s in args.studies if Path(s).is_dir()))
+    with _executor(args, "specimens") as ex:
+        res = population.run(args.studies, executor=ex, adapter=args.adapter, confidence=args.confidence,
+                             alpha=args.alpha, say=lambda s: print(s, flush=True))
+    print("  writing the report and plots", flush=True)
+    files = write_output(out, "population", res.write)
+    doc = res.to_json()
+    sol, d = doc["solver"], doc["specimens_differ"]
+    print(f"population of {len(res.outcomes)} specimens: {sol['runs']} solver run(s)"
+          + (f" + {sol['cached_batches']} from the cache" if sol["cached_batches"] else "")
+          + f", {res.wall_s:.1f} s on {res.executor}; specimens differ: "
+          + (f"p = {d['p_value']:.3g} (chi2 = {d['statistic']:.4g}, {d['df']} df)" if d and d["p_value"] is not None
+             else "not tested (no degrees of freedom)") + f" -> {out}"
+          + ("" if any(f.endswith(".png") for f in files) else " (no plots: install matplotlib)"))
+    for p in doc["parameters"]:
+        hi = p["center_ci_high"]
+        print(f"  {p['joint']}.{p['name']}: centre {p['center']:.4g} [{p['center_ci_low'] or 0:.4g}, "
+              f"{hi if hi is not None else float('inf'):.4g}], spread {100 * (p['spread'] or 0):.3g} %"
+              if p["center"] is not None else f"  {p['joint']}.{p['name']}: not determined")
+    for o in doc["outliers"]:
+        print(f"  outlier: {o['study']} in {o['joint']}.{o['name']} (p = {o['p_value']:.2g}, "
+              f"Bonferroni {o['p_adjusted']:.2g})")
+    _warn(doc["warnings"])
+    if not res.ok:
+        why = []
+        if res.undetermined:
+            why.append(f"these specimens do not determine the centre or bound the spread of "
+                       f"{', '.join(res.undetermined)} (see the notes)")
+        if res.not_converged:
+            why.append(f"the estimate of {', '.join(res.not_converged)} did not converge")
+        print(f"blackbox population: result not usable as it stands: {'; '.join(why)} (exit {EXIT_UNUSABLE})",
+              file=sys.stderr)
+        return EXIT_UNUSABLE
+    return EXIT_OK
+
+
 def cmd_bench(args) -> int:
     from blackbox.commands import bench
 
@@ -471,6 +513,21 @@ def build_parser() -> argparse.ArgumentParser:
     add_cache_options(s)
     add_parallel_options(s)
     s.set_defaults(func=cmd_batch)
+
+    s = sub.add_parser("population", help="many specimens of one joint design: the population's centre and "
+                                          "spread per joint parameter, each specimen shrunk toward it")
+    s.add_argument("studies", type=Path, nargs="+", metavar="STUDY", help="one study folder per specimen")
+    s.add_argument("--out", type=Path, required=True, help="the output folder")
+    s.add_argument("--adapter", default=None, help="override every study's [solver] adapter")
+    s.add_argument("--confidence", type=float, default=None,
+                   help="of every interval (default: the studies' [identification] confidence)")
+    s.add_argument("--alpha", type=float, default=0.01,
+                   help="family-wise level of the test for a specimen that does not belong (default 0.01)")
+    s.add_argument("--trust-command", action="store_true",
+                   help="consent, for this run, to start the studies' external command (adapter \"command\")")
+    add_cache_options(s)
+    add_parallel_options(s)
+    s.set_defaults(func=cmd_population)
 
     s = _study_command(sub, "design", "choose the load cases and sensors of a test before it is run", cmd_design)
     s.add_argument("--candidates", type=Path, required=True,

@@ -60,7 +60,13 @@ class DesignError(BlackboxError, ValueError):
     that carry no information); says what was given."""
 
 
+class PopulationError(BlackboxError, ValueError):
+    """Studies that cannot be pooled into one population (different joints or parameters, a
+    joint model the population does not model, too few studies); says which and what was given."""
+
+
 __all__ = ["DesignError", "BlackboxError", "StudyError", "IdentificationError", "JointModelError", "ComparisonError",
            "DiagnosisError", "EditedDeckError", "SolverError", "DeckFormatError", "ModelError", "UnstableStructureError",
            "UnknownDofError", "SolverRunError", "SolverTimeoutError", "FactorizationError",
-           "RegistryError", "UnknownPluginError", "PluginLoadError", "PluginConflictError", "OptionError"]
+           "RegistryError", "UnknownPluginError", "PluginLoadError", "PluginConflictError", "OptionError",
+           "PopulationError"]

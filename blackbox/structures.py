@@ -108,6 +108,31 @@ def cube(edge: float = 0.2) -> FrameBuilder:
     return f
 
 
+def braced_portal(span: float = 5.0, height: float = 3.0) -> FrameBuilder:
+    """A braced portal frame with two semi-rigid beam-to-column connections: columns 1-6-2 and
+    5-7-4 clamped at their feet (grids 1, 5), the beam 2-3-4, braces 1-3 and 5-3 (they hold the
+    beam's torsion, which the two joints alone would leave free). Each knee is a 2-branch flexible
+    joint (column first, then beam): ``JL`` at grid 2 (beam branch grid 21), ``JR`` at grid 4
+    (41); 3 springs each. Car-body sections (Table 3.4)."""
+    f = FrameBuilder(E=206.85e9, G=82.7e9, A=2.99e-4, I1=77.42e-8, I2=16.65e-8, J=35.40e-8)
+    for g, xyz in {1: (0, 0, 0), 6: (0, 0, height / 2), 2: (0, 0, height), 3: (span / 2, 0, height),
+                   4: (span, 0, height), 7: (span, 0, height / 2), 5: (span, 0, 0)}.items():
+        f.grid(g, xyz)
+    f.bar(1, 6)
+    c1 = f.bar(6, 2)
+    b1 = f.bar(2, 3)
+    b2 = f.bar(3, 4)
+    c2 = f.bar(4, 7)
+    f.bar(7, 5)
+    f.bar(1, 3)
+    f.bar(5, 3)
+    f.fix(1)
+    f.fix(5)
+    f.flexible_joint("JL", 2, [c1, b1], 21)
+    f.flexible_joint("JR", 4, [c2, b2], 41)
+    return f
+
+
 def star_joint_frame(n_branches: int, seed: int = 0, arm: float = 0.5) -> FrameBuilder:
     """A frame with one flexible joint of ``n_branches`` branches (2..6 and more).
 
