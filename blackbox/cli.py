@@ -497,9 +497,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="members considered at most for member_stiffness, those nearest the declared "
                         "fit's residual beyond (default 300)")
     s.add_argument("--effects", default=None,
-                   help="comma-separated effect kinds to consider (default: all of joint_coupling, "
-                        "joint_translation, undeclared_joint, support_flexibility, load_scale, "
-                        "sensor_gain, sensor_offset, member_stiffness)")
+                   help="comma-separated effect kinds to consider (default: every kind; the list is in "
+                        "docs/commands.md)")
 
     s = sub.add_parser("batch", help="identify (or diagnose) many studies side by side; summary across them")
     s.add_argument("studies", type=Path, nargs="+", metavar="STUDY")
@@ -525,6 +524,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="family-wise level of the test for a specimen that does not belong (default 0.01)")
     s.add_argument("--trust-command", action="store_true",
                    help="consent, for this run, to start the studies' external command (adapter \"command\")")
+    add_allow_outside(s)
     add_cache_options(s)
     add_parallel_options(s)
     s.set_defaults(func=cmd_population)
