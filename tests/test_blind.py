@@ -40,7 +40,7 @@ SUBSET = [(0, "support_flexibility", "portal", "plain"), (1, "member_stiffness",
           (6, "joint_coupling", "star", "plain"), (7, "sensor_offset", "box", "plain"),
           (8, "outlier", "portal", "plain"), (9, "sign_flip", "box", "user"),
           (10, "channel_swap", "portal", "plain"), (11, "misplaced_sensor", "box", "plain"),
-          (12, "joint_gap", "star", "plain"), (13, ("member_stiffness", "sign_flip"), "portal", "import")]
+          (12, "joint_gap", "star", "user"), (13, ("member_stiffness", "sign_flip"), "portal", "import")]
 
 
 @pytest.fixture(scope="module")

@@ -320,6 +320,9 @@ def assign_user_systems(frame: Frame, rng: np.random.Generator) -> None:
         frame.cd[int(g)] = int(rng.choice([0] + systems))
     for g in frame.spcs:      # a support in a system of the structure's own (the hall's bases) keeps it
         frame.cd[g] = own[g] if g in own else int(rng.choice(systems))
+    for _, grids in frame.joints:     # a joint made already (the star's): one CD for its branch grids
+        for g in grids[1:]:
+            frame.cd[g] = frame.cd[grids[0]]
 
 
 def user_style(frame: Frame, rng: np.random.Generator) -> UserStyle:

@@ -582,13 +582,27 @@ def main(argv: list[str] | None = None) -> int:
     # worker processes import this module by name: they need the project on their path
     os.environ["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH", "")]))
     executor = make_executor(workers=args.workers) if args.workers > 1 and todo else SerialExecutor()
+    items = [(i, args.seed, str(out), args.keep) for i in todo]
     with path.open("a") as fh, executor:
-        # blocks of studies, each block mapped over the workers and appended as it comes back
-        block = max(1, 2 * executor.workers)
-        for b0 in range(0, len(todo), block):
-            recs = executor.map(_run_task, [(i, args.seed, str(out), args.keep) for i in todo[b0:b0 + block]])
-            for rec in recs:
+        if hasattr(executor, "client"):
+            # every study submitted at once and appended as it finishes: a long study holds up
+            # no other worker
+            from distributed import as_completed
+            futures = executor.client.map(_run_task, items, pure=False)
+            index = {f.key: item[0] for f, item in zip(futures, items)}
+            for fut in as_completed(futures):
+                try:
+                    rec = fut.result()
+                except Exception as exc:     # a worker lost (memory): that study's error
+                    i = index[fut.key]
+                    rec = {"study": f"s{i:04d}", "index": i, "seed": args.seed, "kind": None,
+                           "family": study_family(args.seed, i), "error": f"worker: {type(exc).__name__}: {exc}",
+                           "generate_s": 0.0, "diagnose_s": 0.0, "wall_s": 0.0}
                 _record(fh, rec, done, len(indices), t0)
+                fut.release()
+        else:
+            for item in items:
+                _record(fh, _run_task(item), done, len(indices), t0)
     run_wall = time.perf_counter() - t0
     wall_path = out / "run_wall.json"
     walls = json.loads(wall_path.read_text()) if wall_path.exists() else []
