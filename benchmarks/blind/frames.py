@@ -342,7 +342,8 @@ def user_style(frame: Frame, rng: np.random.Generator) -> UserStyle:
         for g in list(spc_sets)[::2]:
             spc_sets[g] = 3
     ids = sorted(frame.grids)
-    masses = [(int(g), float(np.round(rng.uniform(5, 200), 1))) for g in rng.choice(ids, size=min(6, len(ids)), replace=False)]
+    masses = [(int(g), float(np.round(rng.uniform(5, 200), 1)))
+              for g in rng.choice(ids, size=min(6, len(ids)), replace=False)]
     return UserStyle(grdset_cp, grdset_cd, cp, spc_sets, 100, masses)
 
 
@@ -565,7 +566,8 @@ def storey(rng: np.random.Generator, max_members: int = 420) -> Frame:
     col = f.section(ibeam(rng, (0.2, 0.3), wide=True))
     beam = f.section(ibeam(rng, (0.2, 0.4)))
     area = rod_area(rng, (0.016, 0.03))
-    g = {(i, j, k): f.grid((i * bx, j * by, k * hs)) for i in range(nx + 1) for j in range(ny + 1) for k in range(ns + 1)}
+    g = {(i, j, k): f.grid((i * bx, j * by, k * hs))
+         for i in range(nx + 1) for j in range(ny + 1) for k in range(ns + 1)}
     for (i, j, k), gid in g.items():
         if k == 0:
             f.fix(gid, "123456", 1)
@@ -611,8 +613,9 @@ def from_builder(family: str, fb: FrameBuilder, section=None) -> Frame:
     plain = Section("PBAR", (fb.A, fb.I1, fb.I2, fb.J))
     def by_direction(e, a, b, v):
         d = np.abs(np.subtract(fb.grids[b], fb.grids[a]))
-        return plain, ("vertical", "along x", "along y")[int(np.argmax(d[[2, 0, 1]]))] if d.max() > 0.9 * np.linalg.norm(d) \
-            else "inclined"
+        if d.max() <= 0.9 * np.linalg.norm(d):
+            return plain, "inclined"
+        return plain, ("vertical", "along x", "along y")[int(np.argmax(d[[2, 0, 1]]))]
     for e, a, b, v in fb.bars:
         sec, group = (section or by_direction)(e, a, b, v)
         pid = f.section(sec)

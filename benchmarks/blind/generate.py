@@ -589,7 +589,8 @@ def candidate_places(deck: Deck, joints: list[dict], away: list[int], measured_g
         "member_stiffness": sorted(deck.cbars),
         "outlier": [(c, g, k) for c in fit_labels for g, k in channels],
         "sign_flip": [(g, k) for g, k in channels if g in away],
-        "channel_swap": [(a, b, k) for k, gs in sorted(by_comp.items()) for a, b in itertools.combinations(sorted(gs), 2)],
+        "channel_swap": [(a, b, k) for k, gs in sorted(by_comp.items())
+                         for a, b in itertools.combinations(sorted(gs), 2)],
         "misplaced_sensor": misplaced,
     }
 

@@ -367,7 +367,8 @@ def markdown(summary: dict, settings: dict) -> str:
         "",
         "| goal | measured | target |",
         "|---|---|---|",
-        f"| right kind at the right place, effects >= 2x threshold | {_frac(t['correct_at_2x'])} | >= 97 % in every family |",
+        f"| right kind at the right place, effects >= 2x threshold | {_frac(t['correct_at_2x'])} "
+        "| >= 97 % in every family |",
         f"| false alarms on no-effect studies | {_frac(t['false_alarm'])}"
         + (f" ({t['none_errors']} more ended in an error)" if t["none_errors"] else "") + " | <= 3 % |",
         f"| first added effect a planted one, effects >= 2x | {_frac(t['first_correct_at_2x'])} | >= 95 % |",
@@ -375,7 +376,8 @@ def markdown(summary: dict, settings: dict) -> str:
     ]
     rd = summary["reported_as_data"]
     if rd["n"] and rd["unknown"] == rd["n"]:
-        lines.append(f"| test-data defects found reported as data | not measurable: no entry says ({rd['n']} found) | all |")
+        lines.append(f"| test-data defects found reported as data | not measurable: no entry says "
+                     f"({rd['n']} found) | all |")
     else:
         lines.append(f"| test-data defects found reported as data | {_frac(rd)} | all |")
     lines.append(f"| diagnosis errors | {t['errors']}/{t['n']} | none |")
@@ -386,14 +388,16 @@ def markdown(summary: dict, settings: dict) -> str:
                       f"planted {_frac(h['first_correct_at_2x'])}, over the limit {_frac(h['over_limit'])}, errors "
                       f"{h['errors']}/{h['n']}."]
     lines += ["", "## Per family", "",
-              "| family | studies | members (median) | correct at >= 2x | correct (all sizes) | first added planted (>= 2x) "
+              "| family | studies | members (median) | correct at >= 2x | correct (all sizes) "
+              "| first added planted (>= 2x) "
               "| false alarms | over the limit | errors | diagnosis median s | largest s |",
               "|---|---|---|---|---|---|---|---|---|---|---|"]
     for f, b in summary["families"].items():
         tag = " (held out)" if f in summary["held_out_families"] else ""
         lines.append(f"| {f}{tag} | {b['n']} | {_g(b['members_median'])} | {_frac(b['correct_at_2x'])} | "
                      f"{_frac(b['correct'])} | {_frac(b['first_correct_at_2x'])} | {_frac(b['false_alarm'])} | "
-                     f"{b['over_limit']['k']} | {b['errors']} | {_g(b['diagnose_median_s'])} | {_g(b['diagnose_max_s'])} |")
+                     f"{b['over_limit']['k']} | {b['errors']} | {_g(b['diagnose_median_s'])} | "
+                     f"{_g(b['diagnose_max_s'])} |")
     lines += ["", "## Per kind (one-effect studies, families tuned on)", "",
               "Correct per size bin; wrong when detected: something was added, but not the planted effect.", "",
               "| kind | n | 0.5-1x | 1-2x | 2-5x | 5-20x | >20x | correct at >= 2x | first added planted (>= 2x) "
@@ -416,13 +420,15 @@ def markdown(summary: dict, settings: dict) -> str:
         lines += ["", "## Two effects", "",
                   f"{te['n']} studies with two planted effects of different kinds at different places: both found "
                   f"{_frac(te['correct'])} (at >= 2x of the smaller: {_frac(te['correct_at_2x'])}), at least one found "
-                  f"{_frac(te['one_of_two'])}, first added effect a planted one (>= 2x) {_frac(te['first_correct_at_2x'])}, "
+                  f"{_frac(te['one_of_two'])}, first added effect a planted one (>= 2x) "
+                  f"{_frac(te['first_correct_at_2x'])}, "
                   f"over the limit {te['over_limit']['k']}, errors {te['errors']}. Per bin of the smaller multiple: "
                   + ", ".join(f"{b} {_frac(d)}" for b, d in te["by_bin"].items() if d["n"]) + "."]
     lines += ["", "## Deck style and adapter", "",
               "`plain`: the project's own writing; `user`: a user's bulk data (coordinate systems, GRDSET, PBARL, "
               "offsets, CONM2, SPCADD); `import`: a whole input file made into the study by `blackbox import`.", "",
-              "| studies | n | correct at >= 2x | false alarms | errors | diagnosis median s |", "|---|---|---|---|---|---|"]
+              "| studies | n | correct at >= 2x | false alarms | errors | diagnosis median s |",
+              "|---|---|---|---|---|---|"]
     for name, b in list(summary["styles"].items()) + [(f"adapter {a}", b) for a, b in summary["adapters"].items()]:
         lines.append(f"| {name} | {b['n']} | {_frac(b['correct_at_2x'])} | {_frac(b['false_alarm'])} | {b['errors']} | "
                      f"{_g(b['diagnose_median_s'])} |")
