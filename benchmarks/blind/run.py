@@ -59,6 +59,7 @@ ALL_BINS = BIN_NAMES + (OVER,)
 AT_2X = ("2-5x", "5-20x", OVER)
 SENSOR_DEFECTS = ("outlier", "sign_flip", "channel_swap", "misplaced_sensor")
 GOALS = {"correct_at_2x": 0.97, "false_alarm": 0.03, "first_correct": 0.95, "over_limit": 0}
+MAX_LISTED = 60                 # rows of the misses and errors tables in the report (all in the JSON)
 
 
 # --------------------------------------------------------------------------------------------
@@ -449,12 +450,15 @@ def markdown(summary: dict, settings: dict) -> str:
                 lines.append(f"| {kind} | {label} | {k} |")
     ms = summary["misses_at_2x"]
     if ms:
-        lines += ["", f"## Misses at >= 2x ({len(ms)})", "", "| study | family | planted | where | multiple | added |",
-                  "|---|---|---|---|---|---|"]
-        for m in ms:
-            added = ("error: " + m["error"]) if m["error"] else _added(m["added"])
-            lines.append(f"| {m['study']} | {m['family']} | {m['kind']} | {m['where']} | {_g(m['multiple'])} | "
-                         f"{added.replace('|', '/')} |")
+        shown = [m for m in ms if not m["error"]]
+        lines += ["", f"## Misses at >= 2x ({len(ms)}, {len(ms) - len(shown)} of them errors: see Errors)", "",
+                  "| study | family | planted | where | multiple | added |", "|---|---|---|---|---|---|"]
+        for m in shown[:MAX_LISTED]:
+            where = "; ".join(str(w) for w in m["where"])
+            lines.append(f"| {m['study']} | {m['family']} | {m['kind']} | {where} | {_g(m['multiple'])} | "
+                         f"{_added(m['added']).replace('|', '/')} |")
+        if len(shown) > MAX_LISTED:
+            lines.append(f"| ... | {len(shown) - MAX_LISTED} more in `docs/blind.json` | | | | |")
     if summary["false_alarms"]:
         lines += ["", "## False alarms", "", "| study | family | added |", "|---|---|---|"]
         for m in summary["false_alarms"]:
@@ -471,9 +475,11 @@ def markdown(summary: dict, settings: dict) -> str:
         lines += ["", f"## Errors ({len(summary['errors'])})", "",
                   "By type: " + ", ".join(f"{k} x{n}" for k, n in sorted(kinds.items(), key=lambda kv: -kv[1])) + ".",
                   "", "| study | family | style | planted | error |", "|---|---|---|---|---|"]
-        for e in summary["errors"]:
+        for e in summary["errors"][:MAX_LISTED]:
             lines.append(f"| {e['study']} | {e['family']} | {e['style']} | {e['kind']} | "
-                         f"{e['error'][:160].replace('|', '/').replace(chr(10), ' ')} |")
+                         f"{' '.join(e['error'][:200].replace('|', '/').split())} |")
+        if len(summary["errors"]) > MAX_LISTED:
+            lines.append(f"| ... | {len(summary['errors']) - MAX_LISTED} more in `docs/blind.json` | | | |")
     w = summary["wall_s"]
     lines += ["", f"Wall time: {_g(w['total'])} s of study time in all (generation {_g(w['generate_total'])} s: "
                   f"median {_g(w['generate_median'])} s, largest {_g(w['generate_max'])} s per study); diagnosis "
@@ -538,13 +544,18 @@ def _run_task(item: tuple[int, int, str, bool]) -> dict:
 
 
 def study_indices(seed: int, n: int, include_held_out: bool, families: list[str] | None = None) -> list[int]:
-    """The first ``n`` study indices whose family is run (the held-out family's only with
-    ``include_held_out``; ``families`` restricts further)."""
-    out, i = [], 0
-    while len(out) < n:
+    """The indices of the first ``n`` studies of the tuned families (``families`` restricts
+    them); with ``include_held_out`` also the held-out family's studies among them (those
+    before the last one taken), so that the tuned studies are the same with and without it.
+    When only held-out families are named, ``n`` counts theirs."""
+    tuned = [f for f in FAMILIES if f not in HELD_OUT and (not families or f in families)]
+    held = [f for f in HELD_OUT if include_held_out and (not families or f in families)]
+    out, i, count = [], 0, 0
+    while count < n and (tuned or held):
         f = study_family(seed, i)
-        if (include_held_out or f not in HELD_OUT) and (not families or f in families):
+        if f in tuned or f in held:
             out.append(i)
+            count += 1 if (f in tuned or not tuned) else 0
         i += 1
     return out
 
