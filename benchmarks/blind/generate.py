@@ -26,8 +26,9 @@ One study (:func:`generate_study`):
 * sensors: every joint DOF and all six components of 4-10 random grids;
 * noise: 1-5 % of each value, floored at 2-10 % of the case's largest value of the same kind;
 * none, one or (in about 15 % of the effect studies) two planted effects of different kinds at
-  different places (:data:`ALL_KINDS`). Structural effects are edited into the truth deck
-  ``truth/truth.bdf``; the others act on the readings:
+  different places (:data:`ALL_KINDS`; on a frame with one joint, not two at joints).
+  Structural effects are edited into the truth deck ``truth/truth.bdf``; the others act on the
+  readings:
 
   - ``sensor_gain``: a factor on one grid's values; ``sensor_offset``: a constant added to one
     channel (grid, component) in every case; ``load_scale``: all cases (the truth's
@@ -131,6 +132,7 @@ SIZE_MAX = {"load_scale": 0.5, "sensor_gain": 0.5, "sensor_offset": 2.0, "member
 DECK_KINDS = ("joint_coupling", "joint_translation", "undeclared_joint", "support_flexibility", "member_stiffness")
 JOINT_KINDS = ("joint_coupling", "joint_translation", "joint_gap")
 MAX_BRANCHES = {1: 6, 2: 4, 3: 3}   # per joint, by the number of joints of the study
+ONE_JOINT = ("star",)               # families whose frame comes with its one joint
 
 
 def size_bin(multiple: float | None) -> str | None:
@@ -767,6 +769,9 @@ def generate_study(index: int, seed: int, out: Path, kind: str | tuple[str, ...]
     st, ad = study_style(seed, index)
     style, adapter = style or st, adapter or ad
     kinds = draw_kinds(rng)
+    if family in ONE_JOINT and len(kinds) == 2 and all(k in JOINT_KINDS for k in kinds):
+        # two effects at two joints need two joints: the second goes elsewhere
+        kinds = (kinds[0], str(rng.choice([k for k in ALL_KINDS if k not in JOINT_KINDS])))
     if kind is not None:
         kinds = () if kind == NONE else ((kind,) if isinstance(kind, str) else tuple(kind))
     failures: list[str] = []
@@ -943,9 +948,9 @@ def _plan_discrete(rng, kind, pool, resp, n_candidates, multiple, forced, others
     if len(pool) > 400:
         pool = [pool[i] for i in rng.choice(len(pool), 400, replace=False)]
     mults = {}
-    for place in pool:
+    for place in pool:                  # below half its threshold a defect is not planted
         lam = discrete_lambda(kind, place, resp)
-        if lam > 0:
+        if lam >= (BINS[0][0] ** 2) * lam1:
             mults[place] = math.sqrt(lam / lam1)
     if not mults:
         return None
