@@ -106,6 +106,8 @@ def test_threshold_multiples(studies):
                 assert lo * 0.99 <= e["multiple"] <= hi * 1.01
                 assert e["multiple"] == pytest.approx(e["multiple_drawn"], rel=0.02)
                 assert 0 < e["size"] <= gen.SIZE_MAX[e["kind"]]
+            else:                                   # discrete: the size its place gives it, >= 0.5x
+                assert e["multiple"] >= lo and e["bin"] in gen.BIN_NAMES + (gen.OVER,)
             assert e["bin"] == gen.size_bin(e["multiple"])
             # the threshold: 50 % power of the chi2 test of the effect's parameters at 0.01 / M
             crit = stats.chi2.isf(gen.ALPHA / st.planted["n_candidates"], e["params"])

@@ -278,6 +278,15 @@ def summarize(results: list[dict]) -> dict:
         rs = [r for r in single if (r.get("placement") or [None])[0] == pl]
         out["placement"][pl] = {"n": len(rs), "kinds": sorted({r["kinds"][0] for r in rs}),
                                 "correct_at_2x": _rate([r for r in rs if r["bin"] in AT_2X], "correct")}
+    searched = {f for r in rows for f in r.get("families") or []}
+    if searched:      # like for like with a benchmark of the searched kinds on plain decks only
+        like = [r for r in single if r.get("style") == "plain" and r["kinds"][0] in searched]
+        out["searched_kinds_plain"] = {
+            "kinds": sorted(searched), "all": _rate([r for r in like if r["bin"] in AT_2X], "correct"),
+            "families": {f: _rate([r for r in like if r["family"] == f and r["bin"] in AT_2X], "correct")
+                         for f in FAMILIES if any(r["family"] == f for r in like)},
+            "false_alarm": _rate([r for r in tuned if r.get("style") == "plain" and r.get("n_effects") == 0],
+                                 "false_alarm")}
     flags = [f for r in tuned for f in r.get("reported_as_data") or []]
     out["reported_as_data"] = {"k": sum(1 for f in flags if f), "n": len(flags),
                                "unknown": sum(1 for f in flags if f is None)}
@@ -292,7 +301,8 @@ def summarize(results: list[dict]) -> dict:
     out["over_limit_studies"] = [{"study": r["study"], "kind": r["kind"], "n_added": len(r.get("added", []))}
                                  for r in rows if r.get("over_limit")]
     out["errors"] = [{"study": r["study"], "family": r.get("family"), "style": r.get("style"),
-                      "kind": r.get("kind"), "error": r["error"]} for r in results if r.get("error")]
+                      "kind": r.get("kind"), "error": " ".join(r["error"].split())[:300]}
+                     for r in results if r.get("error")]
     conf: dict[str, dict[str, int]] = {}
     for r in single:
         if r.get("detected") and not r["correct"]:
@@ -306,7 +316,10 @@ def summarize(results: list[dict]) -> dict:
                      "generate_median": _median([r.get("generate_s") for r in results]),
                      "generate_max": max((r.get("generate_s") or 0.0 for r in results), default=None),
                      "diagnose_median": _median([r.get("diagnose_s") for r in rows]),
-                     "diagnose_max": max((r.get("diagnose_s") or 0.0 for r in rows), default=None)}
+                     "diagnose_max": max((r.get("diagnose_s") or 0.0 for r in rows), default=None),
+                     "diagnose_median_finished": _median([r.get("diagnose_s") for r in rows if not r.get("error")]),
+                     "diagnose_mean_finished": (float(np.mean([r["diagnose_s"] for r in rows if not r.get("error")]))
+                                                if any(not r.get("error") for r in rows) else None)}
     return out
 
 
@@ -388,6 +401,12 @@ def markdown(summary: dict, settings: dict) -> str:
                       f"{_frac(h['correct_at_2x'])}, false alarms {_frac(h['false_alarm'])}, first added effect "
                       f"planted {_frac(h['first_correct_at_2x'])}, over the limit {_frac(h['over_limit'])}, errors "
                       f"{h['errors']}/{h['n']}."]
+    like = summary.get("searched_kinds_plain")
+    if like:
+        lines += ["", f"Like for like with a benchmark of the kinds the diagnosis searches on the project's own "
+                      f"deck writing: one-effect studies of those kinds, plain decks, >= 2x: {_frac(like['all'])} ("
+                      + ", ".join(f"{f} {_frac(b)}" for f, b in like["families"].items())
+                      + f"); false alarms on plain no-effect studies {_frac(like['false_alarm'])}."]
     lines += ["", "## Per family", "",
               "| family | studies | members (median) | correct at >= 2x | correct (all sizes) "
               "| first added planted (>= 2x) "
@@ -483,7 +502,9 @@ def markdown(summary: dict, settings: dict) -> str:
     w = summary["wall_s"]
     lines += ["", f"Wall time: {_g(w['total'])} s of study time in all (generation {_g(w['generate_total'])} s: "
                   f"median {_g(w['generate_median'])} s, largest {_g(w['generate_max'])} s per study); diagnosis "
-                  f"median {_g(w['diagnose_median'])} s, largest {_g(w['diagnose_max'])} s per study"
+                  f"median {_g(w['diagnose_median'])} s, largest {_g(w['diagnose_max'])} s per study (of the "
+                  f"diagnoses that ran to the end, without an error: median {_g(w.get('diagnose_median_finished'))} "
+                  f"s, mean {_g(w.get('diagnose_mean_finished'))} s)"
                   + (f"; {_g(settings['run_wall_s'])} s from start to end on {settings.get('workers', 1)} worker(s)"
                      if settings.get("run_wall_s") else "") + ".", ""]
     return "\n".join(lines)
@@ -636,7 +657,8 @@ def main(argv: list[str] | None = None) -> int:
     md = markdown(summary, settings)
     (out / "blind.md").write_text(md)
     if args.docs:              # the studies one per line, without parameter values: a smaller file
-        slim = [{**{k: v for k, v in r.items() if k not in ("added", "traceback", "families")},
+        slim = [{**{k: v for k, v in r.items() if k not in ("added", "traceback", "families", "error")},
+                 **({"error": " ".join(r["error"].split())[:300]} if r.get("error") else {}),
                  "added": [{"effect": a["effect"], "where": a["where"],
                             "parameters": [p.get("name") for p in a.get("parameters") or []]}
                            for a in r.get("added", [])]} for r in results]
