@@ -257,7 +257,8 @@ class TruthDeck:
         for e in self.members_at(grid)[1:]:
             g = self.next_grid
             self.next_grid += 1
-            d.grids[g] = Grid(g, d.grids[grid].xyz, cd=getattr(d.grids[grid], "cd", 0))   # same CD: springs join like directions
+            # the grid's own CD: the springs put between the branches join like directions
+            d.grids[g] = Grid(g, d.grids[grid].xyz, cd=getattr(d.grids[grid], "cd", 0))
             b = d.cbars[e]
             d.cbars[e] = replace(b, ga=g if b.ga == grid else b.ga, gb=g if b.gb == grid else b.gb)
             branches.append(g)

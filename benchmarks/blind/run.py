@@ -4,9 +4,9 @@
 
 Study ``i`` (seeded by ``--seed`` and ``i``) is written by :mod:`benchmarks.blind.generate`: the
 study folder and, outside it, ``planted.json``. Its family is drawn first, from its own random
-stream; the studies of the held-out family (``frames.HELD_OUT``: ``hall``) are skipped unless
-``--include-held-out``, so ``--n`` counts the studies of the families run and a study has the
-same draws in every run. :func:`blackbox.commands.diagnose.run` (the study's own adapter,
+stream; ``--n`` counts the studies of the families tuned on, and the held-out family's
+(``frames.HELD_OUT``: ``hall``) are skipped unless ``--include-held-out`` adds those among them,
+so the tuned studies and their draws are the same in every run. :func:`blackbox.commands.diagnose.run` (the study's own adapter,
 in-process, default settings) diagnoses the folder, and only its result document is read
 (``added``: kind, where, details, parameters; ``before``/``after``; ``verdict``). The score of
 each study is appended to ``OUT/results.jsonl`` as soon as it is known, so an interrupted run
