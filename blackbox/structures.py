@@ -280,12 +280,14 @@ class TruthDeck:
     def split_grid(self, grid: int) -> list[int]:
         """Make ``grid`` a joint of its members: one new coincident grid per member after the
         first, each member moved to its own grid, their translations tied to ``grid`` by an RBE2
-        CM=123 (as a study's joints). Returns the branch grids, ``grid`` first."""
+        CM=123 (as a study's joints); the new grids give their components in ``grid``'s CD
+        system. Returns the branch grids, ``grid`` first."""
         d = self.deck
         branches = [grid]
         for e in self.members_at(grid)[1:]:
             g = self.next_grid
             self.next_grid += 1
+            # the grid's own CD: the springs put between the branches join like directions
             d.grids[g] = Grid(g, d.grids[grid].xyz, cd=d.grids[grid].cd)
             b = d.cbars[e]
             d.cbars[e] = replace(b, ga=g if b.ga == grid else b.ga, gb=g if b.gb == grid else b.gb)

@@ -1,33 +1,59 @@
-"""Random studies with one planted effect (or none) for the blind benchmark of ``blackbox diagnose``.
+"""Random studies with planted effects (or none) for the blind benchmark of ``blackbox diagnose``.
 
-Method-free: this module builds structures (``blackbox.structures``), writes decks, solves them
-with the reference solver and simulates measurements (``blackbox simulate``); it never calls the
-identification or the diagnosis. What was planted is written beside the study, never into it.
+Method-free: this module builds structures (:mod:`benchmarks.blind.frames`), writes decks, solves
+them with the reference solver and simulates measurements (the noise model of
+``blackbox.simulation``); it never calls the identification or the diagnosis. What was planted
+is written beside the study (``hidden/``), never into it.
 
 One study (:func:`generate_study`):
 
-* a random frame: a two-plane portal frame (1-3 bays, 1-2 storeys, beams with a midspan node),
-  a ladder frame (rails, cross members with a midspan node, some braced bays), a space-frame box
-  (up to 3 x 2 x 2 cells, some face diagonals), a tube body (``tube_body``) or a star frame
-  (``star_joint_frame``); all members the same steel tube section;
-* 1-2 flexible joints of 2-5 branches (2-3 each when there are two) at grids where exactly that
-  many members meet (coincident branch grids tied by an RBE2 CM=123, GN = branch 1,
-  ``FrameBuilder.flexible_joint``); two joints never share a member (a member between two
-  free-rotation ends would spin about its axis in the declared deck); the truth of each is the
-  simple model, every spring a random factor of the branch members' bending stiffness 4EI/L;
-* 8-20 load cases (``random_loads``); in two studies of three about a fifth of them are hold-out
-  cases, in the third none are declared (every case fitted; the diagnosis then checks additions by
+* a frame of one of the families of :mod:`benchmarks.blind.frames` (ladder, truss, storey, tube,
+  imported, portal, box, star; ``hall`` is held out of all tuning: :func:`study_family` draws it
+  too, and ``run.py`` runs its studies only with ``--include-held-out``);
+* written in one of three styles: ``plain`` (the project's own writing, two studies of three),
+  ``user`` (a user's bulk data: CORD2R/CORD1R chains, grids in CP and CD systems, GRDSET,
+  PBARL, CBAR vectors and offsets in the grids' systems, CONM2, SPC1 sets combined by an
+  SPCADD) or ``import`` (a whole user's input file whose case control selects the SPCADD, with
+  a further SPC1 set it does not select and the load cases as FORCE/MOMENT cards, made into the
+  study by ``blackbox import``); a few percent of the studies name ``adapter = "mystran"``;
+* 1-3 flexible joints (1: 2-6 branches, 2: up to 4 each, 3: up to 3 each) at grids where that
+  many bars meet (coincident branch grids tied by an RBE2 CM=123, in the grid's CD); two joints
+  never share or touch a member; the truth of each is the simple model, every spring a random
+  factor of the branch members' bending stiffness 4EI/L;
+* 8-20 load cases on free grids, components in the grids' CD systems; in two studies of three a
+  fifth of them are hold-out cases, in the third none (the diagnosis then checks additions by
   K-fold cross-validation over the load cases);
-* sensors: every joint DOF and all six components of 3-8 random grids;
+* sensors: every joint DOF and all six components of 4-10 random grids;
 * noise: 1-5 % of each value, floored at 2-10 % of the case's largest value of the same kind;
-* the planted effect, written into the truth deck ``truth/truth.bdf`` (deck effects) or applied
-  to the simulated values (``sensor_gain``: a factor on one grid's values; ``sensor_offset``: a
-  constant added to one channel, grid and component, in every case; ``load_scale`` of one case,
-  or of a *test day*: a run of consecutive cases, a third to two thirds of them, whose loads were
-  all off by one factor; ``load_scale`` of all cases is the truth's ``force_scale``). A study with
-  a test day names the days in a ``group`` column of ``loads.csv`` half of the time (the planted
-  day one group, the other cases another); otherwise the diagnosis must find the group from the
-  data.
+* none, one or (in about 15 % of the effect studies) two planted effects of different kinds at
+  different places (:data:`ALL_KINDS`; on a frame with one joint, not two at joints).
+  Structural effects are edited into the truth deck ``truth/truth.bdf``; the others act on the
+  readings:
+
+  - ``sensor_gain``: a factor on one grid's values; ``sensor_offset``: a constant added to one
+    channel (grid, component) in every case; ``load_scale``: all cases (the truth's
+    ``force_scale``), one case, or a test day (a run of consecutive cases whose loads were all
+    off by one factor; named by a ``group`` column of ``loads.csv`` half of the time);
+  - ``outlier``: one reading (a fitted case c, grid g, component k) off by ``b``;
+  - ``sign_flip``: one channel (g, k) negated in every case (``y = -u + noise``);
+  - ``channel_swap``: the values of the channels (g1, k) and (g2, k), g1 < g2, exchanged in
+    every case;
+  - ``misplaced_sensor``: the channels of grid g (one, or all six) really read at a grid h joined
+    to g by one member: ``u(h, k) + noise`` in every case;
+  - ``joint_gap``: a declared joint whose springs are softer on one side: in each load case each
+    spring m has stiffness ``k_m`` when its relative rotation (branch i minus branch j about its
+    axis) is >= 0 and ``r k_m`` when it is < 0, one ``r`` in [0.05, 20] per joint; the truth is
+    solved per case by iterating the signs until they settle (:func:`gap_response`; a case
+    whose signs cycle is reported and the draw repeated).
+
+  The readings' defects act on what the gauge saw (its noise is that of the value read, as a
+  rig's own sigma would be); gains, offsets, load scales and the outlier on the noisy values.
+  Misplaced and swapped channels, sign flips and outliers are placed on the fitted data.
+
+Placement: in half of the studies of the kinds that have such places, the effect goes where
+something else could mimic it: an undeclared joint one grid away from a declared joint, a
+member factor on a member framing into a joint or a support, a flexible support where one bar
+ends (a factor on that bar could stand in) (``planted.json``: ``placement``).
 
 Detection threshold of a planted effect (computed from the noise-free responses, without the
 diagnosis): the effect changes the noise-free measured values of the fitted cases by ``d``; the
@@ -35,14 +61,20 @@ part of ``d / sigma`` that the declared model cannot absorb is ``r = (I - P) d /
 the projector onto the declared joint parameters' sensitivities (log parameters, at the truth);
 the noncentrality of the chi2 excess it causes is ``lambda = |r|^2``. A likelihood-ratio test of
 the effect's ``p`` parameters at level ``alpha / M`` (``alpha = 0.01``, the diagnosis's default;
-``M`` the number of candidate effects the study offers, a Bonferroni correction) rejects with
-probability ``P(ncx2(p, lambda) > chi2_isf(alpha / M, p))``; the **threshold** is the
-noncentrality ``lambda_1`` at which that probability is 0.5, and an effect of threshold multiple
-``m`` is planted at the size whose noncentrality is ``m^2 lambda_1`` (for an effect linear in its
-size, ``m`` is the ratio of the size to the threshold size). ``m`` is drawn log-uniformly from
-0.5 to 5. A place where 5x would need an unphysical size (a member factor beyond 10, a gain
-beyond 1.5, an offset beyond twice the channel's largest value, a coupling that loses positive
-definiteness) is redrawn.
+``M`` the number of candidate effects the study offers over every kind, data defects included:
+each fitted reading an outlier, each channel a sign flip, each pair of channels of one component
+a swap, each grid-neighbour pair a misplaced sensor in seven ways; a Bonferroni correction)
+rejects with probability ``P(ncx2(p, lambda) > chi2_isf(alpha / M, p))``; the **threshold** is
+the noncentrality ``lambda_1`` at which that probability is 0.5, and an effect of threshold
+multiple ``m`` has noncentrality ``m^2 lambda_1``. Continuous effects are planted at the size
+whose noncentrality is that of a multiple drawn log-uniformly within a size bin (the bins
+0.5-1, 1-2, 2-5 and 5-20x drawn equally often); a place where that multiple would need an
+unphysical size (a member factor beyond 10, a gain beyond 1.5, an offset beyond twice the
+channel's largest value, a coupling that loses positive definiteness, a gap ratio beyond
+20) is redrawn. A discrete defect (sign flip, swap, misplaced sensor) has the size its place
+gives it, its multiple computed the same way with ``p = 1`` (the one parameter that mixes the
+declared reading with the defective one); the place is chosen among those whose multiple falls in
+the drawn bin (the nearest bin that has one when none does; beyond 20x when every place is).
 
 Run ``python -m benchmarks.blind.generate OUT --n 5`` to write five studies (``OUT/studies/sNNNN``
 for the diagnosis, ``OUT/hidden/sNNNN`` with ``planted.json`` and the truth).
@@ -51,6 +83,7 @@ for the diagnosis, ``OUT/hidden/sNNNN`` with ``planted.json`` and the truth).
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 import shutil
@@ -67,198 +100,181 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from blackbox.commands import simulate as simulate_cmd                    # noqa: E402
-from blackbox.joints import complex_params_from_kc, make_joint             # noqa: E402
-from blackbox.simulation import NoiseConfig, noise_sigma                    # noqa: E402
-from blackbox.structures import (FrameBuilder, TruthDeck, random_loads, star_joint_frame,  # noqa: E402
-                                 tube_body, write_study)
+from benchmarks.blind import frames as fr                                 # noqa: E402
+from blackbox.joints import complex_params_from_kc, joint_dofs, make_joint  # noqa: E402
+from blackbox.simulation import NoiseConfig, noise_sigma, simulate_rows     # noqa: E402
+from blackbox.structures import TruthDeck                                 # noqa: E402
 from solver_adapters.bdf import read_deck_text                            # noqa: E402
 from solver_adapters.bdf_write import write_deck                          # noqa: E402
-from solver_adapters.deck import Deck, Mat1, PBar                         # noqa: E402
+from solver_adapters.deck import Deck, Mat1                               # noqa: E402
 from solver_adapters.protocol import LoadMatrix                           # noqa: E402
 from solver_adapters.reference import ReferenceAdapter                   # noqa: E402
 
 KINDS = ("joint_coupling", "joint_translation", "undeclared_joint", "support_flexibility",
          "load_scale", "sensor_gain", "sensor_offset", "member_stiffness")
+DATA_KINDS = ("outlier", "sign_flip", "channel_swap", "misplaced_sensor", "joint_gap")
+ALL_KINDS = KINDS + DATA_KINDS
+DISCRETE = ("sign_flip", "channel_swap", "misplaced_sensor")
 NONE = "none"
-KIND_WEIGHTS = {NONE: 2.0, **{k: 1.0 for k in KINDS}}   # none-studies twice as often: false alarms
-SHAPES = ("portal", "ladder", "box", "tube", "star")
+KIND_WEIGHTS = {NONE: 2.0, **{k: 1.0 for k in ALL_KINDS}}   # none-studies twice as often: false alarms
+TWO_EFFECTS = 0.15              # share of the effect studies with two effects
+STYLES = {"plain": 2 / 3, "user": 1 / 6, "import": 1 / 6}
+MYSTRAN_SHARE = 0.03            # studies whose study.toml names adapter = "mystran"
 ALPHA = 0.01                    # the diagnosis's default significance (after Bonferroni)
 POWER_AT_THRESHOLD = 0.5        # the threshold: the noncentrality at which the test has this power
-MULTIPLE_RANGE = (0.5, 5.0)     # threshold multiples, drawn log-uniformly
+BINS = ((0.5, 1.0), (1.0, 2.0), (2.0, 5.0), (5.0, 20.0))
+BIN_NAMES = ("0.5-1x", "1-2x", "2-5x", "5-20x")
+OVER = ">20x"                   # the bin of a discrete defect no place of which is within 20x
 # largest physically sensible size per kind (beyond it the place is redrawn)
 SIZE_MAX = {"load_scale": 0.5, "sensor_gain": 0.5, "sensor_offset": 2.0, "member_stiffness": math.log(10.0),
             "support_flexibility": 1.0e3, "undeclared_joint": 1.0e3, "joint_translation": 1.0e3,
-            "joint_coupling": 0.9}
-STEEL = dict(E=206.85e9, G=82.7e9, A=2.99e-4, I1=77.42e-8, I2=16.65e-8, J=35.40e-8)
+            "joint_coupling": 0.9, "outlier": 1.0e3, "joint_gap": math.log(20.0)}
+DECK_KINDS = ("joint_coupling", "joint_translation", "undeclared_joint", "support_flexibility", "member_stiffness")
+JOINT_KINDS = ("joint_coupling", "joint_translation", "joint_gap")
+MAX_BRANCHES = {1: 6, 2: 4, 3: 3}   # per joint, by the number of joints of the study
+ONE_JOINT = ("star",)               # families whose frame comes with its one joint
+
+
+def size_bin(multiple: float | None) -> str | None:
+    if multiple is None:
+        return None
+    for (lo, hi), name in zip(BINS, BIN_NAMES):
+        if lo <= multiple < hi:
+            return name
+    return BIN_NAMES[0] if multiple < BINS[0][0] else (BIN_NAMES[-1] if multiple < BINS[-1][1] * 1.01 else OVER)
 
 
 # --------------------------------------------------------------------------------------------
-# structures
+# the study's draws that do not depend on its structure
 # --------------------------------------------------------------------------------------------
-def _portal(rng: np.random.Generator) -> FrameBuilder:
-    """Two parallel multi-bay portal frames tied by beams at every floor; bases clamped."""
-    f = FrameBuilder(**STEEL)
-    nb, ns = int(rng.integers(1, 4)), int(rng.integers(1, 3))
-    bay, h, depth = rng.uniform(0.8, 1.6), rng.uniform(0.8, 1.4), rng.uniform(0.6, 1.2)
-    ids: dict[tuple, int] = {}
-
-    def node(key, xyz):
-        if key not in ids:
-            ids[key] = f.grid(len(ids) + 1, xyz)
-        return ids[key]
-    for j in (0, 1):
-        for i in range(nb + 1):
-            for k in range(ns + 1):
-                node(("n", i, k, j), (i * bay, j * depth, k * h))
-    for j in (0, 1):
-        for i in range(nb + 1):
-            f.fix(ids[("n", i, 0, j)])
-            for k in range(ns):
-                f.bar(ids[("n", i, k, j)], ids[("n", i, k + 1, j)])
-        for k in range(1, ns + 1):
-            for i in range(nb):
-                mid = node(("m", i, k, j), ((i + 0.5) * bay, j * depth, k * h))
-                f.bar(ids[("n", i, k, j)], mid)
-                f.bar(mid, ids[("n", i + 1, k, j)])
-    for k in range(1, ns + 1):
-        for i in range(nb + 1):
-            f.bar(ids[("n", i, k, 0)], ids[("n", i, k, 1)])
-    return f
+def study_family(seed: int, index: int) -> str:
+    """The family of study ``index`` (its own random stream: the same whichever families a run
+    includes)."""
+    names = list(fr.FAMILIES)
+    return str(np.random.default_rng([seed, index, 1]).choice(names))
 
 
-def _ladder(rng: np.random.Generator) -> FrameBuilder:
-    """A ladder (chassis) frame: two rails, cross members with a midspan node, some bays braced;
-    clamped at the two front corners, vertically supported at the rear ones."""
-    f = FrameBuilder(**STEEL)
-    n = int(rng.integers(3, 7))
-    length, width = rng.uniform(2.0, 4.0), rng.uniform(0.6, 1.2)
-    rail = [[f.grid(1 + 2 * i + s, (length * i / (n - 1), s * width, 0.0)) for s in (0, 1)] for i in range(n)]
-    nid = 2 * n + 1
-    for i in range(n):
-        mid = f.grid(nid, (length * i / (n - 1), 0.5 * width, 0.0))
-        nid += 1
-        f.bar(rail[i][0], mid)
-        f.bar(mid, rail[i][1])
-        if i + 1 < n:
-            for s in (0, 1):
-                f.bar(rail[i][s], rail[i + 1][s])
-            if rng.random() < 0.4:
-                f.bar(rail[i][0], rail[i + 1][1])
-    f.fix(rail[0][0])
-    f.fix(rail[0][1])
-    f.fix(rail[-1][0], "3")
-    f.fix(rail[-1][1], "3")
-    return f
+def study_style(seed: int, index: int) -> tuple[str, str]:
+    """``(style, adapter)`` of study ``index`` (its own random stream)."""
+    rng = np.random.default_rng([seed, index, 2])
+    style = str(rng.choice(list(STYLES), p=list(STYLES.values())))
+    return style, ("mystran" if rng.random() < MYSTRAN_SHARE else "reference")
 
 
-def _box(rng: np.random.Generator) -> FrameBuilder:
-    """A space-frame box of nx x ny x nz cells (at most 6), some face diagonals; the four bottom
-    corners supported (two clamped, two in translation)."""
-    f = FrameBuilder(**STEEL)
-    while True:
-        nx, ny, nz = (int(v) for v in rng.integers(1, [4, 3, 3]))
-        if nx * ny * nz <= 6 and nx * ny * nz > 1:
+def draw_kinds(rng: np.random.Generator) -> tuple[str, ...]:
+    """``()`` (no effect), one kind, or two different kinds."""
+    names = list(KIND_WEIGHTS)
+    w = np.array([KIND_WEIGHTS[k] for k in names])
+    first = str(rng.choice(names, p=w / w.sum()))
+    if first == NONE:
+        return ()
+    if rng.random() < TWO_EFFECTS:
+        second = str(rng.choice([k for k in ALL_KINDS if k != first]))
+        return (first, second)
+    return (first,)
+
+
+def draw_multiple(rng: np.random.Generator) -> float:
+    """A threshold multiple: a size bin drawn equally, log-uniform within it."""
+    lo, hi = BINS[int(rng.integers(len(BINS)))]
+    return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
+
+
+# --------------------------------------------------------------------------------------------
+# joints, offsets, loads
+# --------------------------------------------------------------------------------------------
+def place_joints(f: fr.Frame, rng: np.random.Generator) -> None:
+    """1-3 flexible joints at grids where 2-6 bars meet (:data:`MAX_BRANCHES`); no two share or
+    touch a member; the degree is drawn first (among those available), then the grid."""
+    if f.joints:
+        return
+    n_joints = int(rng.choice([1, 2, 3], p=[0.5, 0.3, 0.2]))
+    taken: set[int] = set()
+    for _ in range(n_joints):
+        at = f.members_at()
+        ok = [g for g, es in at.items() if 2 <= len(es) <= MAX_BRANCHES[n_joints]
+              and g not in f.spcs and g not in taken]
+        if not ok:
             break
-    dx, dy, dz = rng.uniform(0.3, 0.8, 3)
-
-    def gid(i, j, k):
-        return 1 + i + (nx + 1) * (j + (ny + 1) * k)
-    for k in range(nz + 1):
-        for j in range(ny + 1):
-            for i in range(nx + 1):
-                f.grid(gid(i, j, k), (i * dx, j * dy, k * dz))
-    for k in range(nz + 1):
-        for j in range(ny + 1):
-            for i in range(nx + 1):
-                if i < nx:
-                    f.bar(gid(i, j, k), gid(i + 1, j, k))
-                if j < ny:
-                    f.bar(gid(i, j, k), gid(i, j + 1, k))
-                if k < nz:
-                    f.bar(gid(i, j, k), gid(i, j, k + 1))
-                    if i < nx and rng.random() < 0.2:
-                        f.bar(gid(i, j, k), gid(i + 1, j, k + 1))
-    corners = [gid(0, 0, 0), gid(nx, 0, 0), gid(nx, ny, 0), gid(0, ny, 0)]
-    for c, comps in zip(corners, ["123456", "123", "123456", "123"]):
-        f.fix(c, comps)
-    return f
+        degrees = sorted({len(at[g]) for g in ok})
+        deg = int(rng.choice(degrees))
+        node = int(rng.choice([g for g in ok if len(at[g]) == deg]))
+        bars = [int(b) for b in rng.permutation(at[node])]
+        grids = f.flexible_joint(f"J{node}", node, bars)
+        for g in grids:
+            taken |= {g} | f.neighbours(g)
+            for h in f.neighbours(g):
+                taken |= f.neighbours(h)
 
 
-def _tube(rng: np.random.Generator) -> FrameBuilder:
-    """A small car-body-like tube frame (``tube_body``) without its own joint."""
-    n_long = int(rng.integers(4, 6))
-    n_around = 6 if n_long == 5 else int(rng.choice([6, 8]))
-    return tube_body(n_long, n_around, length=rng.uniform(2.0, 4.0), width=rng.uniform(1.0, 1.6),
-                     height=rng.uniform(1.0, 1.5), with_joint=False)
+def add_offsets(f: fr.Frame, rng: np.random.Generator) -> None:
+    """CBAR offsets as a user models eccentric connections: the members of one or two groups
+    get, at each end where a member of another group ends, an offset of 2-10 cm along their
+    orientation vector (a purlin on a rafter, a cross member on the rails)."""
+    groups = [g for g, es in f.groups.items() if any(e in f.bars for e in es)]
+    if len(groups) < 2:
+        return
+    chosen = [str(g) for g in rng.choice(groups, size=min(2, len(groups)), replace=False)]
+    owner = {e: g for g, es in f.groups.items() for e in es}
+    ends: dict[int, set[str]] = {}
+    for e, (a, b, *_) in f.bars.items():
+        for g in (a, b):
+            ends.setdefault(g, set()).add(owner.get(e, ""))
+    for grp in chosen:
+        delta = float(np.round(rng.uniform(0.02, 0.1), 3))
+        for e in f.groups[grp]:
+            if e not in f.bars:
+                continue
+            bar = f.bars[e]
+            v = np.asarray(bar[3], float)
+            d = np.subtract(f.grids[bar[1]], f.grids[bar[0]])
+            n = v - d * (v @ d) / (d @ d)
+            n = tuple(float(x) for x in delta * n / np.linalg.norm(n))
+            for k, g in ((4, bar[0]), (5, bar[1])):
+                if ends.get(g, set()) - {grp}:
+                    bar[k] = n
 
 
-def _members_at(f: FrameBuilder) -> dict[int, list[int]]:
+def random_loads(f: fr.Frame, n_cases: int, rng: np.random.Generator, per_case: int,
+                 labels: list[str]) -> list[tuple[str, int, int, float]]:
+    """Load cases on unsupported grids away from the joints: forces and moments mixed, in the
+    grids' CD components."""
+    joint_grids = {g for _, gs in f.joints for g in gs}
+    free = [g for g in sorted(f.grids) if g not in f.spcs and g not in joint_grids]
+    rows = []
+    for c in range(n_cases):
+        for g in rng.choice(free, size=min(per_case, len(free)), replace=False):
+            comp = int(rng.integers(1, 7))
+            mag = f.force if comp <= 3 else f.moment
+            rows.append((labels[c], int(g), comp, float(np.round(mag * rng.uniform(-1, 1), 3))))
+    return rows
+
+
+def joint_truths(deck: Deck, f: fr.Frame, rng: np.random.Generator) -> list[dict]:
+    """Each joint's truth: the simple model, springs a random factor (log-normal, 0.3) of a
+    joint scale ``k`` = 10^U(-0.7, 0.3) x the mean 4EI/L of its branch members."""
+    out = []
     at: dict[int, list[int]] = {}
-    for e, a, b, _ in f.bars:
-        at.setdefault(a, []).append(e)
-        at.setdefault(b, []).append(e)
-    return at
-
-
-def _neighbours(f: FrameBuilder, g: int) -> set[int]:
-    return {b if a == g else a for _, a, b, _ in f.bars if g in (a, b)}
-
-
-def _bending_ref(deck_or_f, eids) -> float:
-    """Mean 4EI/L of the members ``eids`` (I the mean of the two planes): the joints' scale."""
-    vals = []
-    for e in eids:
-        _, a, b, _ = deck_or_f.bars[e - 1]
-        L = float(np.linalg.norm(np.subtract(deck_or_f.grids[a], deck_or_f.grids[b])))
-        vals.append(4.0 * deck_or_f.E * 0.5 * (deck_or_f.I1 + deck_or_f.I2) / L)
-    return float(np.mean(vals))
-
-
-def build_structure(rng: np.random.Generator, shape: str) -> tuple[FrameBuilder, list[dict]]:
-    """The frame of ``shape`` with its flexible joints; returns the builder and the joints' truth
-    (name, grids, simple-model values)."""
-    if shape == "star":
-        n = int(rng.integers(2, 6))
-        f = star_joint_frame(n, seed=int(rng.integers(2**31)), arm=rng.uniform(0.4, 0.8))
-    else:
-        f = {"portal": _portal, "ladder": _ladder, "box": _box, "tube": _tube}[shape](rng)
-        n_joints = 1 if rng.random() < 0.65 else 2
-        # two joints of at most 3 branches each: the diagnosis's complex-model candidates of two
-        # 4- or 5-branch joints (45 or 78 parameters each) make one study cost about a minute
-        max_branches = 5 if n_joints == 1 else 3
-        taken: set[int] = set()
-        for _ in range(n_joints):
-            at = _members_at(f)
-            ok = [g for g, es in at.items() if 2 <= len(es) <= max_branches and g not in f.spcs and g not in taken]
-            if not ok:
-                break
-            degrees = sorted({len(at[g]) for g in ok})
-            deg = int(rng.choice(degrees))
-            node = int(rng.choice([g for g in ok if len(at[g]) == deg]))
-            bars = list(rng.permutation(at[node]))
-            f.flexible_joint(f"J{node}", node, [int(b) for b in bars], max(f.grids) + 1)
-            # the next joint shares no member with this one
-            taken |= {node} | _neighbours(f, node) | {g for _, gs in f.joints[-1:] for g in gs}
-            for g in f.joints[-1][1]:
-                taken |= _neighbours(f, g)
-    joints = []
+    for e, b in deck.cbars.items():
+        at.setdefault(b.ga, []).append(e)
+        at.setdefault(b.gb, []).append(e)
     for name, grids in f.joints:
-        at = _members_at(f)
-        eids = [at[g][0] for g in grids]
-        k_joint = _bending_ref(f, eids) * 10 ** rng.uniform(-0.7, 0.3)
+        vals = []
+        for g in grids:
+            b = deck.cbars[at[g][0]]
+            p, m = deck.pbars[b.pid], deck.mat1s[deck.pbars[b.pid].mid]
+            L = float(np.linalg.norm(np.subtract(deck.grids[b.ga].xyz, deck.grids[b.gb].xyz)))
+            vals.append(4.0 * m.e * 0.5 * (p.i1 + p.i2) / L)
+        k = float(np.mean(vals)) * 10 ** rng.uniform(-0.7, 0.3)
         model = make_joint(name, grids, "simple")
-        values = k_joint * np.exp(0.3 * rng.standard_normal(model.n_params))
-        joints.append({"name": name, "grids": [int(g) for g in grids], "k": float(k_joint),
-                       "values": [float(v) for v in values]})
-    return f, joints
+        values = k * np.exp(0.3 * rng.standard_normal(model.n_params))
+        out.append({"name": name, "grids": [int(g) for g in grids], "k": k, "values": [float(v) for v in values]})
+    return out
 
 
 # --------------------------------------------------------------------------------------------
-# deck edits of the truth
+# the truth deck
 # --------------------------------------------------------------------------------------------
-
-
 def coupled_kc(grids, simple_values, rho: np.ndarray, t: float) -> np.ndarray:
     """``K_C = S^1/2 (I + t rho) S^1/2``: the simple model's ``K_C`` (``S``) coupled by the
     symmetric zero-diagonal ``rho`` of spectral norm 1; positive definite for ``t < 1``."""
@@ -272,7 +288,8 @@ def coupled_kc(grids, simple_values, rho: np.ndarray, t: float) -> np.ndarray:
 
 
 def plant_deck(truth: TruthDeck, kind: str, where, size: float, sign: float, extra: dict) -> None:
-    """Edit the effect ``kind`` of ``size`` into the truth deck (deck effects only)."""
+    """Edit the deck effect ``kind`` of ``size`` into the truth deck (joint coupling: the
+    joint's springs, see :func:`truth_deck`)."""
     d = truth.deck
     if kind == "support_flexibility":
         g = int(where)
@@ -301,54 +318,131 @@ def plant_deck(truth: TruthDeck, kind: str, where, size: float, sign: float, ext
         b = d.cbars[eid]
         p, m = d.pbars[b.pid], d.mat1s[d.pbars[b.pid].mid]
         factor = math.exp(sign * size)
-        mid, pid = max(d.mat1s) + 1, max(d.pbars) + 1
+        mid, pid = max(d.mat1s) + 1, max([*d.pbars, *d.prods]) + 1
         d.mat1s[mid] = Mat1(mid, m.e * factor, m.g * factor, m.nu)
-        d.pbars[pid] = PBar(pid, mid, p.a, p.i1, p.i2, p.j)
+        d.pbars[pid] = replace(p, pid=pid, mid=mid, src="")       # shear factors and I12 kept
         d.cbars[eid] = replace(b, pid=pid)
-    elif kind != "joint_coupling":              # coupling: the joint's springs, see truth_deck
+    elif kind != "joint_coupling":
         raise ValueError(f"{kind} is not a deck effect")
 
 
-DECK_KINDS = ("joint_coupling", "joint_translation", "undeclared_joint", "support_flexibility", "member_stiffness")
-
-
-def truth_deck(declared: Deck, joints: list[dict], kind: str, where=None, size: float = 0.0,
-               sign: float = 1.0, extra: dict | None = None) -> Deck:
-    """The declared deck with the joints' truth springs and, for a deck effect, the effect."""
+def truth_deck(declared: Deck, joints: list[dict], effects: list[dict]) -> Deck:
+    """The declared deck with the joints' truth springs and the deck effects of ``effects``
+    (dicts with ``kind``, ``where``, ``size``, ``sign``, ``extra``)."""
     t = TruthDeck(declared)
+    coupled = {e["where"]: e for e in effects if e["kind"] == "joint_coupling" and e["size"] > 0}
     for j in joints:
-        if kind == "joint_coupling" and j["name"] == where and size > 0:
-            kc = coupled_kc(j["grids"], j["values"], np.asarray(extra["rho"]), size)
+        if j["name"] in coupled:
+            e = coupled[j["name"]]
+            kc = coupled_kc(j["grids"], j["values"], np.asarray(e["extra"]["rho"]), e["size"])
             t.joint(j["name"], j["grids"], "complex", complex_params_from_kc(kc))
         else:
             t.joint(j["name"], j["grids"], "simple", j["values"])
-    if kind in DECK_KINDS and kind != "joint_coupling" and size > 0:
-        plant_deck(t, kind, where, size, sign, extra or {})
+    for e in effects:
+        if e["kind"] in DECK_KINDS and e["kind"] != "joint_coupling" and e["size"] > 0:
+            plant_deck(t, e["kind"], e["where"], e["size"], e.get("sign", 1.0), e.get("extra") or {})
     return t.deck
 
 
 # --------------------------------------------------------------------------------------------
-# noise-free responses, the declared model's sensitivities and the noncentrality
+# solves: the linear truth and the joint with a gap
 # --------------------------------------------------------------------------------------------
-def load_matrix(loads: list[tuple[str, int, int, float]]) -> LoadMatrix:
+def load_matrix(loads: list[tuple[str, int, int, float]], scale: float = 1.0) -> LoadMatrix:
     cases = list(dict.fromkeys(r[0] for r in loads))
     dofs = list(dict.fromkeys((r[1], r[2]) for r in loads))
     di, ci = {d: i for i, d in enumerate(dofs)}, {c: i for i, c in enumerate(cases)}
     V = sp.lil_matrix((len(dofs), len(cases)))
     for c, g, comp, v in loads:
-        V[di[(g, comp)], ci[c]] = v
+        V[di[(g, comp)], ci[c]] += v * scale
     return LoadMatrix(tuple(dofs), sp.csc_matrix(V), tuple(cases))
 
 
+def gap_springs(joint: dict) -> list[tuple[tuple[int, int], tuple[int, int], float]]:
+    """The joint's simple-model springs ``((grid_i, c), (grid_j, c), k)``, branch i < j."""
+    g = joint["grids"]
+    model = make_joint(joint["name"], g, "simple")
+    return [((g[ia - 1], "xyz".index(p) + 4), (g[ib - 1], "xyz".index(p) + 4), k)
+            for (p, ia, ib), k in zip(model.springs, joint["values"])]
+
+
+class GapNotConverged(RuntimeError):
+    """The signs of a joint with a gap cycle in a load case: no settled state was found."""
+
+
+def gap_solve(U: np.ndarray, G: np.ndarray, Ub: np.ndarray, Gbb: np.ndarray, springs, bindex, ratio: float,
+              max_iter: int = 60) -> tuple[np.ndarray, list[int]]:
+    """The responses with the joint's springs ``k_m`` where the relative rotation is >= 0 and
+    ``ratio k_m`` where it is < 0, from the linear responses (springs ``k_m``) ``U`` (rows: the
+    reported DOFs) and ``Ub`` (rows: the joint's rotation DOFs ``bindex``), and the flexibility
+    columns of unit moments at those DOFs (``G``, ``Gbb``): per case, the springs' stiffness
+    change ``dK`` gives ``u_b = (I + Gbb dK)^-1 u_b,lin`` and ``u = u_lin - G dK u_b``; the signs
+    are iterated from the linear state until they repeat. Returns the responses and the number of
+    iterations per case; raises :class:`GapNotConverged` when a case's signs cycle."""
+    nb = Gbb.shape[0]
+    E = np.zeros((len(springs), nb))
+    ks = np.array([k for _, _, k in springs])
+    for m, (a, b, _) in enumerate(springs):
+        E[m, bindex[a]] += 1.0
+        E[m, bindex[b]] -= 1.0
+    out = U.copy()
+    iters = []
+    for c in range(U.shape[1]):
+        ub = Ub[:, c]
+        neg = (E @ ub) < 0
+        seen = {neg.tobytes()}
+        for it in range(1, max_iter + 1):
+            dk = np.where(neg, (ratio - 1.0) * ks, 0.0)
+            dK = E.T @ (dk[:, None] * E)
+            ub_new = np.linalg.solve(np.eye(nb) + Gbb @ dK, Ub[:, c])
+            new_neg = (E @ ub_new) < 0
+            if np.array_equal(new_neg, neg):
+                out[:, c] = U[:, c] - G @ (dK @ ub_new)
+                iters.append(it)
+                break
+            if new_neg.tobytes() in seen:
+                raise GapNotConverged(f"load case {c + 1}: the springs' signs cycle after {it} iterations")
+            seen.add(new_neg.tobytes())
+            neg = new_neg
+        else:
+            raise GapNotConverged(f"load case {c + 1}: no settled signs in {max_iter} iterations")
+    return out, iters
+
+
+def truth_response(deck: Deck, lm: LoadMatrix, report: list[tuple[int, int]], gap: dict | None = None,
+                   ratio: float = 1.0) -> tuple[np.ndarray, list[int]]:
+    """Noise-free responses at ``report`` (rows) for every case of ``lm`` from one batched run of
+    the truth deck; with ``gap`` (a joint's truth) the joint's springs depend on the sign
+    (:func:`gap_solve`, the linear truth's flexibility at its rotation DOFs from the same run)."""
+    if gap is None:
+        return ReferenceAdapter(deck).solve(lm, report).values, []
+    rot = [(g, c) for g in gap["grids"] for c in (4, 5, 6)]
+    unit = LoadMatrix(tuple(rot), sp.identity(len(rot), format="csc"), tuple(f"u{q}" for q in range(len(rot))))
+    rows = list(dict.fromkeys(list(report) + rot))
+    out = ReferenceAdapter(deck).solve(lm.hstack(unit), rows).values
+    n = lm.n_cases
+    ri = {d: i for i, d in enumerate(rows)}
+    rep, bi = [ri[d] for d in report], [ri[d] for d in rot]
+    U, G = out[rep, :n], out[rep, n:]
+    Ub, Gbb = out[bi, :n], out[bi, n:]
+    return gap_solve(U, G, Ub, Gbb, gap_springs(gap), {d: i for i, d in enumerate(rot)}, ratio)
+
+
+# --------------------------------------------------------------------------------------------
+# noise-free responses, the declared model's sensitivities and the noncentrality
+# --------------------------------------------------------------------------------------------
 @dataclass
 class Response:
-    """The noise-free truth without the effect at the measured DOFs (all cases), the fitted
-    rows' sigma and the declared model's whitened sensitivity basis ``Q`` (orthonormal)."""
+    """The noise-free truth without effects: at the measured DOFs (``U0``, all cases), at further
+    DOFs (``extra``: neighbours of measured grids, for misplaced sensors), the fitted rows' sigma,
+    the declared model's whitened sensitivity basis ``Q`` (orthonormal), and for each joint the
+    flexibility columns of unit moments at its rotation DOFs (for a gap)."""
     U0: np.ndarray               # (n_dofs, n_cases)
     dofs: list[tuple[int, int]]
     fit_cases: np.ndarray        # column indices of the fitted cases
     sigma: np.ndarray            # (n_dofs, n_fit) of the fitted rows
     Q: np.ndarray                # (n_dofs * n_fit, r)
+    extra: dict                  # DOF -> (n_cases,) noise-free response
+    rot: dict                    # joint name -> (rot DOFs, U_rot (nb, n_cases), G (n_dofs, nb), Gbb (nb, nb))
 
     def whitened(self, U: np.ndarray) -> np.ndarray:
         """``(U - U0) / sigma`` on the fitted rows, flattened."""
@@ -357,27 +451,23 @@ class Response:
     def noncentrality(self, r: np.ndarray) -> float:
         return float(r @ r - np.sum((self.Q.T @ r) ** 2))
 
+    def value(self, dof) -> np.ndarray:
+        """The noise-free response at a measured or extra DOF, every case."""
+        dof = tuple(dof)
+        return self.U0[self.dofs.index(dof)] if dof in self.dofs else self.extra[dof]
+
 
 def declared_response(declared: Deck, joints: list[dict], lm: LoadMatrix, dofs, fit_cases,
-                      noise: NoiseConfig) -> Response:
+                      noise: NoiseConfig, extra: list[tuple[int, int]] = ()) -> Response:
     """One batched solve of the effect-free truth: the case loads and unit moments at every joint
     rotation DOF (their columns give the simple springs' sensitivities exactly:
     ``du/dk = -(G_a - G_b)(u_a - u_b)`` for a spring ``k`` between DOFs ``a`` and ``b``)."""
-    deck = truth_deck(declared, joints, NONE)
+    deck = truth_deck(declared, joints, [])
     rot = [(g, c) for j in joints for g in j["grids"] for c in (4, 5, 6)]
-    unit = sp.identity(len(rot), format="csc")
-    n_c = len(lm.cases)
-    all_dofs = list(dict.fromkeys(list(lm.dofs) + rot))
-    V = sp.lil_matrix((len(all_dofs), n_c + len(rot)))
-    idx = {d: i for i, d in enumerate(all_dofs)}
-    Lc = lm.values.tocoo()
-    for i, j, v in zip(Lc.row, Lc.col, Lc.data):
-        V[idx[lm.dofs[i]], j] = v
-    for q, d in enumerate(rot):
-        V[idx[d], n_c + q] = unit[q, q]
-    report = list(dict.fromkeys(list(dofs) + rot))
-    out = ReferenceAdapter(deck).solve(LoadMatrix(tuple(all_dofs), sp.csc_matrix(V),
-                                                  tuple(lm.cases) + tuple(f"u{q}" for q in range(len(rot)))), report)
+    unit = LoadMatrix(tuple(rot), sp.identity(len(rot), format="csc"), tuple(f"u{q}" for q in range(len(rot))))
+    n_c = lm.n_cases
+    report = list(dict.fromkeys(list(dofs) + rot + list(extra)))
+    out = ReferenceAdapter(deck).solve(lm.hstack(unit), report)
     rix = {d: i for i, d in enumerate(report)}
     mi = [rix[d] for d in dofs]
     U0 = out.values[mi, :n_c]
@@ -394,8 +484,12 @@ def declared_response(declared: Deck, joints: list[dict], lm: LoadMatrix, dofs, 
                         noise).reshape(true.shape)
     cols = []
     rq = {d: q for q, d in enumerate(rot)}
+    rots = {}
     for j in joints:
         g = j["grids"]
+        jr = [(x, c) for x in g for c in (4, 5, 6)]
+        qi = [rq[d] for d in jr]
+        rots[j["name"]] = (jr, out.values[[rix[d] for d in jr], :n_c], G[mi][:, qi], G[[rix[d] for d in jr]][:, qi])
         model = make_joint(j["name"], g, "simple")
         for (plane, i_a, i_b), k in zip(model.springs, j["values"]):
             c = "xyz".index(plane) + 4
@@ -406,7 +500,8 @@ def declared_response(declared: Deck, joints: list[dict], lm: LoadMatrix, dofs, 
     J = np.array(cols).T
     Us, s, _ = np.linalg.svd(J, full_matrices=False)
     Q = Us[:, s > 1e-10 * s.max()] if s.size else np.zeros((J.shape[0], 0))
-    return Response(U0, list(dofs), fc, sigma, Q)
+    ext = {d: out.values[rix[d], :n_c] for d in extra}
+    return Response(U0, list(dofs), fc, sigma, Q, ext, rots)
 
 
 def threshold_noncentrality(p: int, m_candidates: int, alpha: float = ALPHA,
@@ -417,38 +512,18 @@ def threshold_noncentrality(p: int, m_candidates: int, alpha: float = ALPHA,
 
 
 # --------------------------------------------------------------------------------------------
-# one study
+# places and their counts
 # --------------------------------------------------------------------------------------------
 def _effect_params(kind: str, n_branches: int, n_support_comps: int) -> int:
-    return {"joint_coupling": 3 * (n_branches - 1) * (3 * n_branches - 2) // 2 - 3 * n_branches * (n_branches - 1) // 2,
-            "joint_translation": 3, "undeclared_joint": 3, "support_flexibility": n_support_comps,
-            "load_scale": 1, "sensor_gain": 1, "sensor_offset": 1, "member_stiffness": 1}[kind]
-
-
-def candidate_places(deck: Deck, joints: list[dict], measured_grids: list[int], fit_labels: list[str],
-                     all_labels: list[str], channels: list[tuple[int, int]] = ()) -> dict[str, list]:
-    """Where each kind can be planted (and, counted, the Bonferroni ``M``)."""
-    at: dict[int, list[int]] = {}
-    for e, b in deck.cbars.items():
-        at.setdefault(b.ga, []).append(e)
-        at.setdefault(b.gb, []).append(e)
-    constrained: dict[int, str] = {}
-    for s in deck.spc1s:
-        for g in s.grids:
-            constrained[g] = "".join(sorted(set(constrained.get(g, "") + s.components)))
-    in_rbe2 = {g for r in deck.rbe2s.values() for g in (r.gn, *r.gm)}
-    declared = {g for j in joints for g in j["grids"]}
-    return {
-        "joint_coupling": [j["name"] for j in joints],
-        "joint_translation": [j["name"] for j in joints],
-        "undeclared_joint": [g for g in sorted(at) if len(at[g]) >= 2 and g not in declared
-                             and g not in constrained and g not in in_rbe2],
-        "support_flexibility": [g for g in sorted(constrained) if g in at and g not in in_rbe2],
-        "load_scale": [tuple(all_labels)] + [(c,) for c in fit_labels] + test_days(all_labels, fit_labels),
-        "sensor_gain": list(measured_grids),
-        "sensor_offset": list(channels),
-        "member_stiffness": sorted(deck.cbars),
-    }
+    if kind == "joint_coupling":
+        return 3 * (n_branches - 1) * (3 * n_branches - 2) // 2 - 3 * n_branches * (n_branches - 1) // 2
+    if kind == "joint_translation":
+        return 3
+    if kind == "undeclared_joint":
+        return 3
+    if kind == "support_flexibility":
+        return n_support_comps
+    return 1
 
 
 def test_days(all_labels: list[str], fit_labels: list[str]) -> list[tuple[str, ...]]:
@@ -470,13 +545,82 @@ def found_group_candidates(n_fit: int) -> int:
     return max(0, 2 * (n_fit - 2))
 
 
+def neighbours_of(deck: Deck, g: int) -> list[int]:
+    """Grids joined to ``g`` by one member (bar or rod)."""
+    out = {b.gb if b.ga == g else b.ga for b in deck.cbars.values() if g in (b.ga, b.gb)}
+    out |= {r.gb if r.ga == g else r.ga for r in deck.rods.values() if g in (r.ga, r.gb)}
+    return sorted(out)
+
+
+def candidate_places(deck: Deck, joints: list[dict], away: list[int], measured_grids: list[int],
+                     fit_labels: list[str], all_labels: list[str], channels: list[tuple[int, int]]) -> dict[str, list]:
+    """Where each kind can be planted (and, counted, the Bonferroni ``M``)."""
+    at: dict[int, list[int]] = {}
+    for e, b in deck.cbars.items():
+        at.setdefault(b.ga, []).append(e)
+        at.setdefault(b.gb, []).append(e)
+    constrained: dict[int, str] = {}
+    for s in deck.spc1s:
+        for g in s.grids:
+            constrained[g] = "".join(sorted(set(constrained.get(g, "") + s.components)))
+    in_rbe2 = {g for r in deck.rbe2s.values() for g in (r.gn, *r.gm)}
+    declared = {g for j in joints for g in j["grids"]}
+    clamped = {g for g, c in constrained.items() if c == "123456"}
+    by_comp: dict[int, list[int]] = {}
+    for g, k in channels:
+        if g in away:
+            by_comp.setdefault(k, []).append(g)
+    misplaced = []
+    for g in away:
+        comps = [k for gg, k in channels if gg == g]
+        for h in neighbours_of(deck, g):
+            if h in clamped or h in declared:
+                continue
+            misplaced.append((g, h, tuple(comps)))
+            misplaced += [(g, h, (k,)) for k in comps]
+    return {
+        "joint_coupling": [j["name"] for j in joints],
+        "joint_translation": [j["name"] for j in joints],
+        "joint_gap": [j["name"] for j in joints],
+        "undeclared_joint": [g for g in sorted(at) if len(at[g]) >= 2 and g not in declared
+                             and g not in constrained and g not in in_rbe2],
+        "support_flexibility": [g for g in sorted(constrained) if g in at and g not in in_rbe2],
+        "load_scale": [tuple(all_labels)] + [(c,) for c in fit_labels] + test_days(all_labels, fit_labels),
+        "sensor_gain": list(measured_grids),
+        "sensor_offset": list(channels),
+        "member_stiffness": sorted(deck.cbars),
+        "outlier": [(c, g, k) for c in fit_labels for g, k in channels],
+        "sign_flip": [(g, k) for g, k in channels if g in away],
+        "channel_swap": [(a, b, k) for k, gs in sorted(by_comp.items())
+                         for a, b in itertools.combinations(sorted(gs), 2)],
+        "misplaced_sensor": misplaced,
+    }
+
+
+def near_places(kind: str, deck: Deck, joints: list[dict]) -> set:
+    """Places of ``kind`` where something else could mimic the effect: an undeclared joint one
+    grid away from a declared joint; a member factor on a member framing into a joint or a
+    support; a flexible support where one bar ends (a factor on that bar could stand in)."""
+    declared = {g for j in joints for g in j["grids"]}
+    supported = {g for s in deck.spc1s for g in s.grids}
+    if kind == "undeclared_joint":
+        return {h for g in declared for h in neighbours_of(deck, g)} - declared
+    if kind == "member_stiffness":
+        return {e for e, b in deck.cbars.items() if {b.ga, b.gb} & (declared | supported)}
+    if kind == "support_flexibility":
+        ends = [g for b in deck.cbars.values() for g in (b.ga, b.gb)]
+        return {g for g in supported if ends.count(g) == 1}
+    return set()
+
+
 def _solve_size(lam: Callable[[float], float], target: float, s_max: float, s0: float) -> tuple[float, float] | None:
     """The size ``s`` with ``lam(s) = target`` (``lam`` ~ s^2 for small s), or None beyond ``s_max``."""
     l0 = lam(s0)
     if not l0 > 0:
         return None
     s = s0 * math.sqrt(target / l0)
-    for _ in range(10):
+    val = l0
+    for _ in range(12):
         if s > s_max:
             return None
         val = lam(s)
@@ -488,208 +632,37 @@ def _solve_size(lam: Callable[[float], float], target: float, s_max: float, s0: 
     return (s, val) if abs(val / target - 1.0) < 0.05 else None
 
 
-@dataclass
-class Study:
-    """A generated study: its folder (what the diagnosis sees) and the hidden record."""
-    index: int
-    folder: Path
-    hidden: Path
-    planted: dict
-
-
-def generate_study(index: int, seed: int, out: Path, kind: str | None = None, shape: str | None = None,
-                   multiple: float | None = None) -> Study:
-    """Write study ``index`` (seeded by ``seed`` and ``index``) into ``out/studies/sNNNN`` and its
-    truth and ``planted.json`` into ``out/hidden/sNNNN``. ``kind``/``shape``/``multiple`` force a
-    choice (the random draws stay the same, so the rest of the study does not change)."""
-    rng = np.random.default_rng([seed, index])
-    if kind is None:
-        names = list(KIND_WEIGHTS)
-        w = np.array([KIND_WEIGHTS[k] for k in names])
-        kind = str(rng.choice(names, p=w / w.sum()))
-    for attempt in range(30):
-        drawn_shape = str(rng.choice(SHAPES))
-        res = _try_study(rng, index, kind, shape or drawn_shape, multiple)
-        if res is not None:
-            break
-    else:
-        raise RuntimeError(f"study {index}: no place found for {kind} in 30 structures")
-    builder, joints, loads, holdout, measured, noise, plan = res
-    plan["attempts"] = attempt + 1
-    name = f"s{index:04d}"
-    folder, hidden = Path(out) / "studies" / name, Path(out) / "hidden" / name
-    for p in (folder, hidden):
-        if p.exists():
-            shutil.rmtree(p)
-    hidden.mkdir(parents=True)
-    initial = float(np.exp(np.mean([math.log(j["k"]) for j in joints])) * 10 ** rng.uniform(-0.5, 0.5))
-    write_study(folder, builder, loads, f"blind-{name}", model="simple", initial=float(f"{initial:.3g}"))
-    with (folder / "study.toml").open("a") as fh:
-        fh.write(f"[identification]\nholdout_cases = {json.dumps(holdout)}\n")
-    if plan.get("group_column"):
-        day = set(plan["where"])
-        with (folder / "loads.csv").open("w") as fh:
-            fh.write("case,grid,component,value,group\n")
-            for case, g, c, v in loads:
-                fh.write(f"{case},{g},{c},{v!r},{'day2' if case in day else 'day1'}\n")
-    declared = read_deck_text((folder / "model.bdf").read_text(), str(folder / "model.bdf"))
-    truth = truth_deck(declared, joints, plan["kind"], plan.get("where"), plan.get("size", 0.0),
-                       plan.get("sign", 1.0), plan.get("extra"))
-    (hidden / "truth").mkdir()
-    (hidden / "truth" / "truth.bdf").write_text(write_deck(truth, "large"))
-    force_scale = plan["factor"] if plan["kind"] == "load_scale" and plan["group"] == "all" else 1.0
-    away = sorted(set(measured) - {j["grids"][0] for j in joints})
-    (hidden / "truth" / "truth.toml").write_text("\n".join([
-        f"seed = {int(rng.integers(2**31))}", 'deck = "truth.bdf"', f"force_scale = {force_scale!r}", "",
-        "[noise]", f"relative = {noise.relative!r}", f"floor = {noise.floor!r}", "",
-        "[measure]", "joint = true", f"away_grids = {away}", ""]))
-    sim = simulate_cmd.run(folder, hidden / "truth" / "truth.toml", adapter="reference")
-    rows = list(sim.rows)
-    if plan["kind"] == "sensor_gain":
-        rows = [(c, g, comp, v * plan["factor"] if g == plan["where"] else v, s_, r)
-                for c, g, comp, v, s_, r in rows]
-    elif plan["kind"] == "sensor_offset":
-        rows = [(c, g, comp, v + plan["offset"] if (g, comp) == (plan["where"], plan["component"]) else v, s_, r)
-                for c, g, comp, v, s_, r in rows]
-    elif plan["kind"] == "load_scale" and plan["group"] != "all":
-        rows = [(c, g, comp, v * plan["factor"] if c in plan["where"] else v, s_, r)
-                for c, g, comp, v, s_, r in rows]
-    (folder / "measurements.csv").write_text(replace(sim, rows=rows).measurements_csv())
-    (hidden / "truth.json").write_text(json.dumps({**sim.record, "truth_file": "truth/truth.toml"}, indent=2))
-    planted = {"study": name, "index": index, "seed": seed, **plan, "joints": joints,
-               "holdout_cases": holdout, "measured_grids": measured,
-               "noise": {"relative": noise.relative, "floor": noise.floor},
-               "n_cases": len(dict.fromkeys(r[0] for r in loads)), "n_members": len(declared.cbars),
-               "n_grids": len(declared.grids), "n_measurements": len(rows),
-               "note": "blind benchmark: blackbox diagnose never reads this file or truth/"}
-    (hidden / "planted.json").write_text(json.dumps(planted, indent=2, default=_json_default))
-    return Study(index, folder, hidden, json.loads((hidden / "planted.json").read_text()))
-
-
-def _json_default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(type(o))
-
-
-def _try_study(rng: np.random.Generator, index: int, kind: str, shape: str, forced_multiple: float | None = None):
-    """One draw of structure, loads, sensors and noise with the effect placed and sized; None
-    when no place of ``kind`` reaches 5x its threshold within the physical sizes."""
-    builder, joints = build_structure(rng, shape)
-    if not joints:
-        return None
-    n_cases = int(rng.integers(8, 21))
-    loads = random_loads(builder, n_cases, seed=int(rng.integers(2**31)), per_case=int(rng.integers(1, 4)))
-    labels = list(dict.fromkeys(r[0] for r in loads))
-    n_hold = max(2, round(0.2 * len(labels))) if rng.random() < 2.0 / 3.0 else 0
-    holdout = sorted(rng.choice(labels, size=n_hold, replace=False).tolist(), key=labels.index)
-    fit_labels = [c for c in labels if c not in holdout]
-    joint_grids = {g for j in joints for g in j["grids"]}
-    free = [g for g in sorted(builder.grids) if g not in joint_grids and builder.spcs.get(g) != "123456"]
-    n_away = min(len(free), int(rng.integers(3, 9)))
-    away = sorted(int(g) for g in rng.choice(free, size=n_away, replace=False))
-    measured = sorted({j["grids"][0] for j in joints} | set(away))
-    dofs = [(g, c) for j in joints for g in j["grids"]
-            for c in ((1, 2, 3, 4, 5, 6) if g == j["grids"][0] else (4, 5, 6))]
-    dofs = list(dict.fromkeys(dofs + [(g, c) for g in away for c in range(1, 7)]))
-    noise = NoiseConfig(relative=float(rng.uniform(0.01, 0.05)), floor=float(rng.uniform(0.02, 0.10)))
-    declared = read_deck_text(builder.bdf("blind"), "<blind>")
-    lm = load_matrix(loads)
-    fit_cases = [labels.index(c) for c in fit_labels]
-    try:
-        # the declared deck (joint rotations free) must not be a mechanism: a chain of members
-        # between two joints could spin about its axis
-        ReferenceAdapter(declared).solve(lm, dofs[:1])
-        resp = declared_response(declared, joints, lm, dofs, fit_cases, noise)
-    except Exception:           # a mechanism, or a case that moves no measured DOF of one kind
-        return None
-    places = candidate_places(declared, joints, measured, fit_labels, labels, dofs)
-    group_column = bool(rng.random() < 0.5)
-    # the candidates the diagnosis offers (its Bonferroni M): not the test days (places to plant),
-    # but two groups from a group column, or the groups it finds from the data
-    n_candidates = (sum(len(v) for k, v in places.items() if k != "load_scale") + 1 + len(fit_labels)
-                    + (2 if group_column else found_group_candidates(len(fit_labels))))
-    plan: dict = {"kind": kind, "shape": shape, "n_candidates": n_candidates,
-                  "n_joints": len(joints), "branches": [len(j["grids"]) for j in joints],
-                  "holdout": bool(holdout)}
-    if kind == NONE:
-        return builder, joints, loads, holdout, measured, noise, plan
-    multiple = float(math.exp(rng.uniform(*np.log(MULTIPLE_RANGE))))
-    if forced_multiple is not None:
-        multiple = float(forced_multiple)
-    constrained = {g: c for g, c in builder.spcs.items()}
-    pool = places[kind]
-    if kind == "load_scale":        # all cases, one case or a test day, a third of the studies each
-        which = str(rng.choice(["all", "case", "day"]))
-        pool = [w for w in pool if (len(w) == len(labels)) == (which == "all")
-                and (len(w) == 1) == (which == "case")]
-    order = list(rng.permutation(len(pool)))
-    for pi in order[:12]:
-        where = pool[pi]
-        sign = float(rng.choice([-1.0, 1.0]))
-        extra: dict = {}
-        if kind in ("joint_coupling", "joint_translation"):
-            j = next(j for j in joints if j["name"] == where)
-            extra["grids"] = j["grids"]
-            n_br = len(j["grids"])
-            if kind == "joint_coupling":
-                m = 3 * n_br - 3
-                R = rng.standard_normal((m, m))
-                R = R + R.T
-                np.fill_diagonal(R, 0.0)
-                extra["rho"] = R / np.linalg.norm(R, 2)
-        else:
-            n_br = 0
-        p = _effect_params(kind, n_br, len(constrained.get(where, "")) if kind == "support_flexibility" else 0)
-        lam1 = threshold_noncentrality(p, n_candidates)
-        lam = _lambda_fn(kind, where, sign, extra, declared, joints, lm, resp, labels)
-        s0 = {"load_scale": 1e-3, "sensor_gain": 1e-3, "member_stiffness": 1e-3, "joint_coupling": 1e-3}.get(kind, 1e-4)
-        top = _solve_size(lam, MULTIPLE_RANGE[1] ** 2 * lam1, SIZE_MAX[kind], s0)
-        if top is None:
-            continue
-        one = _solve_size(lam, lam1, SIZE_MAX[kind], s0)
-        hit = _solve_size(lam, multiple ** 2 * lam1, SIZE_MAX[kind], s0)
-        if one is None or hit is None:
-            continue
-        size, lam_size = hit
-        plan.update({"where": list(where) if isinstance(where, tuple) else where, "sign": sign,
-                     **({"where": where[0], "component": where[1]} if kind == "sensor_offset" else {}),
-                     "size": size, "threshold_size": one[0], "multiple": math.sqrt(lam_size / lam1),
-                     "multiple_drawn": multiple, "noncentrality": lam_size, "threshold_noncentrality": lam1,
-                     "params": p, "extra": {k: v for k, v in extra.items()}})
-        plan.update(_describe(kind, where, size, sign, labels, resp))
-        if kind == "load_scale" and plan["group"] != "all":
-            plan["where"] = list(where)
-            if plan["group"] == "day":
-                plan["group_column"] = group_column
-        return builder, joints, loads, holdout, measured, noise, plan
-    return None
-
-
-def _describe(kind: str, where, size: float, sign: float, labels: list[str], resp: "Response") -> dict:
-    """The planted size in physical terms."""
-    if kind == "sensor_offset":
-        return {"offset": sign * size * _channel_scale(resp, where)}
-    if kind in ("load_scale", "sensor_gain"):
-        out = {"factor": 1.0 + sign * size}
-        if kind == "load_scale":
-            out["group"] = "all" if len(where) == len(labels) else ("case" if len(where) == 1 else "day")
-        return out
-    if kind == "member_stiffness":
-        return {"factor": math.exp(sign * size)}
-    if kind == "joint_coupling":
-        return {"coupling": size}
-    return {"compliance_ratio": size, "stiffness_factor": 1.0 / size}
-
-
-def _channel_scale(resp: "Response", channel) -> float:
+def _channel_scale(resp: Response, channel) -> float:
     """An offset's unit: the channel's largest noise-free |value| over the cases."""
     return float(np.abs(resp.U0[resp.dofs.index(tuple(channel))]).max())
 
 
-def _lambda_fn(kind, where, sign, extra, declared, joints, lm, resp: Response, labels) -> Callable[[float], float]:
+def read_map(effects: list[dict]) -> dict:
+    """What each defective channel really read: ``{(g, k): (source DOF, sign)}`` of the sign
+    flips, swaps and misplaced sensors among ``effects``."""
+    out = {}
+    for e in effects:
+        if e["kind"] == "sign_flip":
+            out[(e["where"][0], e["component"])] = ((e["where"][0], e["component"]), -1.0)
+        elif e["kind"] == "channel_swap":
+            a, b = e["where"]
+            k = e["component"]
+            out[(a, k)], out[(b, k)] = ((b, k), 1.0), ((a, k), 1.0)
+        elif e["kind"] == "misplaced_sensor":
+            g, h = e["where"][0], e["read_at"]
+            for k in e["components"]:
+                out[(g, k)] = ((h, k), 1.0)
+    return out
+
+
+def _read_values(resp: Response, mapping: dict) -> np.ndarray:
+    U = resp.U0.copy()
+    for dof, (src, s) in mapping.items():
+        U[resp.dofs.index(dof)] = s * resp.value(src)
+    return U
+
+
+def lambda_fn(kind, where, extra, declared, joints, lm, resp: Response, labels) -> Callable[[float], float]:
     """``lambda(size)``: the noncentrality of the effect of ``size`` at ``where``."""
     if kind == "sensor_offset":
         base = np.zeros_like(resp.U0)
@@ -708,11 +681,32 @@ def _lambda_fn(kind, where, sign, extra, declared, joints, lm, resp: Response, l
         base[:, cols] = resp.U0[:, cols]
         r1 = resp.whitened(resp.U0 + base)
         return lambda s: s * s * resp.noncentrality(r1)
+    if kind == "outlier":                       # size in units of the reading's sigma
+        c, g, k = where
+        fi = list(resp.fit_cases).index(labels.index(c))
+        r1 = np.zeros(resp.sigma.shape)
+        r1[resp.dofs.index((g, k)), fi] = 1.0
+        r1 = r1.ravel()
+        return lambda s: s * s * resp.noncentrality(r1)
+    if kind == "joint_gap":
+        jr, Ub, G, Gbb = resp.rot[where]
+        j = next(j for j in joints if j["name"] == where)
+        springs, bindex = gap_springs(j), {d: i for i, d in enumerate(jr)}
+        sign = extra["sign"]
+
+        def lam_gap(s: float) -> float:
+            try:
+                U, _ = gap_solve(resp.U0, G, Ub, Gbb, springs, bindex, math.exp(sign * s))
+            except GapNotConverged:
+                return float("nan")
+            return resp.noncentrality(resp.whitened(U))
+        return lam_gap
     cache: dict[float, float] = {}
 
     def lam(s: float) -> float:
         if s not in cache:
-            deck = truth_deck(declared, joints, kind, where, s, sign, extra)
+            deck = truth_deck(declared, joints, [{"kind": kind, "where": where, "size": s,
+                                                  "sign": extra.get("sign", 1.0), "extra": extra}])
             try:
                 U = ReferenceAdapter(deck).solve(lm, resp.dofs).values
             except Exception:           # a size that makes the structure a mechanism: no value
@@ -722,18 +716,454 @@ def _lambda_fn(kind, where, sign, extra, declared, joints, lm, resp: Response, l
     return lam
 
 
+def discrete_lambda(kind: str, place, resp: Response) -> float:
+    """The noncentrality of a sign flip, swap or misplaced sensor at ``place``."""
+    if kind == "sign_flip":
+        e = {"kind": kind, "where": [place[0]], "component": place[1]}
+    elif kind == "channel_swap":
+        e = {"kind": kind, "where": [place[0], place[1]], "component": place[2]}
+    else:
+        e = {"kind": kind, "where": [place[0]], "read_at": place[1], "components": list(place[2])}
+    return resp.noncentrality(resp.whitened(_read_values(resp, read_map([e]))))
+
+
+# --------------------------------------------------------------------------------------------
+# one study
+# --------------------------------------------------------------------------------------------
+@dataclass
+class Study:
+    """A generated study: its folder (what the diagnosis sees) and the hidden record."""
+    index: int
+    folder: Path
+    hidden: Path
+    planted: dict
+
+
+@dataclass
+class Draw:
+    """Everything one successful draw decided."""
+    frame: fr.Frame
+    declared: Deck
+    model_text: str
+    input_text: str | None
+    joints: list[dict]
+    loads: list
+    labels: list[str]
+    holdout: list[str]
+    away: list[int]
+    measured: list[int]
+    noise: NoiseConfig
+    effects: list[dict]
+    info: dict
+
+
+def generate_study(index: int, seed: int, out: Path, kind: str | tuple[str, ...] | None = None,
+                   shape: str | None = None, multiple: float | None = None, style: str | None = None,
+                   adapter: str | None = None) -> Study:
+    """Write study ``index`` (seeded by ``seed`` and ``index``) into ``out/studies/sNNNN`` and its
+    truth and ``planted.json`` into ``out/hidden/sNNNN``. ``kind`` (one kind, ``"none"``, or a
+    tuple of two), ``shape`` (the family), ``multiple``, ``style`` and ``adapter`` force a choice;
+    the other draws stay as they are."""
+    rng = np.random.default_rng([seed, index])
+    family = shape or study_family(seed, index)
+    st, ad = study_style(seed, index)
+    style, adapter = style or st, adapter or ad
+    kinds = draw_kinds(rng)
+    if family in ONE_JOINT and len(kinds) == 2 and all(k in JOINT_KINDS for k in kinds):
+        # two effects at two joints need two joints: the second goes elsewhere
+        kinds = (kinds[0], str(rng.choice([k for k in ALL_KINDS if k not in JOINT_KINDS])))
+    if kind is not None:
+        kinds = () if kind == NONE else ((kind,) if isinstance(kind, str) else tuple(kind))
+    failures: list[str] = []
+    for attempt in range(40):
+        try:
+            res = _try_study(rng, index, kinds, family, style, multiple)
+        except GapNotConverged as exc:
+            failures.append(f"joint_gap: {exc}")
+            res = None
+        if res is not None:
+            break
+    else:
+        raise RuntimeError(f"study {index}: no place found for {kinds} in 40 {family} structures")
+    res.info.update({"attempts": attempt + 1, "gap_not_converged": failures})
+    return write_study_files(index, seed, out, res, family, style, adapter, rng)
+
+
+def _try_study(rng: np.random.Generator, index: int, kinds: tuple[str, ...], family: str, style: str,
+               forced_multiple: float | None) -> Draw | None:
+    """One draw of structure, loads, sensors and noise with the effects placed and sized; None
+    when a place of some kind cannot be found."""
+    f = fr.FAMILIES[family](rng)
+    if style != "plain":
+        fr.assign_user_systems(f, rng)
+        add_offsets(f, rng)
+    place_joints(f, rng)
+    if not f.joints:
+        return None
+    n_cases = int(rng.integers(8, 21))
+    labels = [str(c + 1) for c in range(n_cases)] if style == "import" else [f"L{c + 1}" for c in range(n_cases)]
+    loads = random_loads(f, n_cases, rng, int(rng.integers(1, 4)), labels)
+    title = f"blind study {index}"
+    ustyle = fr.user_style(f, rng) if style != "plain" else None
+    if style == "plain":
+        model_text = fr.plain_text(f, title)
+    else:
+        model_text = fr.user_text(f, ustyle, title)
+    input_text = None
+    if style == "import":
+        free = [g for g in sorted(f.grids) if g not in f.spcs and all(g not in gs for _, gs in f.joints)]
+        input_text = fr.user_text(f, ustyle, title, loads=loads, decoy_spc=int(rng.choice(free)))
+    declared = read_deck_text(model_text, "<blind>")
+    joints = joint_truths(declared, f, rng)
+    n_hold = max(2, round(0.2 * len(labels))) if rng.random() < 2.0 / 3.0 else 0
+    holdout = sorted(rng.choice(labels, size=n_hold, replace=False).tolist(), key=labels.index)
+    fit_labels = [c for c in labels if c not in holdout]
+    joint_grids = {g for j in joints for g in j["grids"]}
+    free = [g for g in sorted(declared.grids) if g not in joint_grids and f.spcs.get(g) != "123456"]
+    n_away = min(len(free), int(rng.integers(4, 11)))
+    away = sorted(int(g) for g in rng.choice(free, size=n_away, replace=False))
+    measured = sorted({j["grids"][0] for j in joints} | set(away))
+    dofs = list(dict.fromkeys([d for j in joints for d in joint_dofs(j["grids"])]
+                              + [(g, c) for g in away for c in range(1, 7)]))
+    noise = NoiseConfig(relative=float(rng.uniform(0.01, 0.05)), floor=float(rng.uniform(0.02, 0.10)))
+    lm = load_matrix(loads)
+    fit_cases = [labels.index(c) for c in fit_labels]
+    extra = sorted({(h, c) for g in away for h in neighbours_of(declared, g) for c in range(1, 7)} - set(dofs))
+    try:
+        # the declared deck (joint rotations free) must not be a mechanism: a chain of members
+        # between two joints could spin about its axis
+        ReferenceAdapter(declared).solve(lm, dofs[:1])
+        resp = declared_response(declared, joints, lm, dofs, fit_cases, noise, extra)
+    except Exception:           # a mechanism, or a case that moves no measured DOF of one kind
+        return None
+    places = candidate_places(declared, joints, away, measured, fit_labels, labels, dofs)
+    group_column = bool(rng.random() < 0.5)
+    # the candidates the diagnosis offers (its Bonferroni M): not the test days (places to plant),
+    # but two groups from a group column, or the groups it finds from the data
+    n_candidates = (sum(len(v) for k, v in places.items() if k != "load_scale") + 1 + len(fit_labels)
+                    + (2 if group_column else found_group_candidates(len(fit_labels))))
+    info = {"n_candidates": n_candidates, "group_column": group_column}
+    effects: list[dict] = []
+    for kind in kinds:
+        e = plan_effect(rng, kind, places, declared, joints, lm, resp, labels, n_candidates,
+                        forced_multiple, effects, group_column)
+        if e is None:
+            return None
+        effects.append(e)
+    return Draw(f, declared, model_text, input_text, joints, loads, labels, holdout, away, measured, noise,
+                effects, info)
+
+
+def _overlaps(e: dict, others: list[dict]) -> bool:
+    """Two effects at one place: the same joint, grid, element, or a channel of the same grid."""
+    def grids(x):
+        w = x["where"]
+        w = w if isinstance(w, list) else [w]
+        out = {str(v) for v in w}
+        if x["kind"] == "misplaced_sensor":
+            out.add(str(x["read_at"]))
+        if x["kind"] == "load_scale":
+            out = {"case " + str(v) for v in w}
+        if x["kind"] == "outlier":
+            out = {str(x["where"][0]), "case " + str(x["case"])}
+        if x["kind"] == "member_stiffness":
+            out = {"element " + str(v) for v in w}
+        return out
+    mine = grids(e)
+    return any(mine & grids(o) for o in others)
+
+
+def plan_effect(rng, kind, places, declared, joints, lm, resp, labels, n_candidates, forced_multiple,
+                others, group_column) -> dict | None:
+    """Place and size one effect of ``kind`` (module docstring); None when no place works."""
+    multiple = float(forced_multiple) if forced_multiple is not None else draw_multiple(rng)
+    pool = list(places[kind])
+    placement = "anywhere"
+    near = near_places(kind, declared, joints)
+    if near and rng.random() < 0.5:
+        pool = [p for p in pool if p in near]
+        placement = {"undeclared_joint": "near_joint", "member_stiffness": "joint_or_support_member",
+                     "support_flexibility": "one_bar_support"}[kind]
+    if kind == "load_scale":        # all cases, one case or a test day, a third of the studies each
+        which = str(rng.choice(["all", "case", "day"]))
+        pool = [w for w in pool if (len(w) == len(labels)) == (which == "all")
+                and (len(w) == 1) == (which == "case")]
+    if not pool:
+        return None
+    if kind in DISCRETE:
+        return _plan_discrete(rng, kind, pool, resp, n_candidates, multiple, forced_multiple, others)
+    order = list(rng.permutation(len(pool)))
+    for pi in order[:12]:
+        where = pool[pi]
+        sign = float(rng.choice([-1.0, 1.0]))
+        extra: dict = {"sign": sign}
+        n_br = 0
+        if kind in JOINT_KINDS:
+            j = next(j for j in joints if j["name"] == where)
+            extra["grids"] = j["grids"]
+            n_br = len(j["grids"])
+            if kind == "joint_coupling":
+                m = 3 * n_br - 3
+                R = rng.standard_normal((m, m))
+                R = R + R.T
+                np.fill_diagonal(R, 0.0)
+                extra["rho"] = R / np.linalg.norm(R, 2)
+        constrained = {g: s.components for s in declared.spc1s for g in s.grids}
+        p = _effect_params(kind, n_br, len(set("".join(s.components for s in declared.spc1s if where in s.grids)))
+                           if kind == "support_flexibility" else 0)
+        if kind == "support_flexibility" and where not in constrained:
+            continue
+        e = {"kind": kind, "where": list(where) if isinstance(where, tuple) else where}
+        if kind == "outlier":
+            e.update({"where": [where[1]], "case": where[0], "component": where[2]})
+        if kind == "sensor_offset":
+            e.update({"where": where[0], "component": where[1]})
+        if _overlaps(e, others):
+            continue
+        lam1 = threshold_noncentrality(p, n_candidates)
+        lam = lambda_fn(kind, where, extra, declared, joints, lm, resp, labels)
+        s0 = {"load_scale": 1e-3, "sensor_gain": 1e-3, "member_stiffness": 1e-3, "joint_coupling": 1e-3,
+              "outlier": 1.0, "joint_gap": 1e-2}.get(kind, 1e-4)
+        one = _solve_size(lam, lam1, SIZE_MAX[kind], s0)
+        if one is None:
+            continue
+        hit = _solve_size(lam, multiple ** 2 * lam1, SIZE_MAX[kind], s0)
+        if hit is None:
+            continue
+        size, lam_size = hit
+        m = math.sqrt(lam_size / lam1)
+        e.update({"sign": sign, "size": size, "threshold_size": one[0], "multiple": m, "bin": size_bin(m),
+                  "multiple_drawn": multiple, "noncentrality": lam_size, "threshold_noncentrality": lam1,
+                  "params": p, "placement": placement, "extra": {k: v for k, v in extra.items()}})
+        e.update(_describe(kind, where, size, sign, labels, resp))
+        if kind == "load_scale" and e["group"] == "day":
+            e["group_column"] = group_column
+        return e
+    return None
+
+
+def _plan_discrete(rng, kind, pool, resp, n_candidates, multiple, forced, others) -> dict | None:
+    """A sign flip, swap or misplaced sensor at a place whose multiple is in the drawn bin."""
+    lam1 = threshold_noncentrality(1, n_candidates)
+    if len(pool) > 400:
+        pool = [pool[i] for i in rng.choice(len(pool), 400, replace=False)]
+    mults = {}
+    for place in pool:                  # below half its threshold a defect is not planted
+        lam = discrete_lambda(kind, place, resp)
+        if lam >= (BINS[0][0] ** 2) * lam1:
+            mults[place] = math.sqrt(lam / lam1)
+    if not mults:
+        return None
+    target = size_bin(multiple)
+    order = [target] + sorted((b for b in BIN_NAMES if b != target),
+                              key=lambda b: abs(BIN_NAMES.index(b) - BIN_NAMES.index(target)))
+    for b in order + [OVER]:
+        cands = [p for p, m in mults.items() if size_bin(m) == b]
+        rng.shuffle(cands)
+        for place in cands:
+            if kind == "sign_flip":
+                e = {"kind": kind, "where": [place[0]], "component": place[1]}
+            elif kind == "channel_swap":
+                e = {"kind": kind, "where": [place[0], place[1]], "component": place[2]}
+            else:
+                e = {"kind": kind, "where": [place[0]], "read_at": place[1], "components": list(place[2])}
+            if _overlaps(e, others):
+                continue
+            m = mults[place]
+            e.update({"size": 1.0, "multiple": m, "bin": size_bin(m), "multiple_drawn": multiple,
+                      "noncentrality": m * m * lam1, "threshold_noncentrality": lam1, "params": 1,
+                      "placement": "neighbour" if kind == "misplaced_sensor" else "anywhere",
+                      "bin_drawn": target})
+            return e
+    return None
+
+
+def _describe(kind: str, where, size: float, sign: float, labels: list[str], resp: Response) -> dict:
+    """The planted size in physical terms."""
+    if kind == "sensor_offset":
+        return {"offset": sign * size * _channel_scale(resp, where)}
+    if kind in ("load_scale", "sensor_gain"):
+        out = {"factor": 1.0 + sign * size}
+        if kind == "load_scale":
+            out["group"] = "all" if len(where) == len(labels) else ("case" if len(where) == 1 else "day")
+        return out
+    if kind == "member_stiffness":
+        return {"factor": math.exp(sign * size)}
+    if kind == "joint_coupling":
+        return {"coupling": size}
+    if kind == "joint_gap":
+        return {"ratio": math.exp(sign * size)}
+    if kind == "outlier":
+        c, g, k = where
+        fi = list(resp.fit_cases).index(labels.index(c))
+        s = float(resp.sigma[resp.dofs.index((g, k)), fi])
+        return {"offset": sign * size * s, "sigma_units": sign * size}
+    return {"compliance_ratio": size, "stiffness_factor": 1.0 / size}
+
+
+# --------------------------------------------------------------------------------------------
+# writing the study
+# --------------------------------------------------------------------------------------------
+def _toml_list(v) -> str:
+    return json.dumps(v)
+
+
+@dataclass
+class Simulated:
+    """The simulated measurements of a study: ``rows`` (``blackbox.simulation.SimulatedRows`` of
+    the readings: what each gauge saw, its sigma, its noise), ``values`` (with the effects on
+    the noisy values applied), the noise-free truth ``U`` at ``report`` and the readings ``read``
+    (noise-free, after sign flips, swaps and misplaced sensors)."""
+    cases: list[str]
+    dofs: list[tuple[int, int]]
+    rows: object
+    values: np.ndarray
+    U: np.ndarray
+    report: list[tuple[int, int]]
+    read: np.ndarray
+    force_scale: float
+    gap_iterations: list[int]
+
+
+def simulate_study(truth: Deck, loads, joints: list[dict], away: list[int], effects: list[dict],
+                   noise: NoiseConfig, noise_seed: int) -> Simulated:
+    """Measurements of the joints' DOFs and all components of ``away`` from the truth deck (the
+    joint with a gap solved per case), the readings' defects applied to what the gauges saw,
+    noise as ``blackbox simulate`` draws it (same order, seed ``noise_seed``), then gains,
+    offsets, load scales of cases and the outlier on the noisy values."""
+    scale = next((e["factor"] for e in effects if e["kind"] == "load_scale" and e["group"] == "all"), 1.0)
+    gap = next((e for e in effects if e["kind"] == "joint_gap"), None)
+    gap_joint = next(j for j in joints if j["name"] == gap["where"]) if gap else None
+    dofs = list(dict.fromkeys([dd for j in joints for dd in joint_dofs(j["grids"])]
+                              + [(g, c) for g in away for c in range(1, 7)]))
+    mapping = read_map(effects)
+    report = list(dict.fromkeys(dofs + [src for src, _ in mapping.values()]))
+    cases = list(dict.fromkeys(r[0] for r in loads))
+    U, iters = truth_response(truth, load_matrix(loads, scale), report, gap_joint, gap["ratio"] if gap else 1.0)
+    row = {dd: i for i, dd in enumerate(report)}
+    read = U[[row[dd] for dd in dofs]]
+    for k, dd in enumerate(dofs):
+        if dd in mapping:
+            src, s = mapping[dd]
+            read[k] = s * U[row[src]]
+    rows = simulate_rows(read, {dd: i for i, dd in enumerate(dofs)}, len(cases), dofs, noise,
+                         np.random.default_rng(noise_seed))
+    values = rows.values.copy()
+    for e in effects:               # effects on the noisy values
+        for i, ((g, comp), ci) in enumerate(zip(rows.dofs, rows.case_index)):
+            case = cases[ci]
+            if e["kind"] == "sensor_gain" and g == e["where"]:
+                values[i] *= e["factor"]
+            elif e["kind"] == "sensor_offset" and (g, comp) == (e["where"], e["component"]):
+                values[i] += e["offset"]
+            elif e["kind"] == "load_scale" and e["group"] != "all" and case in e["where"]:
+                values[i] *= e["factor"]
+            elif e["kind"] == "outlier" and (case, g, comp) == (e["case"], e["where"][0], e["component"]):
+                values[i] += e["offset"]
+    return Simulated(cases, dofs, rows, values, U, report, read, scale, iters)
+
+
+def write_study_files(index: int, seed: int, out: Path, d: Draw, family: str, style: str, adapter: str,
+                      rng: np.random.Generator) -> Study:
+    """The study folder (model.bdf, loads.csv, study.toml, measurements.csv) and the hidden
+    record (truth deck and settings, planted.json, the input file of an imported study)."""
+    name = f"s{index:04d}"
+    folder, hidden = Path(out) / "studies" / name, Path(out) / "hidden" / name
+    for p in (folder, hidden):
+        if p.exists():
+            shutil.rmtree(p)
+    folder.mkdir(parents=True)
+    (hidden / "truth").mkdir(parents=True)
+    effects = d.effects
+    loads = d.loads
+    if style == "import":
+        from blackbox.commands.import_deck import run as import_deck
+        src = hidden / f"{name}.dat"
+        src.write_text(d.input_text)
+        imp = import_deck(src)
+        (folder / "model.bdf").write_text(imp.model_bdf)
+        (folder / "loads.csv").write_text(imp.loads_csv)
+        loads = [(r[0], int(r[1]), int(r[2]), float(r[3]))
+                 for r in (line.split(",") for line in imp.loads_csv.splitlines()[1:] if line.strip())]
+    else:
+        (folder / "model.bdf").write_text(d.model_text)
+    day = next((e for e in effects if e["kind"] == "load_scale" and e.get("group") == "day"
+                and e.get("group_column")), None)
+    if day is not None or style != "import":
+        with (folder / "loads.csv").open("w") as fh:
+            fh.write("case,grid,component,value" + (",group" if day else "") + "\n")
+            for case, g, c, v in loads:
+                tail = f",{'day2' if case in day['where'] else 'day1'}" if day else ""
+                fh.write(f"{case},{g},{c},{v!r}{tail}\n")
+    initial = float(np.exp(np.mean([math.log(j["k"]) for j in d.joints])) * 10 ** rng.uniform(-0.5, 0.5))
+    lines = [f'name = "blind-{name}"', "", "[solver]", f'adapter = "{adapter}"', 'deck = "model.bdf"', ""]
+    for j in d.joints:
+        lines += ["[[joints]]", f'name = "{j["name"]}"', f"grids = {j['grids']}", 'model = "simple"',
+                  f"initial = {float(f'{initial:.3g}')!r}", ""]
+    lines += ["[identification]", f"holdout_cases = {_toml_list(d.holdout)}", ""]
+    (folder / "study.toml").write_text("\n".join(lines))
+
+    declared = read_deck_text((folder / "model.bdf").read_text(), str(folder / "model.bdf"))
+    truth = truth_deck(declared, d.joints, effects)
+    (hidden / "truth" / "truth.bdf").write_text(write_deck(truth, "large"))
+    noise_seed = int(rng.integers(2**31))
+    sim = simulate_study(truth, loads, d.joints, d.away, effects, d.noise, noise_seed)
+    scale, iters, rows, values, cases = sim.force_scale, sim.gap_iterations, sim.rows, sim.values, sim.cases
+    out_rows = ["case,grid,component,value,sigma"]
+    out_rows += [f"{cases[ci]},{g},{comp},{float(v)!r},{float(s)!r}"
+                 for (g, comp), ci, v, s in zip(rows.dofs, rows.case_index, values, rows.sigma)]
+    (folder / "measurements.csv").write_text("\n".join(out_rows) + "\n")
+    (hidden / "truth" / "truth.toml").write_text("\n".join([
+        f"seed = {noise_seed}", 'deck = "truth.bdf"', f"force_scale = {scale!r}", "",
+        "[noise]", f"relative = {d.noise.relative!r}", f"floor = {d.noise.floor!r}", "",
+        "[measure]", "joint = true", f"away_grids = {d.away}", ""]))
+    kinds = [e["kind"] for e in effects]
+    mults = [e["multiple"] for e in effects]
+    planted = {"study": name, "index": index, "seed": seed, "family": family, "shape": family,
+               "style": style, "adapter": adapter,
+               "kind": NONE if not kinds else "+".join(kinds), "kinds": kinds, "n_effects": len(kinds),
+               "effects": effects,
+               **({"where": effects[0]["where"]} if len(effects) == 1 else {}),
+               "multiple": min(mults) if mults else None, "bin": size_bin(min(mults)) if mults else None,
+               "n_joints": len(d.joints), "branches": [len(j["grids"]) for j in d.joints], "joints": d.joints,
+               "holdout": bool(d.holdout), "holdout_cases": d.holdout, "measured_grids": d.measured,
+               "away_grids": d.away, "noise": {"relative": d.noise.relative, "floor": d.noise.floor},
+               "n_cases": len(cases), "n_members": len(declared.cbars) + len(declared.rods),
+               "n_bars": len(declared.cbars), "n_rods": len(declared.rods), "n_grids": len(declared.grids),
+               "n_measurements": len(rows.values), "gap_iterations": iters, **d.info,
+               "note": "blind benchmark: blackbox diagnose never reads this file or truth/"}
+    (hidden / "planted.json").write_text(json.dumps(planted, indent=1, default=_json_default))
+    (hidden / "truth.json").write_text(json.dumps({"truth_file": "truth/truth.toml", "seed": noise_seed,
+                                                   "force_scale": scale, "cases": cases,
+                                                   "n_measurements": len(rows.values)}, indent=1))
+    return Study(index, folder, hidden, json.loads((hidden / "planted.json").read_text()))
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(type(o))
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("out", type=Path)
     ap.add_argument("--n", type=int, default=5)
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--kind", choices=(NONE,) + KINDS)
+    ap.add_argument("--kind", choices=(NONE,) + ALL_KINDS)
+    ap.add_argument("--family", choices=tuple(fr.FAMILIES))
+    ap.add_argument("--style", choices=tuple(STYLES))
     args = ap.parse_args(argv)
+    import time
     for i in range(args.n):
-        st = generate_study(i, args.seed, args.out, kind=args.kind)
+        t0 = time.perf_counter()
+        st = generate_study(i, args.seed, args.out, kind=args.kind, shape=args.family, style=args.style)
         p = st.planted
-        print(f"{st.folder.name}: {p['shape']}, joints {p['branches']}, {p['kind']}"
-              + (f" @ {p['where']} x{p['multiple']:.2f}" if p["kind"] != NONE else ""))
+        eff = ", ".join(f"{e['kind']} @ {e['where']} x{e['multiple']:.2f}" for e in p["effects"]) or "none"
+        print(f"{st.folder.name}: {p['family']} ({p['style']}, {p['adapter']}), {p['n_members']} members, "
+              f"joints {p['branches']}, {eff} ({time.perf_counter() - t0:.1f} s)", flush=True)
     return 0
 
 
