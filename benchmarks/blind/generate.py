@@ -60,10 +60,12 @@ diagnosis): the effect changes the noise-free measured values of the fitted case
 part of ``d / sigma`` that the declared model cannot absorb is ``r = (I - P) d / sigma``, ``P``
 the projector onto the declared joint parameters' sensitivities (log parameters, at the truth);
 the noncentrality of the chi2 excess it causes is ``lambda = |r|^2``. A likelihood-ratio test of
-the effect's ``p`` parameters at level ``alpha / M`` (``alpha = 0.01``, the diagnosis's default;
-``M`` the number of candidate effects the study offers over every kind, data defects included:
-each fitted reading an outlier, each channel a sign flip, each pair of channels of one component
-a swap, each grid-neighbour pair a misplaced sensor in seven ways; a Bonferroni correction)
+the effect's ``p`` parameters at the level the diagnosis spends on one hypothesis of its kind in
+its first round, ``alpha / (2 K M_k)`` (``alpha = 0.01``, the diagnosis's default; ``K`` the
+kinds the study offers candidates of, ``M_k`` the candidates of the effect's kind, data defects
+included: each fitted reading an outlier, each channel a sign flip, each pair of channels of one
+component a swap, each grid-neighbour pair a misplaced sensor in seven ways; see
+``blackbox.diagnosis.search.multipliers``)
 rejects with probability ``P(ncx2(p, lambda) > chi2_isf(alpha / M, p))``; the **threshold** is
 the noncentrality ``lambda_1`` at which that probability is 0.5, and an effect of threshold
 multiple ``m`` has noncentrality ``m^2 lambda_1``. Continuous effects are planted at the size
@@ -838,14 +840,17 @@ def _try_study(rng: np.random.Generator, index: int, kinds: tuple[str, ...], fam
         return None
     places = candidate_places(declared, joints, away, measured, fit_labels, labels, dofs)
     group_column = bool(rng.random() < 0.5)
-    # the candidates the diagnosis offers (its Bonferroni M): not the test days (places to plant),
-    # but two groups from a group column, or the groups it finds from the data
-    n_candidates = (sum(len(v) for k, v in places.items() if k != "load_scale") + 1 + len(fit_labels)
-                    + (2 if group_column else found_group_candidates(len(fit_labels))))
+    # the candidates the diagnosis offers (its Bonferroni M_k per kind): not the test days (places
+    # to plant), but two groups from a group column, or the groups it finds from the data
+    m_k = {k: len(v) for k, v in places.items() if k != "load_scale" and v}
+    m_k["load_scale"] = 1 + len(fit_labels) + (2 if group_column else found_group_candidates(len(fit_labels)))
+    # the diagnosis's first-round multiplier of one hypothesis of a kind (search.multipliers): 2 K M_k
+    mult = {k: 2 * len(m_k) * m for k, m in m_k.items()}
+    n_candidates = sum(m_k.values())
     info = {"n_candidates": n_candidates, "group_column": group_column}
     effects: list[dict] = []
     for kind in kinds:
-        e = plan_effect(rng, kind, places, declared, joints, lm, resp, labels, n_candidates,
+        e = plan_effect(rng, kind, places, declared, joints, lm, resp, labels, mult[kind],
                         forced_multiple, effects, group_column)
         if e is None:
             return None
@@ -873,7 +878,7 @@ def _overlaps(e: dict, others: list[dict]) -> bool:
     return any(mine & grids(o) for o in others)
 
 
-def plan_effect(rng, kind, places, declared, joints, lm, resp, labels, n_candidates, forced_multiple,
+def plan_effect(rng, kind, places, declared, joints, lm, resp, labels, multiplier, forced_multiple,
                 others, group_column) -> dict | None:
     """Place and size one effect of ``kind`` (module docstring); None when no place works."""
     multiple = float(forced_multiple) if forced_multiple is not None else draw_multiple(rng)
@@ -891,7 +896,7 @@ def plan_effect(rng, kind, places, declared, joints, lm, resp, labels, n_candida
     if not pool:
         return None
     if kind in DISCRETE:
-        return _plan_discrete(rng, kind, pool, resp, n_candidates, multiple, forced_multiple, others)
+        return _plan_discrete(rng, kind, pool, resp, multiplier, multiple, forced_multiple, others)
     order = list(rng.permutation(len(pool)))
     for pi in order[:12]:
         where = pool[pi]
@@ -920,7 +925,7 @@ def plan_effect(rng, kind, places, declared, joints, lm, resp, labels, n_candida
             e.update({"where": where[0], "component": where[1]})
         if _overlaps(e, others):
             continue
-        lam1 = threshold_noncentrality(p, n_candidates)
+        lam1 = threshold_noncentrality(p, multiplier)
         lam = lambda_fn(kind, where, extra, declared, joints, lm, resp, labels)
         s0 = {"load_scale": 1e-3, "sensor_gain": 1e-3, "member_stiffness": 1e-3, "joint_coupling": 1e-3,
               "outlier": 1.0, "joint_gap": 1e-2}.get(kind, 1e-4)
@@ -942,9 +947,9 @@ def plan_effect(rng, kind, places, declared, joints, lm, resp, labels, n_candida
     return None
 
 
-def _plan_discrete(rng, kind, pool, resp, n_candidates, multiple, forced, others) -> dict | None:
+def _plan_discrete(rng, kind, pool, resp, multiplier, multiple, forced, others) -> dict | None:
     """A sign flip, swap or misplaced sensor at a place whose multiple is in the drawn bin."""
-    lam1 = threshold_noncentrality(1, n_candidates)
+    lam1 = threshold_noncentrality(1, multiplier)
     if len(pool) > 400:
         pool = [pool[i] for i in rng.choice(len(pool), 400, replace=False)]
     mults = {}

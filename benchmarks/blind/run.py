@@ -371,7 +371,7 @@ def markdown(summary: dict, settings: dict) -> str:
         "branches, 8-20 load cases, 4-10 grids measured beside the joints, 1-5 % noise with a 2-10 % "
         "floor; none, one or two planted effects (13 kinds, data defects included), 0.5-20 times their "
         "detection threshold (the noncentrality at which a likelihood-ratio test of the effect's "
-        "parameters at 0.01 / M, M candidates of every kind, has 50 % power), placed where a member or "
+        "parameters at the level the diagnosis spends on one hypothesis of its kind in its first round, 0.01 / (2 K M_k), has 50 % power), placed where a member or "
         "a neighbouring joint could mimic them in half of the studies that have such places.",
         "",
         "Correct: every planted effect added, of its kind at its place (two-effect studies: both). A "
