@@ -109,8 +109,11 @@ def test_threshold_multiples(studies):
             else:                                   # discrete: the size its place gives it, >= 0.5x
                 assert e["multiple"] >= lo and e["bin"] in gen.BIN_NAMES + (gen.OVER,)
             assert e["bin"] == gen.size_bin(e["multiple"])
-            # the threshold: 50 % power of the chi2 test of the effect's parameters at 0.01 / M
-            crit = stats.chi2.isf(gen.ALPHA / st.planted["n_candidates"], e["params"])
+            # the threshold: 50 % power of the chi2 test of the effect's parameters at the level the
+            # diagnosis spends on one hypothesis of the kind in its first round, 0.01 / (2 K M_k)
+            per_kind = st.planted["candidates_per_kind"]
+            assert e["bonferroni"] == 2 * len(per_kind) * per_kind[e["kind"]]
+            crit = stats.chi2.isf(gen.ALPHA / e["bonferroni"], e["params"])
             assert stats.ncx2.sf(crit, e["params"], e["threshold_noncentrality"]) == pytest.approx(0.5, abs=1e-6)
             assert e["noncentrality"] == pytest.approx(e["multiple"] ** 2 * e["threshold_noncentrality"])
 

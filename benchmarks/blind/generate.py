@@ -847,7 +847,7 @@ def _try_study(rng: np.random.Generator, index: int, kinds: tuple[str, ...], fam
     # the diagnosis's first-round multiplier of one hypothesis of a kind (search.multipliers): 2 K M_k
     mult = {k: 2 * len(m_k) * m for k, m in m_k.items()}
     n_candidates = sum(m_k.values())
-    info = {"n_candidates": n_candidates, "group_column": group_column}
+    info = {"n_candidates": n_candidates, "candidates_per_kind": m_k, "group_column": group_column}
     effects: list[dict] = []
     for kind in kinds:
         e = plan_effect(rng, kind, places, declared, joints, lm, resp, labels, mult[kind],
@@ -938,7 +938,7 @@ def plan_effect(rng, kind, places, declared, joints, lm, resp, labels, multiplie
         size, lam_size = hit
         m = math.sqrt(lam_size / lam1)
         e.update({"sign": sign, "size": size, "threshold_size": one[0], "multiple": m, "bin": size_bin(m),
-                  "multiple_drawn": multiple, "noncentrality": lam_size, "threshold_noncentrality": lam1,
+                  "multiple_drawn": multiple, "noncentrality": lam_size, "threshold_noncentrality": lam1, "bonferroni": multiplier,
                   "params": p, "placement": placement, "extra": {k: v for k, v in extra.items()}})
         e.update(_describe(kind, where, size, sign, labels, resp))
         if kind == "load_scale" and e["group"] == "day":
@@ -976,7 +976,7 @@ def _plan_discrete(rng, kind, pool, resp, multiplier, multiple, forced, others) 
                 continue
             m = mults[place]
             e.update({"size": 1.0, "multiple": m, "bin": size_bin(m), "multiple_drawn": multiple,
-                      "noncentrality": m * m * lam1, "threshold_noncentrality": lam1, "params": 1,
+                      "noncentrality": m * m * lam1, "threshold_noncentrality": lam1, "bonferroni": multiplier, "params": 1,
                       "placement": "neighbour" if kind == "misplaced_sensor" else "anywhere",
                       "bin_drawn": target})
             return e
