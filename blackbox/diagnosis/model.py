@@ -312,6 +312,15 @@ class AugmentedModel:
         A[nS:, nS:] = D + IDK @ self.St
         return np.linalg.inv(A)             # small (n_S + m): inverted once, applied many times
 
+    def condition(self, x: np.ndarray) -> float:
+        """The 2-norm condition number of the augmented system solved at ``x``: how much it
+        amplifies the split run's rounding (large where a declared spring is many decades
+        stiffer than the structure around it, e.g. a fit that wants a joint rigid)."""
+        st = self.state(x)
+        with np.errstate(all="ignore"):
+            c = float(np.linalg.cond(st.Ainv))
+        return c if np.isfinite(c) else float("inf")
+
     CASE_ITERATIONS = 20
 
     def case_factors(self, x: np.ndarray, u_S: np.ndarray) -> np.ndarray:
