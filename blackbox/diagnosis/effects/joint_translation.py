@@ -6,7 +6,9 @@ own stiffness there). Released, as the data support (:func:`~blackbox.diagnosis.
 "equal" (``kt_J``: one factor on that stiffness along every global axis), "per-axis" (``ktx_J,
 kty_J, ktz_J``: equal springs between every pair of branches along each axis) or "per-branch"
 (``ktx_J_G`` ...: per axis, a spring from each branch grid ``G`` to the joint's centre; three
-or more branches). A joint whose tie is not one RBE2 CM=123 on its
+or more branches). Each axis is also a candidate of its own ("axis-x": ``ktx_J`` only, the other
+axes rigid; then the same richer rungs): a joint loose along one axis, which "equal" would
+spread over all three. A joint whose tie is not one RBE2 CM=123 on its
 first grid has no candidate. A branch grid with no member (a clamped footing: the joint is the
 structure's support) is bridged with the other branch's stiffness.
 """
@@ -17,7 +19,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from blackbox.diagnosis.effects.connection import Connection, branch_ladder
+from blackbox.diagnosis.effects.connection import Connection, Rung, branch_ladder
 from blackbox.diagnosis.effects.registry import register
 
 __all__ = ["JointTranslation"]
@@ -65,4 +67,13 @@ class JointTranslation(Connection):
                                    (f"ktx_{jc.name}", f"kty_{jc.name}", f"ktz_{jc.name}"), f"kt_{jc.name}",
                                    tuple(str(g) for g in jc.grids))
             out.append(cls.on_ladder((jc.name,), idx, ladder))
+            # a joint loose along one axis only (a slotted hole, a pin with play): "equal" scales
+            # every axis alike and can miss it, so each axis is a candidate of its own, its
+            # richer rungs those of the ladder (the other axes start rigid)
+            for p, axis in enumerate("xyz"):
+                embed = np.zeros((3, 1))
+                embed[p, 0] = 1.0
+                first = Rung(f"axis-{axis}", (ladder[1].names[p],), ladder[1].basis[p:p + 1],
+                             ladder[1].k_ref[p:p + 1])
+                out.append(cls.on_ladder((jc.name,), idx, (first, replace(ladder[1], embed=embed), *ladder[2:])))
         return out

@@ -4,7 +4,9 @@ Cut: the grid's SPC components (SPC1 sets and GRID PS) are removed and each is r
 grounded spring ``K0`` (the sum of the members' own stiffness at the grid in that component).
 Released, as the data support (:func:`~blackbox.diagnosis.effects.connection.grounded_ladder`):
 "equal" (``ks_G_T``, ``ks_G_R``: one factor on that stiffness for the translations and one for
-the rotations) or "per-axis" (``ks_G_C``: one spring per constrained component). Grids in an RBE2 or with
+the rotations) or "per-axis" (``ks_G_C``: one spring per constrained component). Each component is also a
+candidate of its own ("component-3": ``ks_G_3`` only, the others rigid; richer: "per-axis"): a
+support elastic in one direction, which "equal" would spread over all. Grids in an RBE2 or with
 no member have no candidate.
 """
 
@@ -15,7 +17,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from blackbox.diagnosis.decks import constrained_grids, rbe2_grids
-from blackbox.diagnosis.effects.connection import GridConnection, grounded_ladder
+from blackbox.diagnosis.effects.connection import GridConnection, Rung, grounded_ladder
 from blackbox.diagnosis.effects.registry import register
 from solver_adapters.protocol import Spc1
 
@@ -56,5 +58,16 @@ class SupportFlexibility(GridConnection):
                 k0 = editor.bridge(g, int(c), at[g], "sum")
                 idx.append(editor.connect(k0, (g, int(c))))
                 ks.append(k0)
-            out.append(cls.on_ladder((g,), idx, grounded_ladder(comps, np.array(ks), f"ks_{g}")))
+            ladder = grounded_ladder(comps, np.array(ks), f"ks_{g}")
+            out.append(cls.on_ladder((g,), idx, ladder))
+            if len(ladder) > 1:
+                # elastic along one component only (a bearing pad, a rail's vertical support):
+                # "equal" softens every translation (rotation) alike and can miss it, so each
+                # component is a candidate of its own, richer as "per-axis" (the others rigid)
+                per = ladder[-1]
+                for q, c in enumerate(comps):
+                    embed = np.zeros((len(comps), 1))
+                    embed[q, 0] = 1.0
+                    first = Rung(f"component-{c}", (per.names[q],), per.basis[q:q + 1], per.k_ref[q:q + 1])
+                    out.append(cls.on_ladder((g,), idx, (first, replace(per, embed=embed))))
         return out
