@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from blackbox.fitting.statistics import chi2_band
-from blackbox.reports.plots import pyplot
+from blackbox.reports import raster
 
 __all__ = ["measured_data_report", "measured_data_plots", "amplitude_table", "single_load", "amplitude_before_after"]
 
@@ -147,9 +147,9 @@ def measured_data_report(res) -> str:
 def measured_data_plots(res, out_dir: Path) -> list[str]:
     """``load_displacement.png`` (measured and fitted, when every case loads one DOF) and
     ``residual_amplitude.png`` (the residual signed with the measured value, so that a response
-    larger than the model's is above 0 on either side of the cycle). Returns the file names written."""
-    plt = pyplot()
-    if plt is None or res.prediction is None:
+    larger than the model's is above 0 on either side of the cycle), drawn with
+    :mod:`blackbox.reports.raster`. Returns the file names written."""
+    if not raster.available() or res.prediction is None:
         return []
     obs, pred = res.all_obs, res.prediction
     lab = _row_cases(obs)
@@ -157,55 +157,51 @@ def measured_data_plots(res, out_dir: Path) -> list[str]:
     held = np.isin(lab, list(res.declared.holdout))
     written = []
     sl = single_load(res.study.loads, lab)
+    C0, C1, C2, C3 = raster.PALETTE[:4]
     if sl is not None:
         (g, c), load = sl
         channels = list(dict.fromkeys(obs.dofs))[:4]
-        fig, axes = plt.subplots(1, len(channels), figsize=(6.5 * len(channels), 5), squeeze=False)
-        for ax, ch in zip(axes[0], channels):
+        fig = raster.Figure(650 * len(channels), 500)
+        for ax, ch in zip(fig.panels(len(channels)), channels):
             m = np.array([d == ch for d in obs.dofs])
             order = np.argsort(obs.case_index[m], kind="stable")
             x, y, p = obs.values[m][order], load[m][order], pred[m][order]
             f = fitted[m][order]
-            ax.plot(x, y, "-", color="0.6", lw=0.7, label="measured (in case order)")
-            ax.plot(x[f], y[f], "o", ms=3.5, color="C0", label="measured, fitted cases")
             lim = np.array([y.min(), y.max()])
             slope = np.polyfit(y, p, 1) if np.ptp(y) > 0 else np.array([0.0, 0.0])
-            ax.plot(np.polyval(slope, lim), lim, "-", color="C3", lw=1.5, label="identified model")
-            ax.axhline(0.0, color="k", lw=0.5)
-            ax.axvline(0.0, color="k", lw=0.5)
-            ax.set_xlabel(f"measured displacement at grid {ch[0]}, component {ch[1]}")
-            ax.set_ylabel(f"load at grid {g}, component {c}")
-            ax.legend(fontsize=8)
-            ax.set_title("load - displacement: measured and identified")
-        fig.tight_layout()
-        fig.savefig(out_dir / "load_displacement.png", dpi=110)
-        plt.close(fig)
-        written.append("load_displacement.png")
+            ax.limits(np.r_[x, np.polyval(slope, lim), 0.0], np.r_[y, 0.0])
+            ax.hline(0.0)
+            ax.vline(0.0)
+            ax.line(x, y, color="#999999", width=1, label="measured (in case order)")
+            ax.points(x[f], y[f], color=C0, size=3, label="measured, fitted cases")
+            ax.line(np.polyval(slope, lim), lim, color=C3, width=2, label="identified model")
+            ax.xlabel = f"measured displacement at grid {ch[0]}, component {ch[1]}"
+            ax.ylabel = f"load at grid {g}, component {c}"
+            ax.title = "load - displacement: measured and identified"
+        written.append(fig.save(out_dir / "load_displacement.png"))
     rot = np.array([cc >= 4 for _, cc in obs.dofs])
     kinds = [(k, m) for k, m in (("translation", ~rot), ("rotation", rot)) if m.any()]
-    fig, axes = plt.subplots(1, len(kinds), figsize=(7 * len(kinds), 4.5), squeeze=False)
     # the residual in the direction of the measured value: > 0 where the structure moved more
     # than the model says, whichever way it moved (a softening shows as one rising band)
     resid = (obs.values - pred) * np.where(obs.values < 0, -1.0, 1.0)
-    for ax, (kind, m) in zip(axes[0], kinds):
-        for sel, style, label in ((m & ~fitted & ~held, dict(color="C1", ms=3, alpha=0.6), "predicted (not fitted)"),
-                                  (m & held, dict(color="C2", ms=4), "hold-out"),
-                                  (m & fitted & ~held, dict(color="C0", ms=5), "fitted")):
-            if sel.any():
-                ax.plot(np.abs(obs.values[sel]), resid[sel], "o", label=f"{label} ({int(sel.sum())})", **style)
+    fig = raster.Figure(700 * len(kinds), 450)
+    for ax, (kind, m) in zip(fig.panels(len(kinds)), kinds):
         s = obs.sigma[m]
-        if s.size:
-            ax.axhspan(-2 * float(np.median(s)), 2 * float(np.median(s)), color="0.85",
-                       label="+-2 sigma (median)")
-        ax.axhline(0.0, color="k", lw=0.5)
-        ax.set_xlabel(f"|measured {kind}|")
-        ax.set_ylabel("(measured - predicted) x sign(measured)")
-        ax.legend(fontsize=8)
-        ax.set_title(f"residual against amplitude ({kind}s)")
-    fig.tight_layout()
-    fig.savefig(out_dir / "residual_amplitude.png", dpi=110)
-    plt.close(fig)
-    written.append("residual_amplitude.png")
+        band = 2 * float(np.median(s)) if s.size else 0.0
+        ax.limits(np.abs(obs.values[m]), np.r_[resid[m], -band, band])
+        if band > 0:
+            ax.hspan(-band, band, label="+-2 sigma (median)")
+        ax.hline(0.0)
+        for sel, color, size, label in ((m & ~fitted & ~held, C1, 2, "predicted (not fitted)"),
+                                        (m & held, C2, 3, "hold-out"),
+                                        (m & fitted & ~held, C0, 3, "fitted")):
+            if sel.any():
+                ax.points(np.abs(obs.values[sel]), resid[sel], color=color, size=size,
+                          label=f"{label} ({int(sel.sum())})")
+        ax.xlabel = f"|measured {kind}|"
+        ax.ylabel = "(measured - predicted) x sign(measured)"
+        ax.title = f"residual against amplitude ({kind}s)"
+    written.append(fig.save(out_dir / "residual_amplitude.png"))
     return written
 
 
