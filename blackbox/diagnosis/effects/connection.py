@@ -134,6 +134,13 @@ class Connection(Effect):
     basis: np.ndarray | None = None
     k_ref: np.ndarray | None = None
     ladder: tuple[Rung, ...] = ()
+    track: str = ""
+    """Which of several candidates on the same cut this is (the joint's "axis-x" beside its
+    "equal"): part of the key, so each is scored, refitted and reported on its own."""
+
+    @property
+    def key(self) -> tuple:
+        return (self.kind, tuple(self.where)) + ((self.track,) if self.track else ())
 
     @classmethod
     def on_ladder(cls, where: tuple, pairs, ladder: tuple[Rung, ...], level: int = 0, **kw) -> "Connection":

@@ -75,5 +75,6 @@ class JointTranslation(Connection):
                 embed[p, 0] = 1.0
                 first = Rung(f"axis-{axis}", (ladder[1].names[p],), ladder[1].basis[p:p + 1],
                              ladder[1].k_ref[p:p + 1])
-                out.append(cls.on_ladder((jc.name,), idx, (first, replace(ladder[1], embed=embed), *ladder[2:])))
+                out.append(cls.on_ladder((jc.name,), idx, (first, replace(ladder[1], embed=embed), *ladder[2:]),
+                                          track=first.variant))
         return out

@@ -69,5 +69,5 @@ class SupportFlexibility(GridConnection):
                     embed = np.zeros((len(comps), 1))
                     embed[q, 0] = 1.0
                     first = Rung(f"component-{c}", (per.names[q],), per.basis[q:q + 1], per.k_ref[q:q + 1])
-                    out.append(cls.on_ladder((g,), idx, (first, replace(per, embed=embed))))
+                    out.append(cls.on_ladder((g,), idx, (first, replace(per, embed=embed)), track=first.variant))
         return out
