@@ -397,7 +397,7 @@ def test_registry_one_family_per_module():
     """Every family is registered under its kind, in its own module named after it; the kinds
     are the ones diagnosis.json uses."""
     assert set(dg.kinds()) == {"joint_coupling", "joint_translation", "undeclared_joint", "support_flexibility",
-                               "load_scale", "sensor_gain", "sensor_offset", "member_stiffness"}
+                               "load_scale", "sensor_gain", "sensor_offset", "member_stiffness", "rigid_end_zone"}
     for kind in dg.kinds():
         cls = dg.get(kind)
         assert cls.kind == kind and cls.__module__ == f"blackbox.diagnosis.effects.{kind}"

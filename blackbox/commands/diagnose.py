@@ -56,7 +56,8 @@ from blackbox.commands.common import as_study
 from blackbox.declared import DeclaredModel, SolverCost, declared_model
 from blackbox.diagnosis.decks import SplitDeck, element_deck, split_deck, unmodelled_notes
 from blackbox.diagnosis.document import diagnosis_document, verdict_detail
-from blackbox.diagnosis.effects import CandidateContext, CandidateLimit, Effect, MemberStiffness, families
+from blackbox.diagnosis.effects import (CandidateContext, CandidateLimit, Effect, MemberStiffness, RigidEndZone,
+                                       families)
 from blackbox.diagnosis.effects.load_scale import case_scales
 from blackbox.diagnosis.effects.undeclared_joint import UndeclaredJoint, joint_candidate_grids
 from blackbox.diagnosis.runs import RunRecord, element_stiffness
@@ -217,11 +218,13 @@ def _split_needs_declared_fit(deck: Deck, dm: DeclaredModel, fams, max_joint_can
     """Whether the split run depends on the declared fit: when there is one and a capped family
     has more candidates than its cap, the fit's residuals choose them -- the undeclared-joint
     grids the split deck cuts (:meth:`UndeclaredJoint.cut`), the members whose end DOFs it
-    reports (:meth:`MemberStiffness.split_rows`)."""
+    reports (:meth:`MemberStiffness.split_rows`; :meth:`RigidEndZone.split_rows`, the members at
+    the grids chosen as undeclared joints are)."""
     if not dm.joints:
         return False
     declared = {g for j in dm.joints for g in j.grids}
-    return ((UndeclaredJoint in fams and len(joint_candidate_grids(deck, declared)) > max_joint_candidates)
+    return (((UndeclaredJoint in fams or RigidEndZone in fams)
+             and len(joint_candidate_grids(deck, declared)) > max_joint_candidates)
             or (MemberStiffness in fams and len(deck.cbars) > max_member_candidates))
 
 

@@ -17,7 +17,8 @@ from blackbox.diagnosis.effects.member_stiffness import MemberStiffness  # noqa:
 from blackbox.diagnosis.effects.load_scale import LoadScale  # noqa: E402
 from blackbox.diagnosis.effects.sensor_gain import SensorGain  # noqa: E402
 from blackbox.diagnosis.effects.sensor_offset import SensorOffset  # noqa: E402
+from blackbox.diagnosis.effects.rigid_end_zone import RigidEndZone  # noqa: E402
 
 __all__ = ["CandidateContext", "CandidateLimit", "Effect", "Connection", "register", "get", "kinds", "families",
            "UndeclaredJoint", "JointTranslation", "SupportFlexibility", "JointCoupling", "MemberStiffness",
-           "LoadScale", "SensorGain", "SensorOffset"]
+           "LoadScale", "SensorGain", "SensorOffset", "RigidEndZone"]
