@@ -392,9 +392,14 @@ KNOWN_DIFFERENCES: dict[str, str] = {}
 the adapter), with the reason; they fail strictly, so a fix shows up."""
 
 
+LEFT_OUT = {"shell_thin": "its diagnosis piles complex-joint refits over five rounds (many minutes per adapter); "
+                         "its study is shell_thick's frame with a thinner wall, which is compared"}
+"""Folders not compared here, with the reason."""
+
+
 def _all_folders():
     for p in sorted((ROOT / "fixtures" / "undeclared").iterdir()):
-        if not (p / "study.toml").is_file() or p.name in ("none", "support_flexibility"):
+        if not (p / "study.toml").is_file() or p.name in ("none", "support_flexibility") or p.name in LEFT_OUT:
             continue
         why = KNOWN_DIFFERENCES.get(p.name)
         yield pytest.param(p.name, marks=pytest.mark.xfail(reason=why, strict=True)) if why else p.name
