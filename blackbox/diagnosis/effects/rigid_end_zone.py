@@ -62,8 +62,9 @@ from solver_adapters.protocol import DofLabel
 __all__ = ["RigidEndZone", "ZoneMember", "beam_polynomial", "zone_stiffness", "PRISMATIC_RTOL", "E_MAX_FRACTION"]
 
 PRISMATIC_RTOL = 1e-4       # F_tu of K_e against the prismatic beam's L^2/2 D X (scaled by the
-                            # diagonal): above this the member is no prismatic beam (an offset of
-                            # 1 % of L gives ~1e-2); a K_e from 7-digit flexibilities is off ~1e-6
+                            # diagonal): above this the member is no prismatic beam (a sideways
+                            # offset of 0.1 % of L gives 2e-2); a K_e from 7-digit flexibilities
+                            # is off ~1e-6
 E_MAX_FRACTION = 0.5        # a zone reaches at most half the shortest member at the joint
 AT_BOUND = 1e-9             # a per-member length (m) below this after a refit: that member has no zone
 START_FRACTION = 0.2        # a third refit start: every zone at 0.2 x its upper bound
