@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from blackbox.commands.output import check_out, write_output
-from blackbox.errors import BlackboxError
+from blackbox.errors import BlackboxError, EditedDeckError
 from solver_adapters.errors import ConsentError
 from solver_adapters.protocol import DeckFormatError, ModelError, SolverError, UnknownDofError
 
@@ -101,9 +101,10 @@ def cmd_identify(args) -> int:
     study = load_study(args.study, need_measurements=True)
     print(f"identify {study.name}: {len(study.measurements)} measurements, joints "
           f"{[j.name for j in study.config.joints]}", flush=True)
+    cases = [c.strip() for c in args.cases.split(",") if c.strip()] if args.cases is not None else None
     with _executor(args, "solver chunks, bootstrap refits") as ex:
         res = identify.run(study, adapter=_chunked(study, args, ex), model=args.model, progress=progress,
-                           stages=_Throttled(), executor=ex)
+                           stages=_Throttled(), executor=ex, cases=cases)
     print("  writing the report and plots", flush=True)
     files = write_output(out, "identify", res.write)
     r, cost = res.result, res.solver
@@ -112,6 +113,27 @@ def cmd_identify(args) -> int:
           + (f" + {cost.cached_batches} batch(es) from the cache" if cost.cached_batches else "")
           + f", {cost.right_hand_sides} right-hand sides, adapter {cost.adapter!r} -> {out}"
           + ("" if any(f.endswith(".png") for f in files) else " (no plots: install matplotlib)"))
+    if res.patterns:
+        sel = res.selection_json()
+        print(f"  fitted the {sel['fitted_cases']} case(s) matching {list(res.patterns)}; "
+              f"{sel['excluded_cases']} other case(s) predicted"
+              + (f", RMS error {sel['excluded_rms_error']:.4g}" if sel["excluded_rms_error"] is not None else ""))
+    if res.fit_sigma is not None:
+        fs = res.fit_sigma
+        print("  sigma estimated from this fit (" + ", ".join(
+            f"{k} {s:.4g}, {100 * fs.confidence:g}% interval [{lo:.4g}, {hi:.4g}]"
+            for k, s, lo, hi in zip(fs.kinds, fs.sigma, fs.ci_low, fs.ci_high))
+            + "): the chi-square test of the model is off")
+    elif res.noise is not None and res.noise.estimated:
+        print("  sigma from " + ", ".join(f"{k}: {v} row(s)" for k, v in res.noise.counts().items()))
+    for name, value, lo, hi in zip(r.param_names, r.k, r.ci_low, r.ci_high):
+        if len(r.param_names) <= 6:
+            print(f"  {name} = {value:.5g}  [{lo:.4g}, {hi:.4g}] ({100 * r.confidence:g}%)")
+    if res.scaled is not None and len(r.param_names) <= 6:
+        sc = res.scaled
+        print(f"  the chi-square test fails; with sigma scaled to the residuals (x {sc.covariance_scale ** 0.5:.3g}, "
+              "Student t): " + ", ".join(f"{n} [{lo:.4g}, {hi:.4g}]"
+                                         for n, lo, hi in zip(sc.param_names, sc.ci_low, sc.ci_high)))
     _warn(list(r.warnings))
     if not res.ok:
         why = [] if r.converged else ["the estimation did not converge"]
@@ -196,12 +218,29 @@ def cmd_design(args) -> int:
     return EXIT_OK
 
 
+def cmd_measurements(args) -> int:
+    """``blackbox measurements READINGS --channels CHANNELS.csv --study STUDY --out DIR``: rig readings
+    become measurements.csv (docs/measurements.md)."""
+    from blackbox.commands import measurements
+
+    out = check_out(args.out, "measurements", protect=(args.study,) if args.study.is_dir() else ())
+    res = measurements.run(args.readings, args.channels, args.study)
+    write_output(out, "measurements", res.write)
+    doc = res.to_json()
+    print(f"{doc['rows']} measurement row(s) from {len(res.channels)} channel(s) over "
+          f"{len({r[0] for r in res.rows})} case(s)"
+          + (f", {doc['rows_without_sigma']} without sigma" if doc["rows_without_sigma"] else "")
+          + f" -> {out / 'measurements.csv'}")
+    _warn(list(res.notes))
+    return EXIT_OK
+
+
 def cmd_import(args) -> int:
     """``blackbox import DECK --out STUDY``: a NASTRAN input file becomes a study folder (docs/import.md)."""
     from blackbox.commands import import_deck
 
     out = check_out(args.out, "import")
-    res = import_deck.run(args.deck, joints=args.joint)
+    res = import_deck.run(args.deck, joints=args.joint, include_dirs=args.include_dir)
     write_output(out, "import", res.write)
     for note in res.notes:
         print(f"  {note}")
@@ -292,12 +331,15 @@ def cmd_conformance(args) -> int:
                 others = cf.conformance_decks(tmp)
                 deck_name = "cube" if "cube" in others else "generated"
                 deck, loads = others[deck_name]
-        misbehaviour = None if args.no_misbehaviour else cf.builtin_misbehaviour(name, args.misbehave_timeout)
         print(f"conformance of adapter {name!r} on {deck} ({'+'.join([deck_name, *(n for n in others if n != deck_name)])})")
+        if args.no_misbehaviour:
+            misbehaviour = None
+        else:
+            misbehaviour, which = cf.misbehaviour_for(factory, Path(deck), name, args.misbehave_timeout)
+            print(f"misbehaviour checks: {which}")
 
         def progress(check):
-            print(f"{'PASS' if check.passed else 'FAIL'}  {check.name:<34} {check.wall_s:7.2f} s  {check.detail}",
-                  flush=True)
+            print(cf.check_line(check), flush=True)
 
         report = cf.run_conformance(factory, deck, loads, misbehaviour=misbehaviour, rtol=args.rtol,
                                     agreement_decks=others, deck_name=deck_name, progress=progress)
@@ -347,7 +389,18 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", type=Path, required=True, help="the study folder to write")
     s.add_argument("--joint", action="append", default=[], metavar="NAME:G1,G2,...",
                    help="declare a flexible joint: its branch-end grids, the RBE2's GN first (repeatable)")
+    s.add_argument("--include-dir", action="append", default=[], type=Path, metavar="DIR",
+                   help="a folder outside the deck's own folder tree that its INCLUDEs may read "
+                        "(repeatable; also include_dirs in the user configuration)")
     s.set_defaults(func=cmd_import)
+
+    s = sub.add_parser("measurements", help="rig readings (channels, repeats, zero scans) become measurements.csv")
+    s.add_argument("readings", type=Path, help="CSV case,<channel>,...: one row per scan, 'zero' rows unloaded")
+    s.add_argument("--channels", type=Path, required=True,
+                   help="channel map CSV channel,grid,component,sign,gain,reference_grid,units[,accuracy]")
+    s.add_argument("--study", type=Path, required=True, help="the study the measurements are for")
+    s.add_argument("--out", type=Path, required=True, help="folder for measurements.csv and the report")
+    s.set_defaults(func=cmd_measurements)
 
     s = _study_command(sub, "solve", "solve the study's load cases, no joint model added", cmd_solve)
     add_parallel_options(s)
@@ -370,6 +423,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_parallel_options(s)
     s.add_argument("--model", choices=["simple", "complex"], default=None,
                    help="override every joint's declared model")
+    s.add_argument("--cases", default=None, metavar="PATTERN[,PATTERN...]",
+                   help="fit only these cases (labels or glob patterns, e.g. 's00[1-4]-*'); the others are "
+                        "predicted. Overrides [identification] cases")
 
     _study_command(sub, "compare", "simple vs complex joint model, MDSE loading (Ch. 6)", cmd_compare)
 
@@ -381,16 +437,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--max-steps", type=int, default=5, help="effects added at most (default 5)")
     s.add_argument("--refit-top", type=int, default=6, help="candidates refitted per round (default 6)")
     s.add_argument("--max-joint-candidates", type=int, default=None, metavar="N",
-                   help="undeclared-joint grids considered at most, those nearest the declared fit's "
-                        "residual beyond (default 100; each costs 3 (members - 1) right-hand sides of the "
-                        "split run)")
+                   help="undeclared-joint grids (and rigid_end_zone grids) considered at most, those "
+                        "nearest the declared fit's residual beyond (default 100; each costs 3 (members - 1) "
+                        "right-hand sides of the split run)")
     s.add_argument("--max-member-candidates", type=int, default=None, metavar="N",
                    help="members considered at most for member_stiffness, those nearest the declared "
                         "fit's residual beyond (default 300)")
     s.add_argument("--effects", default=None,
-                   help="comma-separated effect kinds to consider (default: all of joint_coupling, "
-                        "joint_translation, undeclared_joint, support_flexibility, load_scale, "
-                        "sensor_gain, sensor_offset, member_stiffness)")
+                   help="comma-separated effect kinds to consider (default: every kind; docs/commands.md "
+                        "lists them, e.g. joint_coupling, undeclared_joint, member_stiffness, rigid_end_zone)")
 
     s = sub.add_parser("batch", help="identify (or diagnose) many studies side by side; summary across them")
     s.add_argument("studies", type=Path, nargs="+", metavar="STUDY")
@@ -435,6 +490,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--misbehave-timeout", type=float, default=2.0,
                    help="timeout of the 'hang' misbehaviour check (s)")
     s.add_argument("--no-misbehaviour", action="store_true", help="skip the misbehaviour checks")
+    s.add_argument("--trust-command", action="store_true",
+                   help="consent, for this run, to start the study's external command (adapter \"command\")")
     s.set_defaults(func=cmd_conformance)
     return p
 
@@ -503,6 +560,8 @@ def _heartbeat(elapsed_s: float, last_line: str) -> None:
 def exit_code(exc: BaseException) -> int:
     """The documented exit code of an error that ended a command."""
     if isinstance(exc, SolverError) and not isinstance(exc, _BAD_INPUT_SOLVER_ERRORS + (ValueError,)):
+        return EXIT_SOLVER
+    if isinstance(exc, EditedDeckError):          # the solver's answer to an edited deck
         return EXIT_SOLVER
     return EXIT_BAD_INPUT
 

@@ -18,6 +18,26 @@ flexibility form (docs/mystran.md: a 7-digit flexibility should not be inverted)
     U_O' = -G_OB (K_J' U_B + dK U_B')
 
 No solver run is needed after the first one: that is the point of the method.
+
+**Reference springs** (a joint that is the structure's only support). The unit loads need
+``K_R`` to be invertible: the structure with its joints released must stand on its own. A
+column whose base is a joint (footing grid clamped, column base grid tied to it in translation)
+does not: released, the column turns freely about its base. Then ``condense(..., springs=K_ref)``
+runs the solver on the deck with scalar springs ``K_ref`` added across the joints
+(``SolverAdapter.with_springs``); it returns ``G~ = (K_R + K_ref)^-1`` and ``U~_B0 = G~ F_R``, and
+records the springs (:attr:`Condensed.added_springs`). The springs are then carried exactly as
+springs the deck already had, ``K_deck = K_ref``::
+
+    (K_R + K_J) U_B = F_R  <=>  (K_R + K_ref + (K_J - K_ref)) U_B = F_R
+                           <=>  (I + G~ (K_J - K_ref)) U_B = U~_B0
+    U_O = U~_O0 - G~_OB (K_J - K_ref) U_B
+
+which is exact whatever ``K_ref`` is, provided ``K_R + K_ref`` is invertible (the solver could
+run) -- ``K_R`` alone may be singular; ``K_R + K_J`` must not be (a joint of zero stiffness
+leaves the mechanism, and the condensed system says so by becoming singular). In floating point,
+the flexibility ``G~`` carries the solver's relative precision; ``K_ref`` of the order of the
+joint's own stiffness (the study's ``initial``) keeps ``I + G~ (K_J - K_ref)`` as well conditioned
+as ``K_J / K_ref``.
 """
 
 from __future__ import annotations
@@ -28,7 +48,7 @@ from typing import Protocol, Sequence
 
 import numpy as np
 
-from solver_adapters.protocol import Displacements, DofLabel, LoadMatrix, SolverAdapter
+from solver_adapters.protocol import Displacements, DofLabel, LoadMatrix, ScalarSpring, SolverAdapter
 
 
 class JointLike(Protocol):
@@ -56,6 +76,32 @@ class Condensed:
     solver_runs: int
     right_hand_sides: int
     wall_s: float
+    added_springs: tuple[ScalarSpring, ...] = ()
+    """Springs the condensation added to the solver's deck (reference springs, module docstring):
+    ``G_BB`` and ``U_B0`` are those of the deck with them; :meth:`added_stiffness` gives their
+    matrix for ``K_deck``."""
+
+    def added_stiffness(self) -> np.ndarray | None:
+        """The added springs' stiffness over ``boundary`` (``None`` without any). A spring must
+        join two boundary DOFs (or one and the ground): only then is it exactly accounted for."""
+        if not self.added_springs:
+            return None
+        index = {d: i for i, d in enumerate(self.boundary)}
+        K = np.zeros((len(self.boundary), len(self.boundary)))
+        for s in self.added_springs:
+            ends = [s.a] + ([s.b] if s.b is not None else [])
+            missing = [e for e in ends if (int(e[0]), int(e[1])) not in index]
+            if missing:
+                raise ValueError(f"added spring between {s.a} and {s.b}: DOF(s) {missing} are not boundary "
+                                 f"DOFs of the condensation, so the spring cannot be accounted for")
+            a = index[(int(s.a[0]), int(s.a[1]))]
+            K[a, a] += s.k
+            if s.b is not None:
+                b = index[(int(s.b[0]), int(s.b[1]))]
+                K[b, b] += s.k
+                K[a, b] -= s.k
+                K[b, a] -= s.k
+        return K
 
     @property
     def K_R(self) -> np.ndarray:
@@ -69,15 +115,18 @@ class Condensed:
 
 
 def condense(adapter: SolverAdapter, loads: LoadMatrix, boundary: Sequence[DofLabel],
-             observed: Sequence[DofLabel] = ()) -> Condensed:
-    """Run the adapter once with unit loads at ``boundary`` and the actual ``loads`` (Sec. 3.4)."""
+             observed: Sequence[DofLabel] = (), springs: Sequence[ScalarSpring] = ()) -> Condensed:
+    """Run the adapter once with unit loads at ``boundary`` and the actual ``loads`` (Sec. 3.4);
+    with ``springs``, on the deck with those springs added (reference springs, module docstring)."""
     boundary = tuple(dict.fromkeys((int(g), int(c)) for g, c in boundary))
     bset = set(boundary)
     observed = tuple(d for d in dict.fromkeys((int(g), int(c)) for g, c in observed) if d not in bset)
+    springs = tuple(springs)
+    solver = adapter.with_springs(springs) if springs else adapter
     batch = LoadMatrix.unit(boundary).hstack(loads)
-    runs0, rhs0 = adapter.stats.runs, adapter.stats.right_hand_sides
+    runs0, rhs0 = solver.stats.runs, solver.stats.right_hand_sides
     t0 = time.perf_counter()
-    out: Displacements = adapter.solve(batch, boundary + observed)
+    out: Displacements = solver.solve(batch, boundary + observed)
     wall = time.perf_counter() - t0
     nB = len(boundary)
     V = out.values
@@ -86,8 +135,9 @@ def condense(adapter: SolverAdapter, loads: LoadMatrix, boundary: Sequence[DofLa
     sym_err = float(np.max(np.abs(G - G.T)) / scale)
     return Condensed(boundary=boundary, observed=observed, cases=loads.cases,
                      G_BB=0.5 * (G + G.T), G_OB=V[nB:, :nB], U_B0=V[:nB, nB:], U_O0=V[nB:, nB:],
-                     symmetry_error=sym_err, solver_runs=adapter.stats.runs - runs0,
-                     right_hand_sides=adapter.stats.right_hand_sides - rhs0, wall_s=wall)
+                     symmetry_error=sym_err, solver_runs=solver.stats.runs - runs0,
+                     right_hand_sides=solver.stats.right_hand_sides - rhs0, wall_s=wall,
+                     added_springs=springs)
 
 
 class JointAssembly:

@@ -19,6 +19,8 @@ simulated study's truth (``truth.toml`` for ``simulate``, ``truth.json`` written
 
 from __future__ import annotations
 
+import copy
+import itertools
 import json
 import tomllib
 from dataclasses import dataclass, field
@@ -30,17 +32,19 @@ from pydantic import ValidationError
 
 from blackbox.condensation import Condensed, CondensedModel, condense
 from blackbox.errors import StudyError
-from blackbox.joints import ComplexJoint, JointModel, SimpleJoint, actual_joint_stub_kc, make_joint
+from blackbox.joints import (PLANES, ComplexJoint, JointModel, SimpleJoint, actual_joint_stub_kc, make_joint,
+                             spring_network)
 from blackbox.study import Study, joint_branches, read_text
-from solver_adapters.protocol import DofLabel, LoadMatrix, SolverAdapter
+from solver_adapters.protocol import (Deck, DofLabel, LoadMatrix, ScalarSpring, SolverAdapter, Spring,
+                                     UnstableStructureError)
 
 if TYPE_CHECKING:
     from blackbox.identification import Observations
     from blackbox.simulation import TruthConfig
 
 __all__ = ["RIGID_FACTOR", "SolverCost", "FitOptions", "DeclaredModel", "declared_model",
-           "joint_model", "rigid_pair_penalty", "read_truth", "read_truth_record", "truth_values", "truth_joints",
-           "stub_params"]
+           "joint_model", "constrained_springs", "deck_with_springs", "rigid_pair_penalty", "read_truth",
+           "read_truth_record", "truth_values", "truth_joints", "stub_params"]
 
 RIGID_FACTOR = 1e6
 """A rigid pair's penalty: 1e6 times the stiffest rotational stiffness the structure offers at
@@ -170,7 +174,30 @@ class DeclaredModel:
         if rigid is not None:
             K -= rigid
             found = True
+        added = c.added_stiffness()                  # reference springs the condensation added
+        if added is not None:
+            K += added
+            found = True
         return K if found else None
+
+    def reference_springs(self) -> tuple[list[ScalarSpring], dict[str, float]]:
+        """Reference springs across every joint the deck does not already couple
+        (``deck_stiffness`` 0): the simple model's springs (those that can act), each of the
+        joint's ``initial`` stiffness, and ``{joint: stiffness}``. Added to the solver's deck when
+        the structure with its joints released is a mechanism (:meth:`condense`)."""
+        springs, used = [], {}
+        initial = {jc.name: float(jc.initial) for jc in self.study.config.joints}
+        for j, ks in zip(self.joints, self.deck_stiffness):
+            if ks:
+                continue
+            ref = SimpleJoint(j.name, tuple(j.grids),
+                              constrained_springs=constrained_springs(self.study.deck, j.grids))
+            if not ref.n_params:
+                continue
+            k = initial.get(j.name, 1.0e3)
+            springs += spring_network(ref, np.full(ref.n_params, k))
+            used[j.name] = k
+        return springs, used
 
     def rigid_pairs(self) -> dict[str, tuple[tuple[int, int], ...]]:
         """Branch pairs (1-based) declared rigid, per joint name."""
@@ -215,11 +242,51 @@ class DeclaredModel:
     def condense(self, adapter: SolverAdapter, observed: Sequence[DofLabel] | None = None,
                  loads: LoadMatrix | None = None) -> CondensedModel:
         """The one batched run (unit loads at the joints' DOFs plus the load cases), then
-        :meth:`condensed_model`. ``observed`` defaults to every DOF the measurements need."""
+        :meth:`condensed_model`. ``observed`` defaults to every DOF the measurements need.
+
+        When the structure with its joints released is a mechanism (a joint is the structure's
+        only support, e.g. a column on a base joint), the run is repeated with
+        :meth:`reference_springs` across the joints and those springs are accounted for exactly
+        (``blackbox.condensation``, "Reference springs"); a mechanism that remains is a
+        :class:`StudyError` naming the joints and the DOFs that move."""
         if observed is None:
             observed = self.study.measurements.all_dofs if self.study.measurements is not None else []
-        c = condense(adapter, loads if loads is not None else self.study.loads, self.boundary, list(observed))
+        loads = loads if loads is not None else self.study.loads
+        try:
+            c = condense(adapter, loads, self.boundary, list(observed))
+        except UnstableStructureError as exc:
+            springs, used = self.reference_springs()
+            if not springs:
+                raise
+            try:
+                c = condense(adapter, loads, self.boundary, list(observed), springs=springs)
+            except UnstableStructureError as still:
+                raise self._mechanism_error(still, used) from None
         return self.condensed_model(c)
+
+    def _mechanism_error(self, exc: UnstableStructureError, used: dict[str, float]) -> StudyError:
+        """The structure stays a mechanism with reference springs across ``used``: say which
+        joints' DOFs move (the solver's list, when it gives one) and what that means."""
+        moving = set(exc.dofs)
+        parts = []
+        for j in self.joints:
+            mine = [d for d in j.dofs if d in moving]
+            if mine:
+                shown = ", ".join(f"{g}:{c}" for g, c in mine[:12])
+                parts.append(f"joint {j.name!r} moves at {shown} (grid:component)")
+        if parts:
+            where = ("; ".join(parts) + ": springs across a joint only join its branches' rotations, so the "
+                     "branches together must still be held by the structure (a support the joint needs is "
+                     "missing, e.g. the footing grid clamped in translation only)")
+        elif moving:
+            where = "no joint DOF is among the DOFs that move: a support or a tie elsewhere is missing"
+        else:
+            where = ("the solver does not say which DOFs move: a support or tie is missing, at a joint (one "
+                     "whose branches together nothing else holds) or elsewhere")
+        names = ", ".join(f"{n!r} ({k:g})" for n, k in used.items())
+        return StudyError(f"the structure is a mechanism with its joints released, and it still is with "
+                          f"reference springs across joint(s) {names}: {where}. The solver said: {exc}",
+                          file=str(self.study.deck_path))
 
     def observations(self, cases: Sequence[str] | None = None) -> tuple["Observations", "Observations | None"]:
         """The study's measurements as fit rows and hold-out rows (``None`` without hold-out)."""
@@ -249,9 +316,38 @@ def joint_model(study: Study, name: str, model: str) -> JointModel:
         raise StudyError(f"no joint {name!r} in the study ({[j.name for j in study.config.joints]})",
                          file=str(study.root / "study.toml"))
     opts = {}
-    if model == "simple" and jc.rigid_pairs:      # grid pairs -> branch numbers
-        opts = {"rigid_pairs": tuple((jc.grids.index(a) + 1, jc.grids.index(b) + 1) for a, b in jc.rigid_pairs)}
+    if model == "simple":
+        if jc.rigid_pairs:                        # grid pairs -> branch numbers
+            opts["rigid_pairs"] = tuple((jc.grids.index(a) + 1, jc.grids.index(b) + 1) for a, b in jc.rigid_pairs)
+        held = constrained_springs(study.deck, jc.grids)
+        if held:
+            opts["constrained_springs"] = held
     return make_joint(jc.name, jc.grids, model, **opts)
+
+
+def deck_with_springs(deck: Deck, springs: Sequence[ScalarSpring]) -> Deck:
+    """A copy of ``deck`` with ``springs`` written in as CELAS2 cards (element IDs above every
+    element ID of the deck): the deck the solver ran when a condensation added them."""
+    out = copy.deepcopy(deck)
+    eid = out.max_element_id()
+    for s in springs:
+        eid += 1
+        g2, c2 = (int(s.b[0]), int(s.b[1])) if s.b is not None else (0, 0)
+        out.springs[eid] = Spring(eid, int(s.a[0]), int(s.a[1]), g2, c2, k=float(s.k), card="CELAS2")
+    return out
+
+
+def constrained_springs(deck, grids: Sequence[int]) -> tuple[tuple[str, int, int], ...]:
+    """The simple-model springs ``(plane, i, j)`` of a joint on ``grids`` that join two rotation
+    components the deck's supports fix (SPC/SPC1 or GRID PS on both branch grids: a planar
+    model's out-of-plane rotations). They cannot act, so they are no parameters."""
+    fixed = _deck_constrained(deck)
+    out = []
+    for i, j in itertools.combinations(range(1, len(grids) + 1), 2):
+        for p, c in zip(PLANES, (4, 5, 6)):
+            if (grids[i - 1], c) in fixed and (grids[j - 1], c) in fixed:
+                out.append((p, i, j))
+    return tuple(out)
 
 
 def declared_model(study: Study, model: str | None = None) -> DeclaredModel:
@@ -259,6 +355,10 @@ def declared_model(study: Study, model: str | None = None) -> DeclaredModel:
     joints, k0 = [], []
     for jc in study.config.joints:
         jm = joint_model(study, jc.name, model or jc.model)
+        if jm.n_params == 0 and isinstance(jm, SimpleJoint) and jm.constrained_springs:
+            raise StudyError(f"joint {jc.name!r}: the deck's supports fix both ends of every spring of the joint "
+                             f"(SPC/GRID PS on the rotations of grids {jc.grids}), so the joint has no parameter "
+                             "that could act; free a rotation or remove the joint", file=str(study.root / "study.toml"))
         if jm.n_params == 0:
             raise StudyError(f"joint {jc.name!r}: every branch pair is declared rigid, so the joint has no "
                              "parameter to identify; remove a pair from rigid_pairs, or the joint itself "

@@ -43,12 +43,24 @@ class DiagnosisError(BlackboxError, ValueError):
     diagnose (says which and what was given)."""
 
 
+class EditedDeckError(BlackboxError):
+    """An edited deck the diagnosis ran (its split deck) is not the study's structure: at its
+    rigid state it does not reproduce the declared model beyond the solver's rounding. Not bad
+    input of the user's and not a finding about the structure: the command stops with the
+    solver-failure exit code (3), naming where the two differ and the cards there. ``rows``:
+    ``[(grid, component, case, difference in sigma)]``, largest first."""
+
+    def __init__(self, message: str, rows=()):
+        self.rows = list(rows)
+        super().__init__(message)
+
+
 class DesignError(BlackboxError, ValueError):
     """A test design that cannot be made as asked (bad budgets, unknown criterion, candidates
     that carry no information); says what was given."""
 
 
 __all__ = ["DesignError", "BlackboxError", "StudyError", "IdentificationError", "JointModelError", "ComparisonError",
-           "DiagnosisError", "SolverError", "DeckFormatError", "ModelError", "UnstableStructureError",
+           "DiagnosisError", "EditedDeckError", "SolverError", "DeckFormatError", "ModelError", "UnstableStructureError",
            "UnknownDofError", "SolverRunError", "SolverTimeoutError", "FactorizationError",
            "RegistryError", "UnknownPluginError", "PluginLoadError", "PluginConflictError", "OptionError"]

@@ -288,11 +288,17 @@ class SimpleJoint(JointModel):
     equalities as DOF-label pairs (for elimination, e.g. RBE2 rotations or MPCs) and
     :meth:`rigid_penalty_matrix` gives the alternative: very stiff springs of a chosen value.
     ``matrix(k)`` contains neither.
+
+    ``constrained_springs``: springs ``(plane, i, j)`` between two rotation components that the
+    structure's supports fix (both branch grids' component of that plane constrained, as in a
+    planar model, whose out-of-plane rotations are held by SPCs). Such a spring cannot act; it
+    carries no parameter (its data could never determine it).
     """
 
     name: str
     grids: tuple[int, ...]
     rigid_pairs: tuple[tuple[int, int], ...] = ()
+    constrained_springs: tuple[tuple[str, int, int], ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "name", _check_name(self.name))
@@ -315,6 +321,19 @@ class SimpleJoint(JointModel):
                 raise JointModelError(f"joint {self.name!r}: rigid pair {(i, j)} given twice")
             pairs.append((i, j))
         object.__setattr__(self, "rigid_pairs", tuple(sorted(pairs)))
+        held = []
+        for spring in self.constrained_springs:
+            try:
+                p, i, j = str(spring[0]), int(spring[1]), int(spring[2])
+            except (TypeError, ValueError, IndexError):
+                raise JointModelError(f"joint {self.name!r}: constrained_springs must be (plane, i, j), "
+                                      f"got {spring!r}") from None
+            i, j = min(i, j), max(i, j)
+            if p not in PLANES or i == j or i < 1 or j > n:
+                raise JointModelError(f"joint {self.name!r}: constrained spring {spring!r} must name a plane "
+                                      f"{PLANES} and two different branches in 1..{n}")
+            held.append((p, i, j))
+        object.__setattr__(self, "constrained_springs", tuple(sorted(set(held))))
 
     @property
     def spring_pairs(self) -> tuple[tuple[int, int], ...]:
@@ -325,8 +344,9 @@ class SimpleJoint(JointModel):
 
     @property
     def springs(self) -> tuple[tuple[str, int, int], ...]:
-        """``(plane, i, j)`` of every parameter, in parameter order."""
-        return tuple((p, i, j) for (i, j) in self.spring_pairs for p in PLANES)
+        """``(plane, i, j)`` of every parameter, in parameter order (constrained springs left out)."""
+        held = set(self.constrained_springs)
+        return tuple((p, i, j) for (i, j) in self.spring_pairs for p in PLANES if (p, i, j) not in held)
 
     @property
     def param_names(self) -> tuple[str, ...]:
@@ -568,8 +588,9 @@ def spring_network(model: JointModel, k: Sequence[float]) -> list[ScalarSpring]:
 
 
 def make_joint(name: str, grids: Sequence[int], model: str, **options) -> JointModel:
-    """A joint model by name: ``"simple"`` (option ``rigid_pairs``) or ``"complex"`` (no options)."""
-    allowed = {"simple": ("rigid_pairs",), "complex": ()}
+    """A joint model by name: ``"simple"`` (options ``rigid_pairs``, ``constrained_springs``) or
+    ``"complex"`` (no options)."""
+    allowed = {"simple": ("rigid_pairs", "constrained_springs"), "complex": ()}
     if model not in allowed:
         raise JointModelError(f"joint {name!r}: model must be 'simple' or 'complex', got {model!r}")
     unknown = sorted(set(options) - set(allowed[model]))
@@ -579,7 +600,8 @@ def make_joint(name: str, grids: Sequence[int], model: str, **options) -> JointM
             f"(allowed: {list(allowed[model]) or 'none'})")
     grids = _check_grids(grids)
     if model == "simple":
-        return SimpleJoint(name, grids, tuple(tuple(p) for p in options.get("rigid_pairs", ())))
+        return SimpleJoint(name, grids, tuple(tuple(p) for p in options.get("rigid_pairs", ())),
+                           tuple(tuple(s) for s in options.get("constrained_springs", ())))
     return ComplexJoint(name, grids)
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from blackbox.diagnosis.decks import prune_spcadds
 from blackbox.joints import frame_element_stiffness, make_joint, spring_network
 from blackbox.reference_tables import TABLE_3_1
 from solver_adapters.bdf_write import print_float_free
@@ -233,9 +234,12 @@ class TruthDeck:
         return sorted(e for e, b in self.deck.cbars.items() if grid in (b.ga, b.gb))
 
     def unclamp(self, grid: int) -> str:
-        """Take ``grid`` out of every SPC1 set (a set left empty goes); returns the components
-        those sets constrained there, for the springs that replace them."""
-        comps, spcs = "", []
+        """Take ``grid`` out of every SPC1 set (a set left empty goes, and with it its name in
+        an SPCADD) and clear its GRID PS; returns the components those constrained there (in
+        the grid's CD system), for the springs that replace them."""
+        comps, spcs = self.deck.grids[grid].ps, []
+        if comps:
+            self.deck.grids[grid] = replace(self.deck.grids[grid], ps="")
         for s in self.deck.spc1s:
             if grid in s.grids:
                 comps += s.components
@@ -245,7 +249,8 @@ class TruthDeck:
             else:
                 spcs.append(s)
         self.deck.spc1s = spcs
-        return comps
+        prune_spcadds(self.deck)
+        return "".join(sorted(set(comps)))
 
     def split_grid(self, grid: int) -> list[int]:
         """Make ``grid`` a joint of its members: one new coincident grid per member after the
@@ -256,7 +261,7 @@ class TruthDeck:
         for e in self.members_at(grid)[1:]:
             g = self.next_grid
             self.next_grid += 1
-            d.grids[g] = Grid(g, d.grids[grid].xyz)
+            d.grids[g] = Grid(g, d.grids[grid].xyz, cd=d.grids[grid].cd)
             b = d.cbars[e]
             d.cbars[e] = replace(b, ga=g if b.ga == grid else b.ga, gb=g if b.gb == grid else b.gb)
             branches.append(g)
@@ -277,14 +282,18 @@ class TruthDeck:
                     del self.deck.rbe2s[r.eid]
 
     def k_diag(self, eid: int, grid: int) -> np.ndarray:
-        """The diagonal (6) of member ``eid``'s global stiffness at its end ``grid``."""
+        """The diagonal (6) of member ``eid``'s stiffness at its end ``grid``, in the components
+        of the grid's displacement system (CD)."""
         d = self.deck
         b = d.cbars[eid]
         p = d.pbars[b.pid]
         m = d.mat1s[p.mid]
-        K = frame_element_stiffness(d.grids[b.ga].xyz, d.grids[b.gb].xyz, m.e, m.g, p.a, p.i2, p.i1, p.j, b.x)
+        x = b.x if b.g0 is None else np.subtract(d.grids[b.g0].xyz, d.grids[b.ga].xyz)
+        K = frame_element_stiffness(d.grids[b.ga].xyz, d.grids[b.gb].xyz, m.e, m.g, p.a, p.i2, p.i1, p.j, x)
         end = 0 if b.ga == grid else 1
-        return np.diag(K)[6 * end:6 * end + 6]
+        R = d.displacement_frames([grid])[0]
+        blk = K[6 * end:6 * end + 6, 6 * end:6 * end + 6]
+        return np.concatenate([np.diag(R @ blk[:3, :3] @ R.T), np.diag(R @ blk[3:, 3:] @ R.T)])
 
     def joint(self, name: str, grids, model: str, params) -> None:
         for s in spring_network(make_joint(name, grids, model), params):
@@ -294,3 +303,34 @@ class TruthDeck:
 def coupled_kc(grids, simple_values, rho: np.ndarray, t: float) -> np.ndarray:
     """``K_C = S^1/2 (I + t rho) S^1/2``: the simple model's ``K_C`` (``S``) coupled by the
     symmetric zero-diagonal ``rho`` of spectral norm 1; positive definite for ``t < 1``."""
+
+
+def gap_response(adapter, name: str, grids, k, r: float, loads, report, max_iterations: int = 30):
+    """The displacements at ``report`` (``(len(report), cases)``) of the structure of ``adapter``
+    with the simple-model joint ``name`` (branch ``grids``, springs ``k`` in the model's
+    parameter order) given play: in each case each spring acts as ``k`` when its relative
+    rotation (branch ``i`` minus branch ``j`` about its axis) is ``>= 0`` and as ``r k`` when it
+    is ``< 0``, the sides found by solving the case again until they settle. The definition of
+    the ``joint_gap`` effect (``blackbox.diagnosis.effects.joint_gap``), simulated without the
+    diagnosis: one solver run per case and iteration through ``adapter.with_springs``. Raises
+    ``RuntimeError`` when the sides keep changing (a gap that chatters between two states)."""
+    springs = spring_network(make_joint(name, grids, "simple"), k)
+    ends = [d for s in springs for d in (s.a, s.b) if d is not None]
+    rows = list(dict.fromkeys(list(report) + ends))
+    idx = {d: i for i, d in enumerate(rows)}
+    out = np.zeros((len(report), loads.n_cases))
+    for c in range(loads.n_cases):
+        case = loads.select([c])
+        side = np.ones(len(springs), bool)
+        for _ in range(max_iterations):
+            net = [replace(s, k=s.k * (1.0 if up else r)) for s, up in zip(springs, side)]
+            u = adapter.with_springs(net).solve(case, rows).values[:, 0]
+            rel = np.array([u[idx[s.a]] - (u[idx[s.b]] if s.b is not None else 0.0) for s in springs])
+            new = rel >= 0.0
+            if np.array_equal(new, side):
+                break
+            side = new
+        else:
+            raise RuntimeError(f"joint {name}: the gap's sides do not settle in case {loads.cases[c]}")
+        out[:, c] = u[[idx[d] for d in report]]
+    return out

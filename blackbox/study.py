@@ -9,6 +9,7 @@ adapter; the method modules only ever see the adapter through ``solver_adapters.
 from __future__ import annotations
 
 import contextlib
+import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +19,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from blackbox.errors import StudyError
+from blackbox.noise import NoiseModel, Readings, reduce_readings
 from solver_adapters import tables
 from solver_adapters.deck import Deck
 from solver_adapters.tables import TableFormatError
@@ -55,6 +57,7 @@ class JointConfig(_Strict):
 
 
 class IdentificationConfig(_Strict):
+    cases: list[str] = []                   # the cases identify fits (labels or glob patterns); [] = all
     holdout_cases: list[str] = []
     confidence: float = Field(0.95, gt=0, lt=1)
     max_iterations: int = Field(30, ge=1)
@@ -63,11 +66,18 @@ class IdentificationConfig(_Strict):
     profile: bool = True                    # profile-likelihood intervals (their coverage is tested)
 
 
+class MeasurementsConfig(_Strict):
+    """What study.toml says about the measurements' noise (blackbox.noise)."""
+    translation_accuracy: float | None = Field(None, gt=0)   # +- bound of a translation reading's error
+    rotation_accuracy: float | None = Field(None, gt=0)      # +- bound of a rotation reading's error
+
+
 class StudyConfig(_Strict):
     name: str
     solver: SolverConfig = SolverConfig()
     joints: list[JointConfig] = []
     identification: IdentificationConfig = IdentificationConfig()
+    measurements: MeasurementsConfig = MeasurementsConfig()
 
     @model_validator(mode="after")
     def _distinct_joints(self) -> "StudyConfig":
@@ -82,13 +92,15 @@ class StudyConfig(_Strict):
 
 @dataclass(frozen=True)
 class Measurements:
-    """Measured displacements, one row per (case, DOF): ``value`` and its ``sigma``."""
+    """Measured displacements, one row per (case, DOF): ``value`` and its ``sigma`` (``nan``
+    where only the fit can estimate it; ``noise`` says where each sigma came from)."""
     cases: tuple[str, ...]
     dofs: tuple[DofLabel, ...]
     values: np.ndarray
     sigma: np.ndarray
     lines: tuple[int, ...] = ()
     refs: tuple[DofLabel | None, ...] = ()      # optional reference_grid column (Section 5.2)
+    noise: NoiseModel | None = None             # None: every sigma was given
 
     def __len__(self) -> int:
         return len(self.cases)
@@ -98,7 +110,13 @@ class Measurements:
         return Measurements(tuple(self.cases[i] for i in idx), tuple(self.dofs[i] for i in idx),
                             self.values[idx], self.sigma[idx],
                             tuple(self.lines[i] for i in idx) if self.lines else (),
-                            tuple(self.refs[i] for i in idx) if self.refs else ())
+                            tuple(self.refs[i] for i in idx) if self.refs else (),
+                            self.noise.subset(idx) if self.noise is not None else None)
+
+    @property
+    def fit_rows(self) -> np.ndarray:
+        """Rows whose sigma only the fit can estimate (blank, no repeats, no declared accuracy)."""
+        return self.noise.fit_rows if self.noise is not None else np.zeros(len(self), dtype=bool)
 
     @property
     def all_dofs(self) -> list[DofLabel]:
@@ -163,18 +181,30 @@ def read_load_groups(path: Path) -> dict[str, str]:
         return tables.load_groups(path)
 
 
-def read_measurements(path: Path, load_cases: set[str], grids: set[int] | None = None) -> Measurements:
-    """``case,grid,component,value,sigma[,reference_grid]``; sigma > 0 and finite; every case
-    must be loaded. With a ``reference_grid`` the value is the displacement relative to that
-    grid's same component (Section 5.2); blank means absolute."""
+def read_measurements(path: Path, load_cases: set[str], grids: set[int] | None = None,
+                      noise: MeasurementsConfig | None = None, confidence: float = 0.95) -> Measurements:
+    """``case,grid,component,value[,sigma[,reference_grid]]``; every case must be loaded. With a
+    ``reference_grid`` the value is the displacement relative to that grid's same component
+    (Section 5.2); blank means absolute. A given sigma is > 0 and finite; a blank sigma (or no
+    sigma column) is estimated (:mod:`blackbox.noise`: repeated readings -- several rows of one
+    case and DOF, averaged into one --, ``noise``'s declared accuracy, or the fit)."""
     with _located():
-        return _read_measurements(path, load_cases, grids)
+        return _read_measurements(path, load_cases, grids, noise or MeasurementsConfig(), confidence)
 
 
-def _read_measurements(path: Path, load_cases: set[str], grids: set[int] | None) -> Measurements:
-    seen: dict[tuple[str, DofLabel, DofLabel | None], int] = {}
+def _header(path: Path) -> list[str]:
+    """The header of measurements.csv: sigma may be left out (then reference_grid too)."""
+    first = next(iter(tables.read_text(path).splitlines()), "")
+    return [h.strip() for h in first.split(",")]
+
+
+def _read_measurements(path: Path, load_cases: set[str], grids: set[int] | None,
+                       noise: MeasurementsConfig, confidence: float) -> Measurements:
+    seen: dict[tuple[str, DofLabel, DofLabel | None], tuple[int, bool]] = {}
     cases, dofs, vals, sig, lines, refs = [], [], [], [], [], []
-    for line, rec in tables.rows(path, ["case", "grid", "component", "value", "sigma"], ["reference_grid"]):
+    has_sigma = _header(path)[4:5] == ["sigma"]
+    header = ["case", "grid", "component", "value"] + (["sigma"] if has_sigma else [])
+    for line, rec in tables.rows(path, header, ["reference_grid"] if has_sigma else ["sigma", "reference_grid"]):
         dof = tables.parse_dof(rec, path, line, grids)
         ref = None
         if rec.get("reference_grid"):
@@ -190,22 +220,43 @@ def _read_measurements(path: Path, load_cases: set[str], grids: set[int] | None)
             raise StudyError(f"case {rec['case']!r} has no loads in loads.csv", file=str(path),
                              line=line, column="case")
         val = tables.parse_float(rec["value"], path, line, "value")
-        s = tables.parse_float(rec["sigma"], path, line, "sigma")
-        if s <= 0:
-            raise StudyError(f"sigma must be positive, got {rec['sigma']!r}", file=str(path),
-                             line=line, column="sigma")
+        blank = not rec.get("sigma")
+        s = math.nan
+        if not blank:
+            s = tables.parse_float(rec["sigma"], path, line, "sigma")
+            if s <= 0:
+                raise StudyError(f"sigma must be positive (or blank: estimated), got {rec['sigma']!r}",
+                                 file=str(path), line=line, column="sigma")
         key = (rec["case"], dof, ref)
         if key in seen:
-            raise StudyError(f"duplicate measurement of case {key[0]!r} grid {dof[0]} component "
-                             f"{dof[1]} (first on line {seen[key]})", file=str(path), line=line)
-        seen[key] = line
+            first, first_blank = seen[key]
+            if not (blank and first_blank):
+                raise StudyError(f"duplicate measurement of case {key[0]!r} grid {dof[0]} component "
+                                 f"{dof[1]} (first on line {first}): repeated readings of one step must "
+                                 f"leave sigma blank (it is then estimated from them)", file=str(path),
+                                 line=line, column="sigma")
+        else:
+            seen[key] = (line, blank)
         cases.append(rec["case"]); dofs.append(dof); vals.append(val); sig.append(s); lines.append(line)
         refs.append(ref)
     if not cases:
         raise StudyError("no measurement rows", file=str(path))
-    _check_sigma_scale(path, np.array(vals), np.array(sig), lines, dofs)
-    return Measurements(tuple(cases), tuple(dofs), np.array(vals), np.array(sig), tuple(lines),
-                        tuple(refs) if any(r is not None for r in refs) else ())
+    values, sigma = np.array(vals), np.array(sig)
+    noise_model = None
+    if np.isnan(sigma).any():
+        readings = Readings(tuple((c, d[0], d[1], r[0] if r is not None else 0) for c, d, r in zip(cases, dofs, refs)),
+                            values, sigma, tuple(lines))
+        order, values, sigma, noise_model = reduce_readings(readings, noise.translation_accuracy,
+                                                            noise.rotation_accuracy, confidence)
+        cases = [cases[i] for i in order]
+        dofs = [dofs[i] for i in order]
+        lines = [lines[i] for i in order]
+        refs = [refs[i] for i in order]
+    known = np.isfinite(sigma)
+    _check_sigma_scale(path, values[known], sigma[known], [ln for ln, k in zip(lines, known) if k],
+                       [d for d, k in zip(dofs, known) if k])
+    return Measurements(tuple(cases), tuple(dofs), values, sigma, tuple(lines),
+                        tuple(refs) if any(r is not None for r in refs) else (), noise_model)
 
 
 SIGMA_RESOLUTION = 1e-12
@@ -215,7 +266,7 @@ would be noise times 1e12 or overflow. Rejected with the row's location."""
 
 
 def _check_sigma_scale(path: Path, values: np.ndarray, sigma: np.ndarray, lines, dofs) -> None:
-    rot = np.array([d[1] >= 4 for d in dofs])
+    rot = np.array([d[1] >= 4 for d in dofs], dtype=bool)
     for kind, sel in (("translation", ~rot), ("rotation", rot)):
         if not sel.any():
             continue
@@ -229,6 +280,26 @@ def _check_sigma_scale(path: Path, values: np.ndarray, sigma: np.ndarray, lines,
                              f"{kind} ({scale:.3g}): no measurement is that precise, and weights that "
                              f"large make the fit meaningless ({bad.size} such row(s))",
                              file=str(path), line=lines[i], column="sigma")
+
+
+def select_cases(cases, patterns, where: str = "[identification] cases") -> tuple[str, ...]:
+    """The case labels of ``cases`` (in their order, each once) that match any of ``patterns``:
+    a label or a shell-style pattern (``*``, ``?``, ``[...]``; ``fnmatch``, case-sensitive). No
+    pattern: every case. A pattern that matches no measured case is an error naming it."""
+    labels = tuple(dict.fromkeys(str(c) for c in cases))
+    if not patterns:
+        return labels
+    import fnmatch
+
+    chosen: set[str] = set()
+    for p in patterns:
+        hit = [c for c in labels if fnmatch.fnmatchcase(c, p)]
+        if not hit:
+            raise StudyError(f"case selection {p!r} matches no measured case (labels look like "
+                             f"{', '.join(repr(c) for c in labels[:3])}{' ...' if len(labels) > 3 else ''})",
+                             file=where)
+        chosen.update(hit)
+    return tuple(c for c in labels if c in chosen)
 
 
 def check_joints(config: StudyConfig, deck, toml_path: Path) -> None:
@@ -286,11 +357,13 @@ def load_study(root: str | Path, *, need_measurements: bool = False) -> Study:
     meas_path = root / "measurements.csv"
     measurements = None
     if meas_path.exists():
-        measurements = read_measurements(meas_path, set(loads.cases), grids)
+        measurements = read_measurements(meas_path, set(loads.cases), grids, config.measurements,
+                                         config.identification.confidence)
         unknown_holdout = set(config.identification.holdout_cases) - set(measurements.cases)
         if unknown_holdout:
             raise StudyError(f"holdout_cases {sorted(unknown_holdout)} have no measurements",
                              file=str(toml_path))
+        select_cases(measurements.cases, config.identification.cases, where=str(toml_path))
     elif need_measurements:
         raise StudyError("measurements.csv not found (needed for this command)", file=str(meas_path))
     return Study(root, config, deck_path, loads, measurements, deck)

@@ -303,8 +303,8 @@ class _Counting:
 
 
 def test_diagnose_refits_on_cluster_equal_serial(cluster, tmp_path):
-    """The search loop with its refits mapped over the cluster (one task per short-listed
-    candidate, the split base sent once per round): every round scores, refits and adds what the
+    """The search loop with its refits mapped over the cluster (one task per refitted candidate,
+    the split base sent once per refit pass): every round scores, refits and adds what the
     serial loop does. The workers' BLAS is single-threaded, the client's is not (docs/parallel.md),
     so an iteration's rounding differs and the refit may stop at another point of its last step:
     chi2 agrees to 1e-9 relative, each parameter to 1e-4 of its standard deviation (the stopping
@@ -326,7 +326,9 @@ def test_diagnose_refits_on_cluster_equal_serial(cluster, tmp_path):
         ser = loop(None)
         counting = _Counting(cluster)
         par_ = loop(counting)
-        assert counting.shared == len(ser.steps) and counting.tasks == sum(
+        # the base is sent once per refit pass with two or more refits: the refit_top best, then
+        # the others that could still win (search.refit_schedule), so once or twice a round
+        assert len(ser.steps) <= counting.shared <= 2 * len(ser.steps) and counting.tasks == sum(
             sum(1 for c in st.scores if c.refit is not None or c.reason.startswith("refit failed"))
             for st in ser.steps)
         assert len(par_.steps) == len(ser.steps) and ser.added

@@ -38,7 +38,7 @@ def test_good_study_loads(study):
     ("case,grid,component,value,sigma\nNOLOAD,7,4,1e-5,1e-6\n", "measurements.csv:2 column 'case'", "no loads"),
     ("case,grid,component,value,sigma\nL1,7,4,1e-5,1e-6\nL1,7,4,2e-5,1e-6\n", "measurements.csv:3",
      "duplicate measurement"),
-    ("case,grid,component,value\nL1,7,4,1e-5\n", "measurements.csv:1", "header"),
+    ("case,grid,component,value,reference_grid\nL1,7,4,1e-5,8\n", "measurements.csv:1", "header"),
     ("case,grid,component,value,sigma\nL1,7,4,1e-5\n", "measurements.csv:2", "expected 5 columns"),
 ])
 def test_bad_measurements(study, text, where, what):

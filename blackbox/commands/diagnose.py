@@ -53,8 +53,8 @@ import numpy as np
 
 from blackbox.adapters import make_adapter_for
 from blackbox.commands.common import as_study
-from blackbox.declared import DeclaredModel, SolverCost, declared_model
-from blackbox.diagnosis.decks import SplitDeck, element_deck, split_deck, unmodelled_notes
+from blackbox.declared import DeclaredModel, SolverCost, declared_model, deck_with_springs
+from blackbox.diagnosis.decks import SplitDeck, cards_at, element_deck, split_deck, unmodelled_notes
 from blackbox.diagnosis.document import diagnosis_document, verdict_detail
 from blackbox.diagnosis.effects import (CandidateContext, CandidateLimit, Effect, MemberStiffness, RigidEndZone,
                                        families)
@@ -63,13 +63,13 @@ from blackbox.diagnosis.effects.undeclared_joint import UndeclaredJoint, joint_c
 from blackbox.diagnosis.runs import RunRecord, element_stiffness
 from blackbox.diagnosis.search import Diagnosis, diagnose
 from blackbox.diagnosis.split import SplitBase
-from blackbox.errors import DiagnosisError
+from blackbox.errors import DiagnosisError, EditedDeckError
 from blackbox.identification import IdentificationResult, Observations, identify
 from blackbox.parallel import Executor, StudyPackage, pack_study, use_executor
 from blackbox.study import Study, read_load_groups
 from solver_adapters.bdf_write import write_deck
 from solver_adapters.deck import Deck
-from solver_adapters.protocol import DofLabel, SolverAdapter
+from solver_adapters.protocol import DofLabel, SolverAdapter, UnstableStructureError
 
 __all__ = ["DiagnosisResult", "Prepared", "PrepareTask", "Remote", "run", "prepare", "prepare_study",
            "prepare_run", "check_options", "MAX_JOINT_CANDIDATES", "MAX_MEMBER_CANDIDATES"]
@@ -257,13 +257,20 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
     fit_obs, hold_obs = dm.observations(study.loads.cases)
 
     decks = []
-    edeck, emembers = element_deck(deck)
+    edeck, emembers, etips = element_deck(deck)
     epath = deck_dir / "elements.bdf"
     decks.append((epath.name, write_deck(edeck, "large")))
     epath.write_text(decks[-1][1])
 
+    # the deck the split run cuts: the study's, plus the reference springs run 1 had to add
+    # across the joints when they are the structure's only support (DeclaredModel.condense);
+    # K_deck counts them, so the diagnosis sees what a deck with those springs written in sees
+    held = {"deck": deck}
+
     def fit_declared(c) -> tuple[np.ndarray, IdentificationResult, RunRecord]:
         """The declared model's identification on run 1's condensation (here, as serially)."""
+        if c.added_springs:
+            held["deck"] = deck_with_springs(deck, c.added_springs)
         cm = dm.condensed_model(c)
         rec = RunRecord("declared model: condensation", study.deck_path.name, cost.right_hand_sides, c.wall_s)
         ident = identify(cm, fit_obs, dm.k0, holdout=hold_obs, **dm.options.kwargs(profile=False, bootstrap=0))
@@ -294,7 +301,7 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
         # six right-hand sides however many members: one solver run, never cut into chunks (each
         # chunk would repeat the reading and assembly of the whole deck)
         eadapter = adapter_for(epath)
-        K_e, e_asym = element_stiffness(eadapter, emembers, log, deck=epath.name)
+        K_e, e_asym = element_stiffness(eadapter, emembers, log, deck=epath.name, tips=etips)
         if cost is None:
             cost = SolverCost(eadapter.name)
 
@@ -313,7 +320,7 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
 
         # ---- 3. the split deck -----------------------------------------------------------------
         def context() -> CandidateContext:
-            return CandidateContext(deck, tuple(dm.joints), K_e, fit_obs, tuple(study.loads.cases),
+            return CandidateContext(held["deck"], tuple(dm.joints), K_e, fit_obs, tuple(study.loads.cases),
                                     _residual_rms(fit_obs, ident.residuals) if ident is not None else None,
                                     max_joint_candidates, read_load_groups(study.root / "loads.csv"),
                                     case_scales=(case_scales(fit_obs.case_index, fit_obs.values, fit_obs.sigma,
@@ -321,25 +328,39 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
                                                  if ident is not None else None),
                                     max_member_candidates=max_member_candidates)
         # without the fit yet, the cuts and the rows do not read the residuals (checked above)
-        sctx = context()
-        sd = split_deck(deck, K_e, fams, sctx)
-        spath = deck_dir / "split.bdf"
-        decks.append((spath.name, write_deck(sd.deck, "large")))
-        spath.write_text(decks[-1][1])
-        boundary = dm.boundary
-        o_dofs = list(dict.fromkeys(list(study.measurements.all_dofs)))
-        # rows the families' candidates need (the considered members' ends), in the deck's order
-        extra_rows = [d for fam in fams for d in fam.split_rows(sctx, sd)]
-        for lim in sctx.limits.values():
-            say(f"  {lim.sentence()}")
-        say(f"split deck: {len(sd.pairs)} cut DOF pairs, {len(sd.connections)} connection candidates")
-        sadapter = adapter_for(spath)
-        if remote is not None:
-            # an external solver's split runs (this one and the loop's later columns) cut into
-            # column chunks, one solver process per worker (blackbox.parallel.use_executor)
-            sadapter = use_executor(sadapter, remote.executor)
-        base = SplitBase(sadapter, study.loads, sd.pairs, list(dict.fromkeys(boundary + o_dofs)),
-                         list(dict.fromkeys(boundary + o_dofs + extra_rows)), log, deck=spath.name)
+        def split_run():
+            sctx = context()
+            sd = split_deck(held["deck"], K_e, fams, sctx)
+            spath = deck_dir / "split.bdf"
+            text = write_deck(sd.deck, "large")
+            spath.write_text(text)
+            boundary = dm.boundary
+            o_dofs = list(dict.fromkeys(list(study.measurements.all_dofs)))
+            # rows the families' candidates need (the considered members' ends), in the deck's order
+            extra_rows = [d for fam in fams for d in fam.split_rows(sctx, sd)]
+            for lim in sctx.limits.values():
+                say(f"  {lim.sentence()}")
+            say(f"split deck: {len(sd.pairs)} cut DOF pairs, {len(sd.connections)} connection candidates")
+            sadapter = adapter_for(spath)
+            if remote is not None:
+                # an external solver's split runs (this one and the loop's later columns) cut into
+                # column chunks, one solver process per worker (blackbox.parallel.use_executor)
+                sadapter = use_executor(sadapter, remote.executor)
+            base = SplitBase(sadapter, study.loads, sd.pairs, list(dict.fromkeys(boundary + o_dofs)),
+                             list(dict.fromkeys(boundary + o_dofs + extra_rows)), log, deck=spath.name)
+            return sctx, sd, base, (spath.name, text)
+
+        try:
+            sctx, sd, base, split_text = split_run()
+        except UnstableStructureError:
+            # run 1 still on a worker: whether it needed reference springs is known only now
+            if pending is None:
+                raise
+            collect_declared()
+            if held["deck"] is deck:
+                raise
+            sctx, sd, base, split_text = split_run()
+        decks.append(split_text)
         collect_declared()
 
     # ---- candidates (with the declared fit's residuals, as serially) ----------------------------
@@ -391,19 +412,54 @@ class DiagnosisResult:
 
     def write(self, out: Path) -> list[str]:
         from blackbox.reports.diagnose import diagnosis_plots, diagnosis_report
+        from blackbox.reports.response import amplitude_before_after
 
         out = Path(out)
         (out / "diagnosis.json").write_text(json.dumps(self.document, indent=2))
         files = ["diagnosis.json"]
         if self.plots:
             files += diagnosis_plots(self.diagnosis, self.prepared.deck, out)
-        (out / "report.md").write_text(diagnosis_report(self.study, self.document, files))
+        text = diagnosis_report(self.study, self.document, files)
+        d, fo = self.diagnosis, self.prepared.fit_obs
+        if len(d.declared.residuals) == len(fo) == len(d.final.residuals):
+            text += amplitude_before_after(fo.values, fo.sigma, d.declared.residuals, d.final.residuals)
+        (out / "report.md").write_text(text)
         files.append("report.md")
         (out / "decks").mkdir()
         for name, text in self.decks:
             (out / "decks" / name).write_text(text)
             files.append(f"decks/{name}")
         return files
+
+
+def load_magnitudes(loads) -> tuple[float, float]:
+    """The study's typical force and moment: the median magnitude of its nonzero force and moment
+    entries (1 for a kind it has none of) -- the size of the load cases a report proposes."""
+    F = loads.values.tocsr()
+    comps = np.array([c for _, c in loads.dofs], dtype=int)
+    out = []
+    for kind in (comps <= 3, comps >= 4):
+        vals = np.abs(F[np.flatnonzero(kind)].data) if kind.any() else np.zeros(0)
+        vals = vals[vals > 0]
+        out.append(float(np.median(vals)) if vals.size else 1.0)
+    return out[0], out[1]
+
+
+def _nesting_cards(pr: Prepared, rows) -> str:
+    """What a nesting failure involves: the study deck's cards at the grids where the split
+    deck differs most, and where the split deck was cut (the edits that can make it another
+    structure)."""
+    grids = list(dict.fromkeys(g for g, *_ in rows))[:3]
+    parts = [f"cards at grid {g}: {', '.join(cards_at(pr.deck, g)) or 'none'}" for g in grids]
+    cuts: dict[str, list] = {}
+    for e in pr.split.connections:
+        cuts.setdefault(e.kind, []).extend(e.where_json())
+    if cuts:
+        parts.append("the split deck cuts " + "; ".join(
+            f"{k} at {', '.join(map(str, v[:12]))}{' ...' if len(v) > 12 else ''}" for k, v in cuts.items()))
+    return ("; ".join(parts) + ". A diagnosis on this split deck would describe another structure, so "
+            "none is made; the deck editing does not handle something in this deck: please report it "
+            "with the deck")
 
 
 def check_options(alpha: float, max_steps: int, refit_top: int, max_joint_candidates: int,
@@ -460,17 +516,23 @@ def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float =
         a = step.added
         say(f"  added {a.effect.label()[:70]}: reduced chi2 {step.before.reduced_chi2:.4g} -> "
             f"{step.after.reduced_chi2:.4g}, delta BIC {a.delta_bic:.4g}")
+        for e, _ in step.removed:
+            say(f"  removed {e.label()[:70]}: the addition made it unnecessary")
 
     with tempfile.TemporaryDirectory(prefix="blackbox-diagnose-") as tmp:
         pr = prepare(study, Path(tmp), adapter=adapter, max_joint_candidates=max_joint_candidates,
                      max_member_candidates=max_member_candidates, effects=effects, say=say, executor=executor)
         xyz = {int(g): tuple(v) for g, v in pr.base.adapter.grid_xyz().items()}
         ident = pr.ident
-        diag = diagnose(pr.base, pr.boundary, pr.K_deck, pr.joints,
-                        ident.k if ident is not None else np.zeros(0), pr.fit_obs, pr.hold_obs,
-                        pr.candidates, alpha=alpha, refit_top=refit_top, max_steps=max_steps,
-                        declared_prediction=ident.predicted if ident is not None else None,
-                        xyz=xyz, progress=progress_step, executor=executor)
+        try:
+            diag = diagnose(pr.base, pr.boundary, pr.K_deck, pr.joints,
+                            ident.k if ident is not None else np.zeros(0), pr.fit_obs, pr.hold_obs,
+                            pr.candidates, alpha=alpha, refit_top=refit_top, max_steps=max_steps,
+                            declared_prediction=ident.predicted if ident is not None else None,
+                            xyz=xyz, progress=progress_step, executor=executor,
+                            load_magnitudes=load_magnitudes(study.loads))
+        except EditedDeckError as exc:
+            raise EditedDeckError(f"{exc}. {_nesting_cards(pr, exc.rows)}", exc.rows) from None
         say(f"verdict: {diag.verdict}: {verdict_detail(diag)}")
         cost = pr.solver_cost()
     return DiagnosisResult(study, diag, pr, pr.decks, cost, time.perf_counter() - t0, plots)

@@ -14,7 +14,7 @@
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from blackbox.diagnosis.effects.base import CandidateContext, Effect
 
 __all__ = ["members_at", "constrained_grids", "unsplittable_grids", "unmodelled_notes", "element_deck",
-           "SplitEditor", "SplitDeck", "split_deck"]
+           "cards_at", "member_frames", "in_member_frames", "SplitEditor", "SplitDeck", "split_deck", "prune_spcadds"]
 
 
 def members_at(deck: Deck) -> dict[int, list[int]]:
@@ -91,24 +91,104 @@ def unmodelled_notes(deck: Deck) -> list[str]:
     return notes
 
 
-def element_deck(deck: Deck) -> tuple[Deck, dict[int, tuple[int, int]]]:
-    """Every CBAR alone (same EID, PID, orientation; G0 turned into a vector), end a clamped.
-    Returns the deck and ``{eid: (grid_a, grid_b)}`` in it. Each member has its own two grids and
-    nothing else is in the deck (no spring, rigid element or shared grid), so the members are
-    separate structures: one load case can load every member at once
-    (:func:`blackbox.diagnosis.runs.element_flexibility`)."""
+def cards_at(deck: Deck, grid: int) -> list[str]:
+    """The cards of ``deck`` that bear on ``grid``: the GRID with its CP/CD systems, the
+    elements, rigid elements, springs and constraint sets on it (``"CBAR 108 (offsets)"``), for
+    messages that must name what is involved."""
+    if grid not in deck.grids:
+        return []
+    g = deck.grids[grid]
+    out = [f"GRID {grid}" + "".join(f" {k} {v} ({deck.coords[v].card} at {deck.coords[v].src or '?'})"
+                                    for k, v in (("CP", g.cp), ("CD", g.cd)) if v and v in deck.coords)]
+    for b in deck.cbars.values():
+        if grid in (b.ga, b.gb):
+            extra = [w for w, on in (("offsets", b.wa is not None or b.wb is not None),
+                                     ("pin flags", bool(b.pa or b.pb))) if on]
+            out.append(f"{b.card} {b.eid}" + (f" ({', '.join(extra)})" if extra else ""))
+    out += [f"{r.card} {r.eid}" for r in deck.rods.values() if grid in (r.ga, r.gb)]
+    out += [f"RBE2 {r.eid}" for r in deck.rbe2s.values() if grid in (r.gn, *r.gm)]
+    out += [f"{r.card} {r.eid}" for r in deck.rbe3s.values()
+            if grid == r.refgrid or any(grid in gs for _, _, gs in r.groups)]
+    out += [f"CBUSH {b.eid}" for b in deck.bushes.values() if grid in (b.ga, b.gb)]
+    out += [f"{s.card} {s.eid}" for s in deck.springs.values() if grid in (s.g1, s.g2)]
+    sets = sorted({s.sid for s in deck.spc1s if grid in s.grids})
+    out += [f"SPC set {sid}" + "".join(f" (in SPCADD {a.sid})" for a in deck.spcadds.values() if sid in a.sets)
+            for sid in sets]
+    return out
+
+
+def element_deck(deck: Deck) -> tuple[Deck, dict[int, tuple[int, int]], dict[int, np.ndarray]]:
+    """Every CBAR alone (same EID, PID, pin flags and offsets; G0 turned into a vector), end a
+    clamped. Returns the deck, ``{eid: (grid_a, grid_b)}`` in it and ``{eid: k (6,)}``: the
+    grounded springs at end b of a member with pin flags. Each member has its own two grids and
+    nothing else is in the deck but those springs, so the members are separate structures: one
+    load case can load every member at once (:func:`blackbox.diagnosis.runs.element_flexibility`).
+
+    The grids are in basic (no CP, no CD), so ``K_e`` comes out in basic whatever the study's
+    displacement systems (:func:`in_member_frames` turns it into the split deck's components);
+    orientation vectors and offsets are held in basic by the reader already. A pin flag releases
+    a component of the bar's end from its grid, so a member pinned at either end is a
+    mechanism as a cantilever; its end b is then held by grounded springs of known stiffness
+    (``E A / L`` along, ``E I / L`` about each axis: the order of the member's own), which the
+    element run subtracts exactly (:func:`blackbox.diagnosis.runs.element_stiffness`)."""
     e = Deck(pbars=dict(deck.pbars), mat1s=dict(deck.mat1s))
-    members = {}
+    members, tips = {}, {}
+    eid_spring = max(deck.cbars) + 1 if deck.cbars else 1
     for i, eid in enumerate(sorted(deck.cbars)):
         b = deck.cbars[eid]
         ga, gb = 2 * i + 1, 2 * i + 2
-        e.grids[ga] = Grid(ga, deck.grids[b.ga].xyz)
-        e.grids[gb] = Grid(gb, deck.grids[b.gb].xyz)
-        x = b.x if b.g0 is None else tuple(np.subtract(deck.grids[b.g0].xyz, deck.grids[b.ga].xyz).tolist())
-        e.cbars[eid] = CBar(eid, b.pid, ga, gb, x=tuple(float(v) for v in x))
+        xa, xb = deck.grids[b.ga].xyz, deck.grids[b.gb].xyz
+        e.grids[ga] = Grid(ga, xa)
+        e.grids[gb] = Grid(gb, xb)
+        x = b.x if b.g0 is None else tuple(np.subtract(deck.grids[b.g0].xyz, xa).tolist())
+        e.cbars[eid] = CBar(eid, b.pid, ga, gb, x=tuple(float(v) for v in x), pa=b.pa, pb=b.pb,
+                            wa=b.wa, wb=b.wb)
         members[eid] = (ga, gb)
+        if b.pa or b.pb:
+            p = deck.pbars[b.pid]
+            E = deck.mat1s[p.mid].e
+            L = float(np.linalg.norm(np.subtract(xb, xa))) or 1.0
+            k_t, k_r = E * p.a / L, E * max(p.i1, p.i2, p.j) / L
+            tips[eid] = np.array([k_t] * 3 + [k_r] * 3)
+            for c in range(1, 7):
+                e.springs[eid_spring] = Spring(eid_spring, gb, c, 0, 0, k=float(tips[eid][c - 1]))
+                eid_spring += 1
     e.spc1s = [Spc1(1, "123456", tuple(ga for ga, _ in members.values()))]
-    return e, members
+    return e, members, tips
+
+
+def member_frames(deck: Deck, eid: int) -> np.ndarray:
+    """``(12, 12)``: the rotation from basic to the displacement components of CBAR ``eid``'s
+    grids (its CD systems), ``u_cd = Lambda u_basic`` over ``a1..a6, b1..b6``."""
+    b = deck.cbars[eid]
+    Ra, Rb = deck.displacement_frames([b.ga, b.gb])
+    L = np.zeros((12, 12))
+    L[0:3, 0:3] = L[3:6, 3:6] = Ra
+    L[6:9, 6:9] = L[9:12, 9:12] = Rb
+    return L
+
+
+def in_member_frames(deck: Deck, eid: int, K: np.ndarray) -> np.ndarray:
+    """A member matrix over ``a1..a6, b1..b6`` in basic (``K_e`` of the element run, or its
+    parts ``(p, 12, 12)``) in the components of its grids' CD systems: ``Lambda K Lambda^T``."""
+    b = deck.cbars[eid]
+    if not (deck.grids[b.ga].cd or deck.grids[b.gb].cd):
+        return K
+    L = member_frames(deck, eid)
+    return L @ K @ L.T
+
+
+def prune_spcadds(d: Deck) -> None:
+    """SPCADDs of an edited deck name only the SPC sets it still has: a set whose every grid a
+    cut released is gone, and an SPCADD left with no set goes too (NASTRAN rejects an SPCADD
+    naming a set that does not exist; the study format applies every remaining set anyway)."""
+    have = {s.sid for s in d.spc1s}
+    for sid, a in list(d.spcadds.items()):
+        sets = tuple(k for k in a.sets if k in have or k in d.spcadds)
+        if not sets:
+            del d.spcadds[sid]
+        elif sets != a.sets:
+            d.spcadds[sid] = replace(a, sets=sets)
 
 
 @dataclass
@@ -136,10 +216,12 @@ class SplitEditor:
         return members_at(self.original)
 
     def new_grid(self, like: int) -> int:
-        """A new grid at the position of grid ``like``."""
+        """A new grid at the position of grid ``like``, with its displacement system (CD), so
+        that a spring between the two bridges the same directions."""
         g = self.next_grid
         self.next_grid += 1
-        self.deck.grids[g] = Grid(g, self.deck.grids[like].xyz)
+        old = self.deck.grids[like]
+        self.deck.grids[g] = Grid(g, old.xyz, cd=old.cd)
         return g
 
     def new_eid(self) -> int:
@@ -148,10 +230,27 @@ class SplitEditor:
         return eid
 
     def kdiag(self, eid: int, grid: int, comp: int) -> float:
-        """Member ``eid``'s own diagonal stiffness at its end ``grid``, component ``comp``."""
+        """Member ``eid``'s own diagonal stiffness at its end ``grid``, component ``comp`` (of the
+        grid's displacement system)."""
         b = self.original.cbars[eid]
         end = 0 if b.ga == grid else 1
-        return float(self.K_e[eid][6 * end + comp - 1, 6 * end + comp - 1])
+        K = in_member_frames(self.original, eid, self.K_e[eid])
+        return float(K[6 * end + comp - 1, 6 * end + comp - 1])
+
+    def bridge(self, grid: int, comp: int, eids: Sequence[int], combine: str = "min") -> float:
+        """``K0`` of a cut at ``grid``, component ``comp``: the smallest (``combine="min"``) or
+        the sum (``"sum"``) of the members ``eids``' own diagonal stiffness there, leaving out a
+        member that has none (a pin flag releases that component of its end: its diagonal is
+        rounding, ~1e-9 of the others). When none has any, the largest diagonal of any member at
+        the grid among the components of the same kind (translations or rotations). Never
+        ~0: a cut bridged by nothing would leave the split deck a mechanism there."""
+        ks = np.array([self.kdiag(e, grid, comp) for e in eids])
+        group = (1, 2, 3) if comp <= 3 else (4, 5, 6)
+        top = max(self.kdiag(e, grid, c) for e in self.members_at.get(grid, eids) for c in group)
+        live = ks > 1e-6 * top
+        if not live.any():
+            return float(top)
+        return float(ks[live].sum() if combine == "sum" else ks[live].min())
 
     def connect(self, k0: float, a: DofLabel, b: DofLabel | None = None) -> int:
         """Bridge DOF ``a`` and DOF ``b`` (or ground) by a CELAS2 of stiffness ``k0``; returns the
@@ -183,6 +282,7 @@ def split_deck(deck: Deck, K_e: dict[int, np.ndarray], families: Sequence[type["
     for fam in families:
         connections += fam.cut(editor, ctx)
     d = editor.deck
+    prune_spcadds(d)
     member_dofs = {eid: tuple((b.ga, c) for c in range(1, 7)) + tuple((b.gb, c) for c in range(1, 7))
                    for eid, b in d.cbars.items()}
     return SplitDeck(d, editor.pairs, connections, member_dofs, editor.split_grids)

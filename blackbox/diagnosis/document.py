@@ -1,7 +1,8 @@
 """``diagnosis.json``: a :class:`~blackbox.diagnosis.search.Diagnosis` as a JSON document.
 
 Keys: ``study``, ``before`` / ``after`` (fit statistics with the 99 % band), ``candidates`` (the
-first round's, best first), ``added`` (each effect with its parameters), ``steps`` (every round:
+first round's, best first), ``added`` (each effect of the final model with its parameters there,
+in the order added), ``removed`` (effects a later addition made unnecessary), ``steps`` (every round:
 statistics, the 25 best candidates, joint parameters and residual structure before and after),
 ``stop_reason``, ``joint_parameters``, ``holdout``, ``validation`` (hold-out cases or K-fold over
 the load cases, :mod:`blackbox.diagnosis.validation`), ``settings``, ``identify_check``, ``solver``,
@@ -19,7 +20,7 @@ import math
 
 from blackbox.diagnosis.fit import Fit, chi2_band
 from blackbox.diagnosis.scoring import CandidateScore
-from blackbox.diagnosis.search import Diagnosis
+from blackbox.diagnosis.search import AMBIGUOUS, Diagnosis
 
 __all__ = ["diagnosis_document", "verdict_detail", "misfit_location", "alternatives", "AMBIGUOUS"]
 
@@ -73,9 +74,6 @@ def _joint_params(fit: Fit) -> dict:
     return out
 
 
-AMBIGUOUS = 10.0            # evidence (delta BIC + hold-out chi2, ~ -2 ln Bayes factor) within which
-                            # another accepted candidate is named beside the one added: below 10 the
-                            # data do not decide "very strongly" between them (Kass & Raftery 1995)
 
 
 def alternatives(step) -> list[dict]:
@@ -89,8 +87,12 @@ def alternatives(step) -> list[dict]:
             continue
         gap = c.evidence - a.evidence
         if gap < AMBIGUOUS:
-            out.append({"effect": c.effect.kind, "where": c.effect.where_json(), **c.effect.details_json(),
-                        "evidence_gap": _num(gap)})
+            alt = {"effect": c.effect.kind, "where": c.effect.where_json(), **c.effect.details_json(),
+                   "evidence_gap": _num(gap), "of": "data" if c.effect.of_data else "structure"}
+            sep = step.separations.get(c.effect.key)
+            if sep is not None:
+                alt["separate_by"] = sep
+            out.append(alt)
     return sorted(out, key=lambda d: d["evidence_gap"])
 
 
@@ -101,15 +103,21 @@ def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: li
     fewer candidates than the study offers (``settings.candidates_limited``, and a warning each)."""
     first = diag.steps[0].scores if diag.steps else ()
     added = []
-    for s in diag.steps:
-        if s.added is None:
+    final = {e.key: e for e in diag.final.spec.effects}
+    for i, s in enumerate(diag.steps):
+        if s.added is None or s.added.effect.key not in final:
             continue
-        e = s.added.effect
+        e = final[s.added.effect.key]
         added.append({"effect": e.kind, "where": e.where_json(), **e.details_json(),
-                      "parameters": e.parameters(s.after),
+                      "of": "data" if e.of_data else "structure",
+                      "parameters": e.parameters(diag.final), "step": i + 1,
                       "delta_bic": _num(s.added.delta_bic), "lr_p_value": _num(s.added.lr_p_value),
                       "variants_tried": [_trial(t) for t in s.added.variants],
                       "alternatives": alternatives(s)})
+    removed = [{"effect": e.kind, "where": e.where_json(), **e.details_json(), "step": i + 1,
+                "delta_bic": _num(j.delta_bic), "holdout_delta_chi2": _num(j.holdout_delta_chi2),
+                "kfold_delta_chi2": _num(j.kfold_delta_chi2), "decision": j.decision}
+               for i, s in enumerate(diag.steps) for e, j in s.removed]
     steps = []
     for i, s in enumerate(diag.steps):
         steps.append({
@@ -127,13 +135,18 @@ def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: li
             "residual_structure_after": _trim(s.structure_after),
             "solver_runs": s.runs,
             "lr_level": _num(s.level),
+            "lr_levels": {k: _num(v) for k, v in s.levels.items()},
             "hypotheses": s.hypotheses,
+            "hypotheses_by_kind": dict(s.by_kind),
+            "removed": [{"effect": e.kind, "where": e.where_json(), **e.details_json(), "decision": j.decision}
+                        for e, j in s.removed],
         })
     return {
         "study": study_name,
         "before": _stats(diag.declared, diag.band),
         "candidates": [_candidate(c) for c in first],
         "added": added,
+        "removed": removed,
         "after": _stats(diag.final, diag.band),
         "steps": steps,
         "stop_reason": diag.stop_reason,
@@ -145,9 +158,12 @@ def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: li
                            "cv_chi2_before": _num(diag.kfold["cv_chi2_before"]),
                            "cv_chi2_after": _num(diag.kfold["cv_chi2_after"])})},
         "settings": {"alpha": diag.alpha,
-                     "multiplicity": "alpha spending over rounds (round r spends alpha / 2^r), Bonferroni "
-                                     "within a round over its candidates and their variant upgrades; "
-                                     "the *_bonferroni p-values are p x 2^r x M_r, compared with alpha",
+                     "multiplicity": "alpha spending over rounds (round r spends alpha / 2^r), shared "
+                                     "equally among the kinds of effect in the round and, within a kind, "
+                                     "Bonferroni over its candidates and their variant upgrades; the "
+                                     "*_bonferroni p-values are p x 2^r x K_r x M_kind, compared with alpha",
+                     "elimination": "after each addition every earlier effect is judged again as if added "
+                                    "last; one that no longer passes is removed (removed)",
                      "variants": "each accepted candidate refined through its family's richer variants "
                                  "(the same tests as a candidate, against the variant it extends)",
                      "band": "99% band of chi2(n - p) / (n - p)", "candidates_by_effect": diag.n_candidates,
@@ -189,7 +205,10 @@ def verdict_detail(diag: Diagnosis) -> str:
     if diag.verdict == "adequate":
         return f"the declared model fits within the noise (reduced chi2 {r:.4g}, 99 % band {lo:.4g}..{hi:.4g}); nothing added"
     if diag.verdict == "explained":
-        return (f"{n} effect(s) added; the reduced chi2 is back within the noise band ({r:.4g}, 99 % band "
+        data = sum(1 for c in diag.added if c.effect.of_data)
+        which = ("" if not data else " (all of them defects of the test data, not of the structure)" if data == n
+                 else f" ({data} of them defects of the test data, not of the structure)")
+        return (f"{n} effect(s) added{which}; the reduced chi2 is back within the noise band ({r:.4g}, 99 % band "
                 f"{lo:.4g}..{hi:.4g})")
     what = f"after {n} added effect(s)" if n else "and no candidate effect is supported"
     return (f"the reduced chi2 stays at {r:.4g}, above the 99 % band {lo:.4g}..{hi:.4g}, {what}; "

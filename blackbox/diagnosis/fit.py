@@ -64,6 +64,7 @@ class Fit:
     converged: bool
     message: str
     J: np.ndarray                       # whitened Jacobian at x (natural coordinates)
+    holdout_predicted: np.ndarray | None = None     # predictions at the hold-out rows
 
 
 class _Refit:
@@ -131,13 +132,14 @@ def fit_model(model: AugmentedModel, om: ObsMap, hold: ObsMap | None, x0: np.nda
     w = prob.weights
     Jn = model.jacobian(x, om, st) / om.sigma[:, None] if model.p else np.zeros((len(om.y), 0))
     fs = FitStatistics.of(om.y, f, om.sigma, model.p, weights=w)
-    h_rms = h_chi2 = None
+    h_rms = h_chi2 = fh = None
     hn = 0
     if hold is not None and len(hold.y):
-        hs = HoldoutStats.of((), hold.y, model.predict(x, hold, st), 1.0 / hold.sigma)
+        fh = model.predict(x, hold, st)
+        hs = HoldoutStats.of((), hold.y, fh, 1.0 / hold.sigma)
         h_rms, h_chi2, hn = hs.rms_error, hs.chi2, hs.n_obs
     return Fit(spec, x, std_of(Jn), fs.n_obs, fs.n_params, fs.chi2, fs.reduced_chi2, fs.rms_residual, fs.bic,
-               (om.y - f) * w, f, h_rms, h_chi2, hn, bool(converged), msg, Jn)
+               (om.y - f) * w, f, h_rms, h_chi2, hn, bool(converged), msg, Jn, fh)
 
 
 def std_of(J: np.ndarray) -> np.ndarray:

@@ -30,6 +30,7 @@ own springs minus the rigid-pair penalty, so a rigid pair stays rigid in every m
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -122,6 +123,7 @@ class ObsMap:
     y: np.ndarray
     sigma: np.ndarray
     comp: np.ndarray | None = None      # the measured component of each row
+    labels: tuple[str, ...] = ()        # the case labels ``case`` indexes
 
     @classmethod
     def of(cls, obs: Observations, o_index: dict) -> "ObsMap":
@@ -130,7 +132,23 @@ class ObsMap:
                    np.array([-1 if r is None else o_index[r] for r in refs], dtype=int),
                    np.asarray(obs.case_index, int), np.array([d[0] for d in obs.dofs], dtype=int),
                    np.asarray(obs.values, float), np.asarray(obs.sigma, float),
-                   np.array([d[1] for d in obs.dofs], dtype=int))
+                   np.array([d[1] for d in obs.dofs], dtype=int), tuple(obs.case_labels))
+
+    @functools.cached_property
+    def _channels(self) -> dict:
+        out: dict = {}
+        for i, (g, c) in enumerate(zip(self.grid.tolist(), self.comp.tolist())):
+            out.setdefault((g, c), []).append(i)
+        return {k: np.array(v, int) for k, v in out.items()}
+
+    def rows_of(self, grid: int, comp: int, case: str | None = None) -> np.ndarray:
+        """Mask of the rows of channel ``(grid, comp)`` (in case ``case`` only, when given)."""
+        m = np.zeros(len(self.y), bool)
+        m[self._channels.get((int(grid), int(comp)), np.zeros(0, int))] = True
+        if case is not None:
+            idx = [i for i, lab in enumerate(self.labels) if lab == case]
+            m &= np.isin(self.case, idx)
+        return m
 
     def pick(self, U: np.ndarray) -> np.ndarray:
         f = U[self.row, self.case]
@@ -142,7 +160,10 @@ class ObsMap:
 
 @dataclass
 class State:
-    """The block system solved at one parameter point."""
+    """The block system solved at one parameter point. ``groups``: with case-dependent joint
+    stiffness (:meth:`Effect.case_factors`), the cases solved together -- ``(cols, dK, Ainv,
+    phi)``, ``phi`` the joint parameters' factors in those cases -- else ``None`` (every case
+    with ``dK`` and ``Ainv``)."""
     dK: np.ndarray
     D: np.ndarray
     Ainv: np.ndarray
@@ -150,6 +171,14 @@ class State:
     f: np.ndarray
     delta: np.ndarray
     U_O: np.ndarray
+    groups: list | None = None
+
+    def each(self):
+        """``(cols, dK, Ainv, phi)`` of every group of cases (``cols`` a slice or index array;
+        ``phi`` ``None`` when every factor is 1)."""
+        if self.groups is None:
+            return [(slice(None), self.dK, self.Ainv, None)]
+        return self.groups
 
 
 class AugmentedModel:
@@ -159,6 +188,7 @@ class AugmentedModel:
                  K_deck: np.ndarray | None, o_dofs: Sequence[DofLabel]):
         self.base, self.spec = base, spec
         self.o_dofs = tuple(o_dofs)
+        self._o_index = {d: i for i, d in enumerate(self.o_dofs)}
         S = list(dict.fromkeys(list(boundary) + [d for e in spec.effects for d in e.stiffness_dofs]))
         self.S = tuple(S)
         sidx = {d: i for i, d in enumerate(S)}
@@ -208,6 +238,21 @@ class AugmentedModel:
                 self._outputs.append(e)
         self._structural = np.flatnonzero(~output)
         self._jD = self.assembly.derivatives(np.ones(spec.joint_params)) if self.assembly else None
+        # effects that make a joint's stiffness depend on the case: (effect, its slice, the
+        # joint's parameter slice, each spring's relative-rotation vector over S)
+        self._case = []
+        jsl = dict(zip((j.name for j in spec.joints), spec.joint_slices()))
+        for e, sl in zip(spec.effects, spec.effect_slices()):
+            name = e.case_joint
+            if name is None:
+                continue
+            js = jsl[name]
+            E = np.zeros((js.stop - js.start, nS))
+            for q, i in enumerate(range(js.start, js.stop)):
+                d = np.diag(self._jD[i])
+                a = int(np.flatnonzero(d > 0)[0])
+                E[q] = self._jD[i][:, a] / np.sqrt(d[a])       # +1 at the lower branch's DOF
+            self._case.append((e, sl, js, E))
 
     def rigid_limits(self) -> np.ndarray:
         """Upper limits on the parameters beyond which a spring is rigid to rounding: a joint
@@ -246,20 +291,114 @@ class AugmentedModel:
             D += x[i] * Dm
         nS, m = self.nS, self.m
         IDK = np.eye(m) - D * self.K0[None, :]                      # I - D K0
+        Ainv = self._inverse(dK, D, IDK)
+        b = np.vstack([self.us0, IDK @ self.dt0])
+        z = Ainv @ b
+        if not np.all(np.isfinite(z)):
+            raise np.linalg.LinAlgError("singular augmented system")
+        groups = None
+        if self._case:
+            z, groups = self._case_solve(x, dK, D, IDK, b, z, Ainv)
+        u_S, f = z[:nS], z[nS:]
+        if groups is None:
+            dKu = dK @ u_S
+        else:
+            dKu = np.zeros_like(u_S)
+            for cols, dKg, _, _ in groups:
+                dKu[:, cols] = dKg @ u_S[:, cols]
+        delta = self.dt0 - self.Zs.T @ dKu - self.St @ f
+        U_O = self.uo0 - self.Gos @ dKu - self.Zo @ f
+        return State(dK, D, Ainv, u_S, f, delta, U_O, groups)
+
+    def _inverse(self, dK: np.ndarray, D: np.ndarray, IDK: np.ndarray) -> np.ndarray:
+        nS, m = self.nS, self.m
         A = np.zeros((nS + m, nS + m))
         A[:nS, :nS] = np.eye(nS) + self.Gss @ dK
         A[:nS, nS:] = self.Zs
         A[nS:, :nS] = IDK @ self.Zs.T @ dK
         A[nS:, nS:] = D + IDK @ self.St
-        b = np.vstack([self.us0, IDK @ self.dt0])
-        Ainv = np.linalg.inv(A)             # small (n_S + m): inverted once, applied many times
-        z = Ainv @ b
-        if not np.all(np.isfinite(z)):
-            raise np.linalg.LinAlgError("singular augmented system")
-        u_S, f = z[:nS], z[nS:]
-        delta = self.dt0 - self.Zs.T @ (dK @ u_S) - self.St @ f
-        U_O = self.uo0 - self.Gos @ (dK @ u_S) - self.Zo @ f
-        return State(dK, D, Ainv, u_S, f, delta, U_O)
+        return np.linalg.inv(A)             # small (n_S + m): inverted once, applied many times
+
+    CASE_ITERATIONS = 20
+
+    def case_factors(self, x: np.ndarray, u_S: np.ndarray) -> np.ndarray:
+        """``(joint params, cases)``: each joint parameter's stiffness factor in each case, from
+        the case-dependent effects at the joint solution ``u_S`` (1 elsewhere)."""
+        phi = np.ones((self.spec.joint_params, u_S.shape[1]))
+        for e, sl, js, E in self._case:
+            phi[js] = e.case_factors(E @ u_S, x[sl])
+        return phi
+
+    def _case_solve(self, x, dK, D, IDK, b, z, Ainv0):
+        """The cases solved with their own joint stiffness (factors ``phi`` from the case-dependent
+        effects at the current solution), repeated until ``phi`` settles: a gap's side depends on
+        the sign of the relative rotation it causes. Cases with equal factors share one inverse."""
+        nS = self.nS
+        jp = self.spec.joint_params
+        xj = x[:jp]
+        phi = self.case_factors(x, z[:nS])
+        groups = None
+        for _ in range(self.CASE_ITERATIONS):
+            keys, inv = np.unique(np.round(phi.T, 12), axis=0, return_inverse=True)
+            inv = np.asarray(inv).reshape(-1)
+            groups = []
+            z = np.empty_like(z)
+            for g, key in enumerate(keys):
+                cols = np.flatnonzero(inv == g)
+                if np.any(key != 1.0):
+                    dKg = dK + np.tensordot((key - 1.0) * xj, self._jD, axes=1)
+                    Ag = self._inverse(dKg, D, IDK)
+                else:
+                    dKg, Ag = dK, Ainv0
+                z[:, cols] = Ag @ b[:, cols]
+                groups.append((cols, dKg, Ag, key))
+            if not np.all(np.isfinite(z)):
+                raise np.linalg.LinAlgError("singular augmented system")
+            new = self.case_factors(x, z[:nS])
+            if np.array_equal(np.round(new, 12), np.round(phi, 12)):
+                break
+            phi = new
+        return z, groups
+
+    def _output_mixes(self, om: ObsMap) -> list[tuple[int, np.ndarray, list]]:
+        if not any(type(e).mix_rows is not Effect.mix_rows for e in self._outputs):
+            return []
+        sl = dict(zip(self.spec.effects, self.spec.effect_slices()))
+        o_index = self._o_index
+        return [(sl[e].start + q, rows, terms) for e in self._outputs for q, rows, terms in e.mix_rows(om, o_index)]
+
+    def pick(self, U: np.ndarray, x: np.ndarray, om: ObsMap) -> np.ndarray:
+        """``U`` (observed DOFs x cases) at the rows of ``om``, with the output mixes applied
+        (a channel that reads, in part ``x_q``, another DOF's motion: two channels swapped, a
+        sensor on the neighbouring grid): ``f_rows += x_q (source - f_rows)``. Linear in ``U``."""
+        f = om.pick(U)
+        mixes = self._output_mixes(om)
+        if not mixes:
+            return f
+        out = f.copy()
+        for i, rows, terms in mixes:
+            case = om.case[rows]
+            src = sum(w * U[idx, case] for idx, w in terms)
+            ref = om.ref[rows]
+            has = ref >= 0
+            if has.any():
+                src = src - np.where(has, U[np.maximum(ref, 0), case], 0.0)
+            out[rows] += x[i] * (src - f[rows])
+        return out
+
+    def _mix_columns(self, U: np.ndarray, om: ObsMap) -> list[tuple[int, np.ndarray, np.ndarray]]:
+        """``d pick / d x_q`` of every mixing parameter: ``(q, rows, source - own)``."""
+        f = om.pick(U)
+        out = []
+        for i, rows, terms in self._output_mixes(om):
+            case = om.case[rows]
+            src = sum(w * U[idx, case] for idx, w in terms)
+            ref = om.ref[rows]
+            has = ref >= 0
+            if has.any():
+                src = src - np.where(has, U[np.maximum(ref, 0), case], 0.0)
+            out.append((i, rows, src - f[rows]))
+        return out
 
     def _output_factors(self, om: ObsMap) -> list[tuple[int, np.ndarray]]:
         sl = dict(zip(self.spec.effects, self.spec.effect_slices()))
@@ -285,12 +424,13 @@ class AugmentedModel:
 
     def predict(self, x: np.ndarray, om: ObsMap, st: State | None = None) -> np.ndarray:
         st = self.state(x) if st is None else st
-        return self.multiplier(x, om) * om.pick(st.U_O) + self.offset(x, om)
+        return self.multiplier(x, om) * self.pick(st.U_O, x, om) + self.offset(x, om)
 
     def structural_derivatives(self, x: np.ndarray, st: State, which: np.ndarray) -> np.ndarray:
-        """``dU_O/dx_i`` for the structural parameters ``which``: ``(len(which), n_O, L)``."""
+        """``dU_O/dx_i`` for the structural parameters ``which``: ``(len(which), n_O, L)``. With
+        case-dependent joint stiffness, per group of cases, the factors held fixed (a gap's side
+        is piecewise constant in the parameters)."""
         nS, m, L = self.nS, self.m, self.base.n_cases
-        rhs, dKs = [], []
         IDK = np.eye(m) - st.D * self.K0[None, :]
         force = st.f + self.K0[:, None] * st.delta                 # whole force through the pairs
         basis = dict(self._basis)
@@ -301,32 +441,46 @@ class AugmentedModel:
             if any(sl.start <= i < sl.stop for i in which):
                 for q, K_q in enumerate(e.stiffness_derivatives(x[sl])):
                     stiff.setdefault(sl.start + q, []).append((idx, K_q))
+        case_of = {}
+        for e, sl, js, E in self._case:
+            for q, i in enumerate(range(sl.start, sl.stop)):
+                case_of[i] = (e, sl, js, E, q)
         jp = self.spec.joint_params
-        for i in which:
-            if i < jp:
-                dKq = self._jD[i]
-            elif i in stiff:
-                dKq = np.zeros((nS, nS))
-                for idx, K_q in stiff[i]:
-                    dKq[np.ix_(idx, idx)] += K_q
-            else:
-                dKq = None
-            if dKq is not None:
-                v = dKq @ st.u_S
-                rhs.append(np.vstack([self.Gss @ v, IDK @ (self.Zs.T @ v)]))
-            else:
-                rhs.append(np.vstack([np.zeros((nS, L)), basis[i] @ force]))
-            dKs.append(dKq)
-        if not rhs:
-            return np.zeros((0, len(self.o_dofs), L))
-        dz = -(st.Ainv @ np.hstack(rhs)).reshape(nS + m, len(rhs), L).transpose(1, 0, 2)
-        out = np.empty((len(rhs), len(self.o_dofs), L))
-        for q, dKq in enumerate(dKs):
-            du_S, df = dz[q, :nS], dz[q, nS:]
-            w = st.dK @ du_S
-            if dKq is not None:
-                w = w + dKq @ st.u_S
-            out[q] = -self.Gos @ w - self.Zo @ df
+        out = np.zeros((len(which), len(self.o_dofs), L))
+        if not len(which):
+            return out
+        for cols, dKg, Ainv, phi in st.each():
+            u = st.u_S[:, cols]
+            rhs, vs = [], []
+            for i in which:
+                v = None
+                if i < jp:
+                    v = (self._jD[i] @ u) * (1.0 if phi is None else phi[i])
+                elif i in stiff:
+                    dKq = np.zeros((nS, nS))
+                    for idx, K_q in stiff[i]:
+                        dKq[np.ix_(idx, idx)] += K_q
+                    v = dKq @ u
+                elif i in case_of:
+                    e, sl, js, E, q = case_of[i]
+                    dphi = e.case_factor_derivatives(E @ u, x[sl])[q]          # (joint params, cases)
+                    v = np.zeros_like(u)
+                    for k, ij in enumerate(range(js.start, js.stop)):
+                        if np.any(dphi[k]):
+                            v += (self._jD[ij] @ u) * (dphi[k] * x[ij])
+                if v is not None:
+                    rhs.append(np.vstack([self.Gss @ v, IDK @ (self.Zs.T @ v)]))
+                else:
+                    rhs.append(np.vstack([np.zeros((nS, u.shape[1])), basis[i] @ force[:, cols]]))
+                vs.append(v)
+            n = u.shape[1]
+            dz = -(Ainv @ np.hstack(rhs)).reshape(nS + m, len(rhs), n).transpose(1, 0, 2)
+            for q, v in enumerate(vs):
+                du_S, df = dz[q, :nS], dz[q, nS:]
+                w = dKg @ du_S
+                if v is not None:
+                    w = w + v
+                out[q][:, cols] = -self.Gos @ w - self.Zo @ df
         return out
 
     def jacobian(self, x: np.ndarray, om: ObsMap, st: State | None = None) -> np.ndarray:
@@ -334,15 +488,22 @@ class AugmentedModel:
         x = np.asarray(x, float)
         st = self.state(x) if st is None else st
         mult = self.multiplier(x, om)
-        base = om.pick(st.U_O)
+        base = self.pick(st.U_O, x, om)
         J = np.zeros((len(om.y), self.p))
         structural = self._structural
         if structural.size:
             dU = self.structural_derivatives(x, st, structural)
             for q, i in enumerate(structural):
-                J[:, i] = mult * om.pick(dU[q])
-        for i, rows in self._output_factors(om):
-            J[rows, i] = mult[rows] / x[i] * base[rows]
+                J[:, i] = mult * self.pick(dU[q], x, om)
+        factors = self._output_factors(om)
+        for k, (i, rows) in enumerate(factors):
+            other = np.ones(len(om.y))          # the other factors' product (x_i may cross 0)
+            for k2, (i2, rows2) in enumerate(factors):
+                if k2 != k:
+                    other[rows2] *= x[i2]
+            J[rows, i] += other[rows] * base[rows]
+        for i, rows, col in self._mix_columns(st.U_O, om):
+            J[rows, i] += mult[rows] * col
         for i, rows in self._output_offsets(om):
             J[rows, i] = 1.0
         return J

@@ -73,14 +73,17 @@ def element_flexibility(adapter: SolverAdapter, members: dict[int, tuple[int, in
 
 
 def element_stiffness(adapter: SolverAdapter, members: dict[int, tuple[int, int]],
-                      log: list[RunRecord], deck: str = "elements") -> tuple[dict[int, np.ndarray], float]:
+                      log: list[RunRecord], deck: str = "elements",
+                      tips: dict[int, np.ndarray] | None = None) -> tuple[dict[int, np.ndarray], float]:
     """``K_e`` (12 x 12, global axes, DOFs ``a1..a6, b1..b6``) of every member from ONE run.
 
     ``members[eid] = (grid_a, grid_b)`` in the adapter's element deck, where each member is alone
     and clamped at ``grid_a``. Unit loads at ``grid_b`` give ``F_bb`` (:func:`element_flexibility`:
     six load cases for all members); the member's stiffness with its six rigid-body modes is
     ``T^T F_bb^-1 T``, ``T = [-Gamma, I]``, ``Gamma = [[I, -[r x]], [0, I]]`` (``r = x_b - x_a``).
-    Returns the matrices and the largest relative asymmetry of ``F_bb`` (Maxwell-Betti check of
+    ``tips[eid]``: grounded springs (6 components) that hold end b of a member pinned at an end
+    (:func:`blackbox.diagnosis.decks.element_deck`); the run then gives ``(K_bb + diag(k))^-1``,
+    and ``diag(k)`` is subtracted. Returns the matrices and the largest relative asymmetry of ``F_bb`` (Maxwell-Betti check of
     the run).
     """
     flex = element_flexibility(adapter, members, log, deck)
@@ -90,6 +93,8 @@ def element_stiffness(adapter: SolverAdapter, members: dict[int, tuple[int, int]
         F = flex[eid]
         asym = max(asym, float(np.max(np.abs(F - F.T)) / max(np.max(np.abs(F)), 1e-300)))
         K_bb = np.linalg.inv(0.5 * (F + F.T))
+        if tips and eid in tips:
+            K_bb = K_bb - np.diag(tips[eid])
         r = np.subtract(xyz[gb], xyz[ga])
         gamma = np.eye(6)
         gamma[:3, 3:] = -_skew(r)

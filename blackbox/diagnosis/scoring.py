@@ -24,7 +24,7 @@ from blackbox.diagnosis.fit import GRAM_RTOL, Fit
 from blackbox.diagnosis.model import AugmentedModel, ObsMap
 from blackbox.errors import IdentificationError
 
-__all__ = ["CandidateScore", "Projector", "score_test", "score_candidates", "log10_sf", "SCORE_RTOL"]
+__all__ = ["CandidateScore", "Projector", "score_test", "sparse_score", "score_candidates", "log10_sf", "log10_sf_array", "SCORE_RTOL"]
 
 SCORE_RTOL = 1e-8           # a candidate direction whose part outside the model's span is below
                             # 1e-4 of its own size (eigenvalue 1e-8) adds nothing (rounding)
@@ -116,6 +116,28 @@ def score_test(proj: Projector, Jc: np.ndarray, one_sided: np.ndarray):
     return max(full, 0.0), df, step
 
 
+def sparse_score(proj: Projector, rows: np.ndarray, col: np.ndarray, one_sided: np.ndarray):
+    """:func:`score_test` of one whitened column that is zero outside ``rows`` (values ``col``
+    there), without forming it: ``M = c.c - C^T N^+ C`` and ``h = c.r - C^T N^+ b0`` with
+    ``C = J0[rows]^T c`` (column-scaled)."""
+    rows = np.asarray(rows, int)
+    c = np.asarray(col, float)
+    scale = float(np.sqrt(max(float(c @ c), 1e-300)))
+    M = float(c @ c)
+    h = float(c @ proj.r[rows])
+    if proj.p:
+        C = (proj.J0[rows].T @ c) / proj.s
+        M = M - float(C @ proj.Ninv @ C)
+        h = h - float(C @ proj.Ninv @ proj.b0)
+    Ms = M / (scale * scale)
+    if not Ms > SCORE_RTOL:
+        return 0.0, 0, np.zeros(1)
+    th = (h / scale) / Ms
+    if np.any(one_sided) and th < 0:
+        return 0.0, 1, np.zeros(1)
+    return max((h / scale) ** 2 / Ms, 0.0), 1, np.array([th / scale])
+
+
 def score_candidates(model: AugmentedModel, fit: Fit, om: ObsMap, candidates: Sequence[Effect],
                      boundary, K_deck, o_dofs) -> list[tuple[Effect, float, int, np.ndarray]]:
     """Score every candidate at the current optimum: ``[(effect, S, df, step)]``. A family that
@@ -133,6 +155,13 @@ def score_candidates(model: AugmentedModel, fit: Fit, om: ObsMap, candidates: Se
     batched: set[int] = set()
     for family in dict.fromkeys(type(c) for c in candidates):
         group = [c for c in candidates if type(c) is family]
+        sparse = family.sparse_columns(model, st, fit.x, om, group)
+        if sparse is not None:
+            for e, (rows, vals) in zip(group, sparse):
+                S, df, step = sparse_score(proj, rows, vals / om.sigma[rows], e.one_sided)
+                out.append((e, S, df, step))
+                batched.add(id(e))
+            continue
         cols = family.batch_columns(model, st, fit.x, om, group)
         if cols is None:
             continue
@@ -165,4 +194,14 @@ def log10_sf(S: float, df: int) -> float:
     v = float(stats.chi2.logsf(S, df))
     if not math.isfinite(v):
         v = float(stats.chi2.logpdf(S, df)) + math.log(2.0)
+    return v / math.log(10.0)
+
+
+def log10_sf_array(S: np.ndarray, df: int) -> np.ndarray:
+    """:func:`log10_sf` of many statistics with one ``df``, vectorised."""
+    S = np.asarray(S, float)
+    v = stats.chi2.logsf(S, df)
+    bad = ~np.isfinite(v)
+    if bad.any():
+        v[bad] = stats.chi2.logpdf(S[bad], df) + math.log(2.0)
     return v / math.log(10.0)

@@ -32,9 +32,9 @@ from __future__ import annotations
 from typing import Callable
 
 import numpy as np
-from scipy import stats
 
 from blackbox.condensation import CondensedModel
+from blackbox.distributions import norm_ppf, t_ppf
 from blackbox.errors import IdentificationError
 from blackbox.fitting.lm import STATUS_MESSAGES
 from blackbox.fitting.statistics import FitStatistics, HoldoutStats, plausibility_warning
@@ -134,7 +134,7 @@ def identify(model: CondensedModel, obs: Observations, k0, *, fixed_point: bool 
              xtol: float = 1e-8, ftol: float = 1e-10, callback: Callable[[IterationRecord], bool] | None = None,
              profile: bool = True, bootstrap: int = 0, seed: int = 0, scale_covariance: bool = False,
              rank_rtol: float = 1e-8, progress: Callable[[str], None] | None = None,
-             executor=None) -> IdentificationResult:
+             executor=None, sigma_dof: float | None = None, chi2_test: bool = True) -> IdentificationResult:
     """Weighted least-squares estimate of the joint parameters (Sec. 4.3) with its uncertainty.
 
     ``k0``: the start, the concatenated parameters of ``model.assembly`` (admissible: springs > 0,
@@ -149,7 +149,11 @@ def identify(model: CondensedModel, obs: Observations, k0, *, fixed_point: bool 
     ``progress(message)`` hears of the long stages after the estimate (profiles, bootstrap).
     ``executor`` (e.g. :class:`blackbox.parallel.DaskExecutor`, ``--workers``): where the
     bootstrap refits run (:func:`~blackbox.identification.uncertainty.parametric_bootstrap`; the
-    same samples as here); everything else runs here.
+    same samples as here); everything else runs here. ``sigma_dof``: ``sigma`` is an estimate
+    with that many degrees of freedom (repeated readings, the fit: :mod:`blackbox.noise`), so
+    the intervals take Student's t with ``sigma_dof`` instead of the normal quantile (``None`` or
+    ``inf``: sigma known). ``chi2_test=False``: sigma was estimated from this very fit, so the
+    chi-square says nothing about the model and is not judged.
     """
     k0, prob, holdout_prob = _check_inputs(model, obs, k0, confidence, max_iterations, xtol, ftol,
                                            bootstrap, holdout)
@@ -167,7 +171,7 @@ def identify(model: CondensedModel, obs: Observations, k0, *, fixed_point: bool 
     res = (prob.y - f) * prob.w
     fs = FitStatistics.of(prob.y, f, prob.sigma, p, prob.w)
     dof, red = fs.dof, fs.reduced_chi2
-    implausible = plausibility_warning(fs.chi2, dof)
+    implausible = plausibility_warning(fs.chi2, dof) if chi2_test else None
     if implausible:
         warnings.append(implausible)
 
@@ -177,7 +181,11 @@ def identify(model: CondensedModel, obs: Observations, k0, *, fixed_point: bool 
     cscale = max(1.0, red) if scaled else 1.0
     cov = cov * cscale
     std = np.where(ident, np.sqrt(np.abs(np.diag(cov))), np.inf)
-    z = float(stats.t.ppf(0.5 + confidence / 2.0, dof) if scaled else stats.norm.ppf(0.5 + confidence / 2.0))
+    t_dof = dof if scaled else (float(sigma_dof) if sigma_dof is not None and np.isfinite(sigma_dof) else None)
+    if t_dof is not None and not t_dof > 0:
+        raise IdentificationError(f"sigma_dof must be > 0, got {sigma_dof!r}")
+    z = float(t_ppf(0.5 + confidence / 2.0, t_dof) if t_dof is not None
+              else norm_ppf(0.5 + confidence / 2.0))
     lg = prob.log_mask
     lin, half = linear_intervals(k, std, z, lg, ident)
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
@@ -210,7 +218,9 @@ def identify(model: CondensedModel, obs: Observations, k0, *, fixed_point: bool 
         ci, ci_method = prof, "profile likelihood"
     else:
         ci, ci_method = lin, "linearised"
-    ci_method += (f" ({'Student t' if scaled else 'normal'} quantile {z:.4g}"
+    quantile = ("Student t" if scaled else f"Student t, sigma estimated with {t_dof:.4g} dof" if t_dof is not None
+                else "normal")
+    ci_method += (f" ({quantile} quantile {z:.4g}"
                   f"{'; log-space for simple-model springs' if np.any(lg) and not profile else ''})")
     boot_ci = boot = None
     if bootstrap:

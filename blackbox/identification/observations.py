@@ -99,17 +99,41 @@ class Observations:
         return tuple(int(c) for c in np.unique(self.case_index))
 
     @classmethod
-    def from_measurements(cls, measurements, condensed_cases: Sequence[str]) -> "Observations":
+    def from_measurements(cls, measurements, condensed_cases: Sequence[str],
+                          provisional_sigma: bool = False) -> "Observations":
         """From :class:`blackbox.study.Measurements` (rows ``cases, dofs, values, sigma``); every
-        case label must be one of ``condensed_cases`` (``Condensed.cases``)."""
+        case label must be one of ``condensed_cases`` (``Condensed.cases``).
+
+        A row without sigma (blank, and neither repeated readings nor a declared accuracy give
+        one, :mod:`blackbox.noise`) is an error, unless ``provisional_sigma``: it then gets a
+        placeholder per kind (translations, rotations: 1e-3 of the kind's RMS value) that
+        :func:`blackbox.identification.fit_sigma.identify_with_fit_sigma` replaces by the fit's
+        estimate."""
         labels = tuple(str(c) for c in condensed_cases)
         index = {c: j for j, c in enumerate(labels)}
         unknown = sorted({str(c) for c in measurements.cases} - set(index))
         if unknown:
             raise IdentificationError(
                 f"measured case(s) {unknown} are not among the condensed load cases {list(labels)}")
+        sigma = np.array(measurements.sigma, dtype=float)
+        missing = np.isnan(sigma)
+        if missing.any():
+            if not provisional_sigma:
+                raise IdentificationError(
+                    f"{int(missing.sum())} measurement row(s) have no sigma (blank in measurements.csv, no "
+                    f"repeated readings, no declared accuracy), and this command judges the model against "
+                    f"the noise, which must not come from the model's own fit: give sigma in "
+                    f"measurements.csv, declare [measurements] translation_accuracy / rotation_accuracy in "
+                    f"study.toml, or import rig readings with repeats (blackbox measurements)")
+            values = np.asarray(measurements.values, float)
+            rot = np.array([int(c) >= 4 for _, c in measurements.dofs])
+            for kind in (rot, ~rot):
+                m = missing & kind
+                if m.any():
+                    scale = float(np.sqrt(np.mean(values[kind] ** 2)))
+                    sigma[m] = 1e-3 * scale if scale > 0 else 1.0
         return cls(tuple(measurements.dofs), np.array([index[str(c)] for c in measurements.cases], dtype=int),
-                   np.asarray(measurements.values, float), np.asarray(measurements.sigma, float), labels,
+                   np.asarray(measurements.values, float), sigma, labels,
                    tuple(getattr(measurements, "refs", ()) or ()))
 
     def subset(self, mask: np.ndarray) -> "Observations":
@@ -121,6 +145,10 @@ class Observations:
     def with_values(self, values: np.ndarray) -> "Observations":
         """The same rows with other measured values (bootstrap, simulation)."""
         return Observations(self.dofs, self.case_index, values, self.sigma, self.case_labels, self.ref_dofs)
+
+    def with_sigma(self, sigma: np.ndarray) -> "Observations":
+        """The same rows with other standard deviations (a sigma estimated from the fit)."""
+        return Observations(self.dofs, self.case_index, self.values, sigma, self.case_labels, self.ref_dofs)
 
     def split(self, holdout_cases: Sequence[str | int]) -> tuple["Observations", "Observations"]:
         """``(fit, holdout)``: the rows of ``holdout_cases`` (labels or case indices) go to ``holdout``."""

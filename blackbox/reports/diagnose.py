@@ -21,17 +21,43 @@ def _g(v, digits: int = 4) -> str:
     return "n/a" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.{digits}g}"
 
 
+def _separation_lines(e: dict, x: dict) -> list[str]:
+    """What would separate the added effect ``e`` from its alternative ``x`` (the two fitted
+    models' structural responses; a data defect by a second sensor)."""
+    where = f"{x['effect']} at {', '.join(map(str, x['where']))}"
+    sep = x.get("separate_by") or {}
+    lines = []
+    s, ld = sep.get("sensors", []), sep.get("loads", [])
+    if s:
+        b = s[0]
+        lines.append(f"- To separate it from {where}: a sensor at grid {b['grid']} component {b['component']} "
+                     f"({'already measured' if b['measured'] else 'not measured yet'}) differs between the two "
+                     f"fits by {_g(b['separation_sigma'], 3)} sigma (RMS over the load cases)"
+                     + (f"; a load of {_g(ld[0]['value'], 3)} at grid {ld[0]['grid']} component "
+                        f"{ld[0]['component']} would separate them by {_g(ld[0]['separation_sigma'], 3)} sigma "
+                        "with the sensors in place" if ld else "") + ".")
+    if e.get("of") == "data" or x.get("of") == "data":
+        grids = sorted({int(w) for w in (e["where"] + x["where"]) if not isinstance(w, str)})
+        if grids:
+            lines.append(f"- One of the two is a defect of the data: a second, independent sensor at grid(s) "
+                         f"{', '.join(map(str, grids))} (or re-zeroed, re-read channels) would tell it from the structure.")
+    return lines + ([""] if lines else [])
+
+
 def diagnosis_report(study: Study, doc: dict, files: list[str]) -> str:
     """``report.md`` from the ``diagnosis.json`` document; ``files``: the plots written beside it."""
     b, a = doc["before"], doc["after"]
     out = [f"# Diagnosis of {study.name}", "",
            "Declared model fitted, standardized residuals tested against the declared noise, candidate "
-           "effects scored against the residual (score test), the best few refitted (likelihood ratio, "
-           f"BIC); an effect is added when its LR p-value x 2^round x the round's hypotheses is below "
-           f"{doc['settings']['alpha']:g} (alpha spending), BIC improves and it passes the check against data it was not fitted to (hold-out cases: "
-           "delta BIC + hold-out chi2 change < 0; without them: the K-fold chi2 over the load cases decreases); "
-           "an accepted effect is first refined through its richer variants (per-axis, per-branch "
-           "springs; a member's EA, EI1, EI2, GJ), each kept only on the same conditions.", "",
+           "effects scored against the residual (score test), every one that could win refitted "
+           "(likelihood ratio, BIC); an effect is added when its LR p-value x 2^round x the kinds of "
+           f"effect x its kind's hypotheses is below {doc['settings']['alpha']:g} (alpha spending), BIC "
+           "improves and it passes the check against data it was not fitted to (hold-out cases: "
+           "delta BIC + hold-out chi2 change < 0 and no worse hold-out prediction than chance allows; "
+           "without them: the K-fold chi2 over the load cases decreases); an accepted effect is first "
+           "refined through its richer variants (per-axis, per-branch springs; a member's EA, EI1, "
+           "EI2, GJ), each kept only on the same conditions; after each addition an earlier effect that "
+           "no longer passes those tests is removed.", "",
            "## Before and after", "",
            "| | reduced chi2 | 99% band | RMS residual | hold-out RMS | BIC | parameters |",
            "|---|---|---|---|---|---|---|"]
@@ -58,6 +84,13 @@ def diagnosis_report(study: Study, doc: dict, files: list[str]) -> str:
                     out += [f"| {title} | share | rows | excess |", "|---|---|---|---|"]
                     out += [f"| {h[col]} | {_g(h['share'], 3)} | {h['n']} | {_g(h['excess'])} |" for h in rows]
                     out.append("")
+    if doc.get("removed"):
+        out += ["## Effects removed again", "",
+                "Added in an earlier round, then made unnecessary by a later addition (judged again as "
+                "if added last, they no longer pass):", ""]
+        out += [f"- {r['effect']} at {', '.join(map(str, r['where']))} (added in round {r['step']}): "
+                f"{r['decision']}" for r in doc["removed"]]
+        out.append("")
     out += ["## Effects added", ""]
     if not doc["added"]:
         out.append("None: the residuals are explained by the declared model and noise." if verdict != "unexplained"
@@ -65,13 +98,16 @@ def diagnosis_report(study: Study, doc: dict, files: list[str]) -> str:
                         "passes the check against data it was not fitted to.")
     for i, e in enumerate(doc["added"], 1):
         extra = "".join(f", {k} {e[k]}" for k in ("component", "group", "variant") if k in e)
-        out += [f"### {i}. {e['effect']} at {', '.join(map(str, e['where']))}{extra}", "",
+        what = " -- the data, not the structure" if e.get("of") == "data" else ""
+        out += [f"### {i}. {e['effect']} at {', '.join(map(str, e['where']))}{extra}{what}", "",
                 f"delta BIC {_g(e['delta_bic'])}, LR p-value {_g(e['lr_p_value'], 3)}", ""]
         if e.get("alternatives"):
             out += ["The data hardly tell this effect from (evidence, delta BIC + hold-out chi2, within "
                     f"{_g(10.0)} of it): " + "; ".join(
                         f"{x['effect']} at {', '.join(map(str, x['where']))} (+{_g(x['evidence_gap'])})"
-                        for x in e["alternatives"]) + ": loads and sensors near both would separate them.", ""]
+                        for x in e["alternatives"]) + ".", ""]
+            for x in e["alternatives"]:
+                out += _separation_lines(e, x)
         out += [
                 "| parameter | value | std |", "|---|---|---|"]
         out += [f"| {p['name']} | {_g(p['value'])} | {_g(p['std'], 3)} |" for p in e["parameters"]]
@@ -189,16 +225,19 @@ def diagnosis_plots(diag: Diagnosis, deck: Deck, out_dir: Path) -> list[str]:
         kinds = sorted({c.effect.kind for c in sc})
         cmap = plt.get_cmap("tab10")
         y = np.arange(len(sc))[::-1]
-        val = [min(-c.log10_p, 300.0) for c in sc]
+        # -log10 p as it is (a strong effect has thousands: capping it would draw every bar to
+        # the cap), on a log axis wide enough for the longest bar and its label
+        val = [max(-c.log10_p, 1e-3) if math.isfinite(c.log10_p) else 1e6 for c in sc]
         ax.barh(y, val, color=[cmap(kinds.index(c.effect.kind)) for c in sc])
         ax.set_yticks(y, [f"{c.effect.kind} @ {', '.join(map(str, c.effect.where))[:24]}" for c in sc], fontsize=7)
         n_hyp = len(steps[0].scores) + sum(c.effect.variant_tests for c in steps[0].scores)
         thr = -math.log10(diag.alpha / (2.0 * max(n_hyp, 1)))
         ax.axvline(thr, color="k", ls="--", lw=1, label=f"round-1 level ({n_hyp} hypotheses, alpha / 2)")
-        for yi, c in zip(y, sc):
+        for yi, v, c in zip(y, val, sc):
             if c.refit is not None:
-                ax.text(min(-c.log10_p, 300.0), yi, f" dBIC {c.delta_bic:.3g}", va="center", fontsize=6)
-        ax.set_xscale("symlog", linthresh=10)
+                ax.text(v, yi, f" dBIC {c.delta_bic:.3g}", va="center", fontsize=6, clip_on=True)
+        ax.set_xscale("log")
+        ax.set_xlim(min(0.5, 0.5 * min(val), 0.5 * thr), 30.0 * max(max(val), thr))
         ax.set_xlabel("-log10 p (score test)")
         ax.set_title("Candidate ranking, round 1")
         ax.legend(fontsize=7, loc="lower right")

@@ -14,11 +14,17 @@ from blackbox.diagnosis.effects.joint_translation import JointTranslation  # noq
 from blackbox.diagnosis.effects.support_flexibility import SupportFlexibility  # noqa: E402
 from blackbox.diagnosis.effects.joint_coupling import JointCoupling  # noqa: E402
 from blackbox.diagnosis.effects.member_stiffness import MemberStiffness  # noqa: E402
+from blackbox.diagnosis.effects.joint_gap import JointGap  # noqa: E402
 from blackbox.diagnosis.effects.load_scale import LoadScale  # noqa: E402
 from blackbox.diagnosis.effects.sensor_gain import SensorGain  # noqa: E402
 from blackbox.diagnosis.effects.sensor_offset import SensorOffset  # noqa: E402
+from blackbox.diagnosis.effects.outlier import Outlier  # noqa: E402
+from blackbox.diagnosis.effects.sign_flip import SignFlip  # noqa: E402
+from blackbox.diagnosis.effects.channel_swap import ChannelSwap  # noqa: E402
+from blackbox.diagnosis.effects.misplaced_sensor import MisplacedSensor  # noqa: E402
 from blackbox.diagnosis.effects.rigid_end_zone import RigidEndZone  # noqa: E402
 
 __all__ = ["CandidateContext", "CandidateLimit", "Effect", "Connection", "register", "get", "kinds", "families",
-           "UndeclaredJoint", "JointTranslation", "SupportFlexibility", "JointCoupling", "MemberStiffness",
-           "LoadScale", "SensorGain", "SensorOffset", "RigidEndZone"]
+           "UndeclaredJoint", "JointTranslation", "SupportFlexibility", "JointCoupling", "MemberStiffness", "JointGap",
+           "LoadScale", "SensorGain", "SensorOffset", "Outlier", "SignFlip", "ChannelSwap", "MisplacedSensor",
+           "RigidEndZone"]

@@ -220,6 +220,22 @@ class Effect:
         return None
 
     @property
+    def case_joint(self) -> str | None:
+        """The declared joint whose stiffness this effect makes depend on the load case (a gap:
+        softer on one side), or ``None``. The joint's parameters ``k_i`` then act as
+        ``phi_ic k_i`` in case ``c``, :meth:`case_factors` giving ``phi``."""
+        return None
+
+    def case_factors(self, rel: np.ndarray, x_effect: np.ndarray) -> np.ndarray:
+        """``phi`` ``(joint params, cases)`` from each spring's relative rotation ``rel`` (same
+        shape: branch ``i`` minus branch ``j`` about the spring's axis) in each case."""
+        return np.ones_like(rel)
+
+    def case_factor_derivatives(self, rel: np.ndarray, x_effect: np.ndarray) -> np.ndarray:
+        """``d phi / d x_effect``: ``(n_params, joint params, cases)``, the sides held fixed."""
+        return np.zeros((self.n_params, *rel.shape))
+
+    @property
     def cut_pairs(self) -> tuple[int, ...]:
         """Indices of the split deck's cut pairs this effect releases (compliance form)."""
         return ()
@@ -243,11 +259,37 @@ class Effect:
         """``[(q, rows)]``: ``x_q`` is added to the predictions at ``rows`` (after the factors)."""
         return []
 
+    def mix_rows(self, om: "ObsMap", o_index: dict) -> list[tuple[int, np.ndarray, list]]:
+        """``[(q, rows, terms)]``: the predictions at ``rows`` (indices into ``om``) read, in part
+        ``x_q``, a source instead of their own DOF: ``f += x_q (source - f)``, the source
+        ``sum(w * U[idx, case])`` over ``terms = [(idx, w)]`` (observed-DOF indices per row,
+        ``o_index``, and weights), minus the row's reference DOF when it has one. Applied before
+        the factors and offsets."""
+        return []
+
+    @property
+    def source_dofs(self) -> tuple[DofLabel, ...]:
+        """DOFs a mix reads beyond the measured ones (the augmented model must observe them)."""
+        return ()
+
+    of_data: ClassVar[bool] = False
+    """Whether the effect is a defect of the test data (a reading, a channel, a sensor, a load
+    cell or its set-up) rather than of the structure's model: reported as "the data, not the
+    structure"."""
+
     # ---- scoring and refits -----------------------------------------------------------------------
     def scored_columns(self, before: "ModelSpec", after: "ModelSpec") -> tuple[np.ndarray, np.ndarray]:
         """Columns of ``after``'s Jacobian that the score test of this effect uses, and which of
         them are one-sided (default: the effect's own parameters, appended last)."""
         return np.arange(before.n_params, after.n_params), self.one_sided
+
+    @classmethod
+    def sparse_columns(cls, model: "AugmentedModel", st: "State", x: np.ndarray, om: "ObsMap",
+                       effects: Sequence["Effect"]) -> list[tuple[np.ndarray, np.ndarray]] | None:
+        """Unwhitened score columns of one-parameter candidates NOT in ``model``, each as
+        ``(rows, values)`` over the few rows it touches (a reading, a channel), or ``None``: for
+        families with thousands of candidates, whose dense columns would not fit."""
+        return None
 
     @classmethod
     def batch_columns(cls, model: "AugmentedModel", st: "State", x: np.ndarray, om: "ObsMap",
@@ -270,6 +312,22 @@ class Effect:
             xs[first:] = np.clip(x2[first:] + step, lo[first:], hi[first:])
             starts.append(xs)
         return starts
+
+    def rejection(self, x_effect: np.ndarray) -> str | None:
+        """Why a refit that ended at ``x_effect`` does not describe this effect (a "sign flip"
+        whose factor stayed positive), or ``None``; such a refit is not accepted. By default: a
+        parameter held at a bound other than its nested value (a member factor at 0.02 or 50, a
+        connection at its free limit): the data push it beyond any plausible value, so the effect
+        is absorbing a misfit it does not describe."""
+        x = np.asarray(x_effect, float)
+        lo, hi = self.bounds
+        nom = self.nominal
+        for q, name in enumerate(self.names):
+            for b, side in ((hi[q], "upper"), (lo[q], "lower")):
+                if np.isfinite(b) and b != nom[q] and abs(x[q] - b) <= 1e-9 * max(abs(b), 1.0):
+                    return (f"{name} ends at its {side} bound {b:g}: beyond any plausible value, the effect "
+                            "absorbs a misfit it does not describe")
+        return None
 
     def trimmed(self, x_effect: np.ndarray) -> "Effect | None":
         """After a refit: the effect with parameters that ended at their nested bound removed, or

@@ -38,7 +38,9 @@ class JointCoupling(Effect):
         return [cls.of(j.name) for j in ctx.joints if j.model_name == "simple"]
 
     def applicable(self, spec) -> bool:
-        return any(j.name == self.joint and isinstance(j, SimpleJoint) for j in spec.joints)
+        """A simple-model joint without a gap (a gap is defined on the simple model's springs)."""
+        return (any(j.name == self.joint and isinstance(j, SimpleJoint) for j in spec.joints)
+                and not any(e.case_joint == self.joint for e in spec.effects))
 
     def joint_models(self, spec, x):
         joints, parts = [], []

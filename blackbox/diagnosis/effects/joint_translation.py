@@ -7,7 +7,8 @@ own stiffness there). Released, as the data support (:func:`~blackbox.diagnosis.
 kty_J, ktz_J``: equal springs between every pair of branches along each axis) or "per-branch"
 (``ktx_J_G`` ...: per axis, a spring from each branch grid ``G`` to the joint's centre; three
 or more branches). A joint whose tie is not one RBE2 CM=123 on its
-first grid has no candidate.
+first grid has no candidate. A branch grid with no member (a clamped footing: the joint is the
+structure's support) is bridged with the other branch's stiffness.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ import numpy as np
 
 from blackbox.diagnosis.effects.connection import Connection, branch_ladder
 from blackbox.diagnosis.effects.registry import register
-from blackbox.errors import DiagnosisError
 
 __all__ = ["JointTranslation"]
 
@@ -39,23 +39,25 @@ class JointTranslation(Connection):
             ties = [r for r in d.rbe2s.values() if r.gn == g1 and others & set(r.gm)]
             if not ties or any(sorted(r.cm) != ["1", "2", "3"] for r in ties):
                 continue
+            # each branch grid's own stiffness along each axis: the members ending there (a
+            # branch may be a clamped footing with none: a joint that is the structure's support)
+            own = {g: [sum(editor.kdiag(e, g, c) for e in at.get(g, ())) for c in (1, 2, 3)] for g in jc.grids}
+            if not any(at.get(g) for g in jc.grids):
+                continue
             for r in ties:
                 gm = tuple(x for x in r.gm if x not in others)
                 if gm:
                     d.rbe2s[r.eid] = replace(r, gm=gm)
                 else:
                     del d.rbe2s[r.eid]
-            br = {}                                  # branch grid -> the one member ending there
-            for g in jc.grids:
-                if len(at.get(g, ())) != 1:
-                    raise DiagnosisError(f"joint {jc.name!r}: branch grid {g} should end exactly one CBAR, "
-                                         f"it ends {len(at.get(g, ()))} ({at.get(g, [])})")
-                br[g] = at[g][0]
             idx, k_ref = [], []
             for c in (1, 2, 3):
                 ks = []
                 for gi in jc.grids[1:]:
-                    k0 = min(editor.kdiag(br[gi], gi, c), editor.kdiag(br[g1], g1, c))
+                    pair = (own[gi][c - 1], own[g1][c - 1])
+                    # a branch with nothing there (no member, or a pin flag releasing that
+                    # translation): the other branch's stiffness sizes the cut
+                    k0 = min(pair) if min(pair) > 1e-6 * max(pair) else max(pair)
                     idx.append(editor.connect(k0, (gi, c), (g1, c)))
                     ks.append(k0)
                 k_ref.append(float(np.mean(ks)))

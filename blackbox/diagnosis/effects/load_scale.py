@@ -56,6 +56,7 @@ class LoadScale(Effect):
     """``cases``: indices of the scaled cases among the study's load cases; ``group``: the
     ``loads.csv`` group they form (a group candidate), else ``None``."""
     kind = "load_scale"
+    of_data = True
     summary = "the loads of some cases were scaled (a factor on their responses)"
 
     cases: tuple[int, ...] = ()

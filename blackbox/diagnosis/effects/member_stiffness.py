@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from blackbox.diagnosis.decks import in_member_frames
 from blackbox.diagnosis.effects.base import CandidateLimit, Effect
 from blackbox.diagnosis.effects.registry import register
 from solver_adapters.protocol import DofLabel
@@ -138,9 +139,14 @@ class MemberStiffness(Effect):
         out = []
         for eid in cls.selected(ctx):
             v = orientation(ctx.deck, eid) if eid in ctx.deck.cbars else None
+            # the parts from K_e in basic (the element axes are read there), both then in the
+            # components of the member's grids (their CD systems), as the split deck has them
             parts = section_parts(ctx.K_e[eid], v) if v is not None else None
+            K = in_member_frames(ctx.deck, eid, ctx.K_e[eid])
+            if parts is not None:
+                parts = in_member_frames(ctx.deck, eid, parts)
             out.append(cls((eid,), (f"alpha_{eid}",), "whole" if parts is not None else "",
-                           dofs=split.member_dofs[eid], K_e=ctx.K_e[eid], parts=parts))
+                           dofs=split.member_dofs[eid], K_e=K, parts=parts))
         return out
 
     @property
@@ -182,18 +188,28 @@ class MemberStiffness(Effect):
         out = np.zeros((len(om.y), len(effects)))
         if any(e.variant == "sections" for e in effects):
             return None
+        # G_OE by reciprocity needs unit-load columns at the observed DOFs; the DOFs only a mix
+        # may read (a neighbour of a sensor) have none until an effect that reads them is added
+        # (the search loads them then), so until then their rows are not used and stay 0
+        loaded = [i for i, d in enumerate(model.o_dofs) if d in cond.base.col_of]
+        o_loaded = [model.o_dofs[i] for i in loaded]
+        groups = st.each()
         for q, e in enumerate(effects):
             E = list(e.dofs)
             G_ES = cond.G(E, model.S) if nS else np.zeros((len(E), 0))
             Z_E = cond.Z(E)
-            u_E = cond.u0(E) - G_ES @ (st.dK @ st.u_S) - Z_E @ st.f
-            F = e.K_e @ u_E                                           # (12, L)
-            rhs = np.vstack([G_ES.T @ F, IDK @ (Z_E.T @ F)])
-            dz = -st.Ainv @ rhs
-            du_S, df = dz[:nS], dz[nS:]
-            G_OE = cond.G(model.o_dofs, E)
-            dU = -model.Gos @ (st.dK @ du_S) - G_OE @ F - model.Zo @ df
-            out[:, q] = om.pick(dU)
+            G_OE = np.zeros((len(model.o_dofs), len(E)))
+            G_OE[loaded] = cond.G(o_loaded, E)
+            u0E = cond.u0(E)
+            dU = np.zeros_like(st.U_O)
+            for cols, dK, Ainv, _ in groups:         # cases with their own joint stiffness (a gap)
+                u_E = u0E[:, cols] - G_ES @ (dK @ st.u_S[:, cols]) - Z_E @ st.f[:, cols]
+                F = e.K_e @ u_E                                           # (12, cases)
+                rhs = np.vstack([G_ES.T @ F, IDK @ (Z_E.T @ F)])
+                dz = -Ainv @ rhs
+                du_S, df = dz[:nS], dz[nS:]
+                dU[:, cols] = -model.Gos @ (dK @ du_S) - G_OE @ F - model.Zo @ df
+            out[:, q] = model.pick(dU, x, om)
         return out * model.multiplier(x, om)[:, None]
 
     def marker_points(self, xyz, deck):

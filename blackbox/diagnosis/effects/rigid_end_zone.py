@@ -27,7 +27,10 @@ the cantilever of the flexible part, clamped through the rigid zone::
 with the same rigid-body map ``T`` as ``K_e`` (the zone moves with end A). This is what NASTRAN's
 CBAR with an offset ``WA = e ex`` is (``tests/test_rigid_end_zone.py`` checks it against the
 reference solver's own element to round-off). The change ``dK(e) = T^T (F(L-e)^-1 - F(L)^-1) T``
-is exactly 0 at ``e = 0``, and ``d dK / de = T^T F^-1 F'(L-e) F^-1 T`` (``F' = dF/dl``).
+is exactly 0 at ``e = 0``, and ``d dK / de = T^T F^-1 F'(L-e) F^-1 T`` (``F' = dF/dl``). ``K_e``
+is in basic axes; both matrices are then turned into the components of the member's grids (their
+CD systems, :func:`blackbox.diagnosis.decks.member_frames`), as the split deck has them. A member
+with pin flags or offsets on its card has no zone, whatever its ``K_e``.
 
 *Parameters.* ``e`` in metres, from the joint's centre (the declared joint's grid, or the grid where
 the members meet), nested at 0 (one-sided: a zone cannot be shorter than nothing) and bounded by
@@ -53,7 +56,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from blackbox.diagnosis.decks import members_at
+from blackbox.diagnosis.decks import member_frames, members_at
 from blackbox.diagnosis.effects.base import CandidateLimit, Effect
 from blackbox.diagnosis.effects.registry import register
 from blackbox.diagnosis.effects.undeclared_joint import joint_candidate_grids
@@ -153,23 +156,28 @@ def zone_stiffness(K_e: np.ndarray, e: float, zone_end: int = 0) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class ZoneMember:
     """One member at the joint: its element id, its 12 DOFs in the split deck (the CBAR's end a
-    first), which end is at the joint (0: a, 1: b) and its cantilever polynomial from there."""
+    first), which end is at the joint (0: a, 1: b), its cantilever polynomial from there (basic
+    axes, as ``K_e``) and ``frame``: the rotation from basic to its grids' displacement components
+    (:func:`blackbox.diagnosis.decks.member_frames`; ``None``: basic)."""
     eid: int
     dofs: tuple[DofLabel, ...]
     zone_end: int
     poly: Prismatic
+    frame: np.ndarray | None = None
 
     @classmethod
     def of(cls, poly: Prismatic, dofs, zone_end: int, eid: int = 0) -> "ZoneMember":
         return cls(eid, tuple(dofs), zone_end, poly)
 
     def _unpermute(self, M: np.ndarray) -> np.ndarray:
-        if not self.zone_end:
-            return M
-        p = np.r_[6:12, 0:6]          # the zone end first -> the CBAR's a end first
-        out = np.empty_like(M)
-        out[np.ix_(p, p)] = M
-        return out
+        """From the zone end first (basic) to the split deck's DOFs: the CBAR's end a first, in
+        its grids' displacement components."""
+        if self.zone_end:
+            p = np.r_[6:12, 0:6]
+            out = np.empty_like(M)
+            out[np.ix_(p, p)] = M
+            M = out
+        return M if self.frame is None else self.frame @ M @ self.frame.T
 
     def change(self, e: float) -> np.ndarray:
         """``dK(e) = T^T (F(L-e)^-1 - F(L)^-1) T`` over the member's 12 DOFs."""
@@ -243,10 +251,15 @@ class RigidEndZone(Effect):
                 continue
             zm = []
             for eid, end in mem:
+                b = ctx.deck.cbars[eid]
+                if b.pa or b.pb or b.wa is not None or b.wb is not None:
+                    break           # pin flags or offsets: no prismatic beam between its grids
                 poly, _ = beam_polynomial(ctx.K_e[eid], end)
                 if poly is None:
                     break
-                zm.append(ZoneMember(eid, split.member_dofs[eid], end, poly))
+                g = ctx.deck.grids
+                frame = member_frames(ctx.deck, eid) if (g[b.ga].cd or g[b.gb].cd) else None
+                zm.append(ZoneMember(eid, split.member_dofs[eid], end, poly, frame))
             else:
                 tag = where[0]
                 dofs = tuple(dict.fromkeys(d for m in zm for d in m.dofs))
@@ -325,18 +338,28 @@ class RigidEndZone(Effect):
         IDK = np.eye(m) - st.D * model.K0[None, :]
         cond = model.cond
         out = np.zeros((len(om.y), len(effects)))
+        # observed DOFs without unit-load columns (read only by a mix not yet added) stay 0, as
+        # in member_stiffness
+        loaded = [i for i, d in enumerate(model.o_dofs) if d in cond.base.col_of]
+        o_loaded = [model.o_dofs[i] for i in loaded]
+        groups = st.each()
         for q, e in enumerate(effects):
             E = list(e.dofs)
             G_ES = cond.G(E, model.S) if nS else np.zeros((len(E), 0))
             Z_E = cond.Z(E)
-            u_E = cond.u0(E) - G_ES @ (st.dK @ st.u_S) - Z_E @ st.f
-            F = e.stiffness_derivatives(e.nominal)[0] @ u_E
-            rhs = np.vstack([G_ES.T @ F, IDK @ (Z_E.T @ F)])
-            dz = -st.Ainv @ rhs
-            du_S, df = dz[:nS], dz[nS:]
-            G_OE = cond.G(model.o_dofs, E)
-            dU = -model.Gos @ (st.dK @ du_S) - G_OE @ F - model.Zo @ df
-            out[:, q] = om.pick(dU)
+            G_OE = np.zeros((len(model.o_dofs), len(E)))
+            G_OE[loaded] = cond.G(o_loaded, E)
+            u0E = cond.u0(E)
+            dKe = e.stiffness_derivatives(e.nominal)[0]
+            dU = np.zeros_like(st.U_O)
+            for cols, dK, Ainv, _ in groups:         # cases with their own joint stiffness (a gap)
+                u_E = u0E[:, cols] - G_ES @ (dK @ st.u_S[:, cols]) - Z_E @ st.f[:, cols]
+                F = dKe @ u_E
+                rhs = np.vstack([G_ES.T @ F, IDK @ (Z_E.T @ F)])
+                dz = -Ainv @ rhs
+                du_S, df = dz[:nS], dz[nS:]
+                dU[:, cols] = -model.Gos @ (dK @ du_S) - G_OE @ F - model.Zo @ df
+            out[:, q] = model.pick(dU, x, om)
         return out * model.multiplier(x, om)[:, None]
 
     # ---- variants -----------------------------------------------------------------------------

@@ -17,6 +17,7 @@ __all__ = ["SensorGain"]
 @dataclass(frozen=True, eq=False)
 class SensorGain(Effect):
     kind = "sensor_gain"
+    of_data = True
     summary = "the sensors of a grid have a gain (a factor on its measurements)"
 
     @property

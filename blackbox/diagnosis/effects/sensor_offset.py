@@ -26,6 +26,7 @@ __all__ = ["SensorOffset"]
 class SensorOffset(Effect):
     """``component``: the channel's component at grid ``where[0]``."""
     kind = "sensor_offset"
+    of_data = True
     summary = "a measurement channel reads a constant offset (a sensor not zeroed)"
 
     component: int = 0

@@ -53,7 +53,7 @@ class SupportFlexibility(GridConnection):
                 d.grids[g] = replace(d.grids[g], ps="")
             idx, ks = [], []
             for c in comps:
-                k0 = sum(editor.kdiag(eid, g, int(c)) for eid in at[g])
+                k0 = editor.bridge(g, int(c), at[g], "sum")
                 idx.append(editor.connect(k0, (g, int(c))))
                 ks.append(k0)
             out.append(cls.on_ladder((g,), idx, grounded_ladder(comps, np.array(ks), f"ks_{g}")))

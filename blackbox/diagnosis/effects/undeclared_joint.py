@@ -76,7 +76,7 @@ class UndeclaredJoint(GridConnection):
             for c in (4, 5, 6):
                 ks = []
                 for i in range(1, len(eids)):
-                    k0 = min(editor.kdiag(eids[i], g, c), editor.kdiag(eids[0], g, c))
+                    k0 = editor.bridge(g, c, [eids[i], eids[0]])
                     idx.append(editor.connect(k0, (branches[i], c), (g, c)))
                     ks.append(k0)
                 k_ref.append(float(np.mean(ks)))
