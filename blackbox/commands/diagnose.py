@@ -64,7 +64,9 @@ from blackbox.diagnosis.runs import RunRecord, element_stiffness
 from blackbox.diagnosis.search import Diagnosis, diagnose
 from blackbox.diagnosis.split import SplitBase
 from blackbox.errors import DiagnosisError, EditedDeckError
+from blackbox.condensation import CondensedModel
 from blackbox.identification import IdentificationResult, Observations, identify
+from blackbox.identification.fit_sigma import predict_rows
 from blackbox.parallel import Executor, StudyPackage, pack_study, use_executor
 from blackbox.study import Study, read_load_groups
 from solver_adapters.bdf_write import write_deck
@@ -113,6 +115,8 @@ class Prepared:
     element_adapter: SolverAdapter
     limits: tuple[CandidateLimit, ...] = ()
     """The families that considered fewer candidates than the study offers (their caps)."""
+    declared_condensed: CondensedModel | None = None
+    """The declared model on run 1's condensation: its predictions at any joint parameters."""
 
     @property
     def deck(self) -> Deck:
@@ -272,6 +276,7 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
         if c.added_springs:
             held["deck"] = deck_with_springs(deck, c.added_springs)
         cm = dm.condensed_model(c)
+        held["condensed"] = cm
         rec = RunRecord("declared model: condensation", study.deck_path.name, cost.right_hand_sides, c.wall_s)
         ident = identify(cm, fit_obs, dm.k0, holdout=hold_obs, **dm.options.kwargs(profile=False, bootstrap=0))
         say(f"declared model: reduced chi2 = {ident.reduced_chi2:.4g} ({ident.n_obs} rows, "
@@ -371,7 +376,7 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
     limits = {**sctx.limits, **ctx.limits}
     return Prepared(study, dm, fit_obs, hold_obs, tuple(dm.holdout), bool(declared_holdout), K_deck, ident,
                     K_e, e_asym, sd, base, tuple(cands), tuple(decks), log, cost, eadapter,
-                    tuple(limits.values()))
+                    tuple(limits.values()), held.get("condensed"))
 
 
 # --------------------------------------------------------------------------------------------
@@ -530,7 +535,9 @@ def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float =
                             pr.candidates, alpha=alpha, refit_top=refit_top, max_steps=max_steps,
                             declared_prediction=ident.predicted if ident is not None else None,
                             xyz=xyz, progress=progress_step, executor=executor,
-                            load_magnitudes=load_magnitudes(study.loads))
+                            load_magnitudes=load_magnitudes(study.loads),
+                            declared_predict=(functools.partial(predict_rows, pr.declared_condensed, pr.fit_obs)
+                                              if pr.declared_condensed is not None else None))
         except EditedDeckError as exc:
             raise EditedDeckError(f"{exc}. {_nesting_cards(pr, exc.rows)}", exc.rows) from None
         say(f"verdict: {diag.verdict}: {verdict_detail(diag)}")
