@@ -207,6 +207,49 @@ def test_nested_and_variants_nested(cube_prepared):
     assert not shared.applicable(spec) and zones[("J7",)].applicable(spec0)
 
 
+def test_zone_in_the_grids_displacement_systems(tmp_path, monkeypatch):
+    """On ``tests/rich_deck.py`` (grid 14 in a cylindrical CD system, measurements in the grids'
+    CD components): a zone of 0.2 m at grid 14 predicts the reference solver's deck in which each
+    of its four members has the offset of that length at grid 14 (``WA = e ex`` or ``WB = -e ex``,
+    in basic), to 1e-8 of the largest response (as the member factor of
+    ``tests/test_edited_decks.py``: ``K_e`` from flexibilities inverted at cond ~1e6). Members
+    with offsets or pin flags on their card (grid 15's CBEAM is prismatic; 108 has offsets, 116 a
+    pin flag) take no zone."""
+    import dataclasses
+
+    from blackbox.structures import TruthDeck
+    from rich_deck import write_rich_study
+
+    monkeypatch.chdir(tmp_path)
+    pr = diagnose_command.prepare(write_rich_study(tmp_path / "rich"), tmp_path)
+    zones = {e.where: e for e in pr.candidates if isinstance(e, RigidEndZone)}
+    assert all(m.eid not in (108, 116) for z in zones.values() for m in z.members)
+    zone = zones[(14,)]
+    assert all(m.frame is not None for m in zone.members)        # every member has a CD'd grid
+    pr.base.ensure_columns(zone.refit_columns(), "test")
+    spec, x = dg.ModelSpec(tuple(pr.joints)).add(zone, pr.ident.k)
+    e = 0.2
+    x[-1] = e
+    rows = list(dict.fromkeys(pr.study.measurements.all_dofs))
+    model = dg.AugmentedModel(pr.base, spec, pr.boundary, pr.K_deck, rows)
+    om = dg.ObsMap.of(pr.fit_obs, {d: i for i, d in enumerate(rows)})
+    f = model.predict(x, om)
+    truth = TruthDeck(pr.deck)
+    for m in zone.members:
+        b = truth.deck.cbars[m.eid]
+        ex = np.subtract(truth.deck.grids[b.gb].xyz, truth.deck.grids[b.ga].xyz)
+        ex = ex / np.linalg.norm(ex)
+        w = tuple(float(v) for v in (e * ex if m.zone_end == 0 else -e * ex))
+        truth.deck.cbars[m.eid] = dataclasses.replace(b, **({"wa": w} if m.zone_end == 0 else {"wb": w}))
+    for j, sl in zip(pr.joints, dg.ModelSpec(tuple(pr.joints)).joint_slices()):
+        truth.joint(j.name, j.grids, "simple", pr.ident.k[sl])
+    f_true = om.pick(ReferenceAdapter(truth.deck).solve(pr.study.loads, rows).values)
+    assert np.max(np.abs(f - f_true)) < 1e-8 * np.max(np.abs(f_true))
+    f0 = dg.AugmentedModel(pr.base, dg.ModelSpec(tuple(pr.joints)), pr.boundary, pr.K_deck, rows).predict(
+        pr.ident.k, om)
+    assert np.max(np.abs(f0 - f_true)) > 1e-3 * np.max(np.abs(f_true))      # the zone matters
+
+
 # --------------------------------------------------------------------------------------------
 # the shell-modelled joints
 # --------------------------------------------------------------------------------------------
