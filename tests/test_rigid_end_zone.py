@@ -280,6 +280,11 @@ def test_thick_walled_joint_has_rigid_end_zones():
     assert (first["effect"], first["where"]) == ("rigid_end_zone", ["JC"])
     assert doc["verdict"] == "explained" and doc["after"]["in_band"]
     assert doc["before"]["reduced_chi2"] > 2.0
+    # identify's springs run to 1e14-1e21, where its predictions are rounding: the split deck's
+    # nesting is checked at the rigid limits instead (reference solver: double precision, 1e-3
+    # sigma leaves margin over the 8e-6 measured)
+    assert any("beyond their rigid limit" in w for w in doc["warnings"])
+    assert doc["identify_check"]["nesting_error_sigma"] < 1e-3
     assert doc["after"]["holdout_rms"] < doc["before"]["holdout_rms"]
     e = first["parameters"][0]["value"]
     assert abs(e - planted["effects"][0]["half_depth"]["midline"]) < 0.02

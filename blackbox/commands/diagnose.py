@@ -53,6 +53,7 @@ import numpy as np
 
 from blackbox.adapters import make_adapter_for
 from blackbox.commands.common import as_study
+from blackbox.condensation import CondensedModel
 from blackbox.declared import DeclaredModel, SolverCost, declared_model, deck_with_springs
 from blackbox.diagnosis.decks import SplitDeck, cards_at, element_deck, split_deck, unmodelled_notes
 from blackbox.diagnosis.document import diagnosis_document, verdict_detail
@@ -64,7 +65,6 @@ from blackbox.diagnosis.runs import RunRecord, element_stiffness
 from blackbox.diagnosis.search import Diagnosis, diagnose
 from blackbox.diagnosis.split import SplitBase
 from blackbox.errors import DiagnosisError, EditedDeckError
-from blackbox.condensation import CondensedModel
 from blackbox.identification import IdentificationResult, Observations, identify
 from blackbox.identification.fit_sigma import predict_rows
 from blackbox.parallel import Executor, StudyPackage, pack_study, use_executor
