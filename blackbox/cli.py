@@ -490,15 +490,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--max-steps", type=int, default=5, help="effects added at most (default 5)")
     s.add_argument("--refit-top", type=int, default=6, help="candidates refitted per round (default 6)")
     s.add_argument("--max-joint-candidates", type=int, default=None, metavar="N",
-                   help="undeclared-joint grids considered at most, those nearest the declared fit's "
-                        "residual beyond (default 100; each costs 3 (members - 1) right-hand sides of the "
-                        "split run)")
+                   help="undeclared-joint grids (and rigid_end_zone grids) considered at most, those "
+                        "nearest the declared fit's residual beyond (default 100; each costs 3 (members - 1) "
+                        "right-hand sides of the split run)")
     s.add_argument("--max-member-candidates", type=int, default=None, metavar="N",
                    help="members considered at most for member_stiffness, those nearest the declared "
                         "fit's residual beyond (default 300)")
     s.add_argument("--effects", default=None,
-                   help="comma-separated effect kinds to consider (default: every kind; the list is in "
-                        "docs/commands.md)")
+                   help="comma-separated effect kinds to consider (default: every kind; docs/commands.md "
+                        "lists them, e.g. joint_coupling, undeclared_joint, member_stiffness, rigid_end_zone)")
 
     s = sub.add_parser("batch", help="identify (or diagnose) many studies side by side; summary across them")
     s.add_argument("studies", type=Path, nargs="+", metavar="STUDY")

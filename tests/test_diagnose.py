@@ -409,7 +409,7 @@ def test_registry_one_family_per_module():
     are the ones diagnosis.json uses."""
     assert set(dg.kinds()) == {"joint_coupling", "joint_translation", "undeclared_joint", "support_flexibility",
                                "load_scale", "sensor_gain", "sensor_offset", "member_stiffness", "joint_gap",
-                               "outlier", "sign_flip", "channel_swap", "misplaced_sensor"}
+                               "outlier", "sign_flip", "channel_swap", "misplaced_sensor", "rigid_end_zone"}
     for kind in dg.kinds():
         cls = dg.get(kind)
         assert cls.kind == kind and cls.__module__ == f"blackbox.diagnosis.effects.{kind}"
@@ -447,7 +447,8 @@ def test_candidate_caps_are_reported_and_follow_the_residual(tmp_path):
     fixture (planted at grid 41, 115 members) capped at 5 grids and 20 members, the candidates are
     exactly that many, grid 41 is among the 5, the split run reports the considered members' end
     DOFs and no other member's, the document lists both caps and warns of each, and the planted
-    joint is still the effect added."""
+    joint is still the effect added (``rigid_end_zone`` considers the same grids and reports its cap
+    too)."""
     d = tmp_path / "decks"
     d.mkdir()
     pr = diagnose_command.prepare(FIXTURES / "undeclared_joint", d, max_joint_candidates=5, max_member_candidates=20)
@@ -466,7 +467,8 @@ def test_candidate_caps_are_reported_and_follow_the_residual(tmp_path):
     doc = diagnose_command.run(FIXTURES / "undeclared_joint", plots=False, max_joint_candidates=5,
                                max_member_candidates=20).document
     assert {x["effect"]: (x["considered"], x["available"]) for x in doc["settings"]["candidates_limited"]} == {
-        "undeclared_joint": (5, n_grids), "member_stiffness": (20, len(pr.deck.cbars))}
+        "undeclared_joint": (5, n_grids), "member_stiffness": (20, len(pr.deck.cbars)),
+        "rigid_end_zone": (5, n_grids)}
     assert any(w.startswith(f"undeclared_joint: 5 of {n_grids} candidates considered") for w in doc["warnings"])
     assert any(w.startswith("member_stiffness: 20 of 115 candidates considered") for w in doc["warnings"])
     assert doc["added"][0]["effect"] == "undeclared_joint" and doc["added"][0]["where"] == [41]

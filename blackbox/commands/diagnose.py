@@ -52,10 +52,12 @@ import numpy as np
 
 from blackbox.adapters import make_adapter_for
 from blackbox.commands.common import as_study
+from blackbox.condensation import CondensedModel
 from blackbox.declared import DeclaredModel, SolverCost, declared_model, deck_with_springs
 from blackbox.diagnosis.decks import SplitDeck, cards_at, element_deck, split_deck, unmodelled_notes
 from blackbox.diagnosis.document import diagnosis_document, verdict_detail
-from blackbox.diagnosis.effects import CandidateContext, CandidateLimit, Effect, MemberStiffness, families
+from blackbox.diagnosis.effects import (CandidateContext, CandidateLimit, Effect, MemberStiffness, RigidEndZone,
+                                       families)
 from blackbox.diagnosis.effects.load_scale import case_scales
 from blackbox.diagnosis.effects.undeclared_joint import UndeclaredJoint, joint_candidate_grids
 from blackbox.diagnosis.runs import RunRecord, element_stiffness
@@ -63,6 +65,7 @@ from blackbox.diagnosis.search import Diagnosis, diagnose
 from blackbox.diagnosis.split import SplitBase
 from blackbox.errors import DiagnosisError, EditedDeckError
 from blackbox.identification import IdentificationResult, Observations, identify
+from blackbox.identification.fit_sigma import predict_rows
 from blackbox.parallel import Executor, StudyPackage, pack_study, use_executor
 from blackbox.study import Study, read_load_groups
 from solver_adapters.bdf_write import write_deck
@@ -115,6 +118,8 @@ class Prepared:
     element_adapter: SolverAdapter
     limits: tuple[CandidateLimit, ...] = ()
     """The families that considered fewer candidates than the study offers (their caps)."""
+    declared_condensed: CondensedModel | None = None
+    """The declared model on run 1's condensation: its predictions at any joint parameters."""
 
     @property
     def deck(self) -> Deck:
@@ -220,11 +225,13 @@ def _split_needs_declared_fit(deck: Deck, dm: DeclaredModel, fams, max_joint_can
     """Whether the split run depends on the declared fit: when there is one and a capped family
     has more candidates than its cap, the fit's residuals choose them -- the undeclared-joint
     grids the split deck cuts (:meth:`UndeclaredJoint.cut`), the members whose end DOFs it
-    reports (:meth:`MemberStiffness.split_rows`)."""
+    reports (:meth:`MemberStiffness.split_rows`; :meth:`RigidEndZone.split_rows`, the members at
+    the grids chosen as undeclared joints are)."""
     if not dm.joints:
         return False
     declared = {g for j in dm.joints for g in j.grids}
-    return ((UndeclaredJoint in fams and len(joint_candidate_grids(deck, declared)) > max_joint_candidates)
+    return (((UndeclaredJoint in fams or RigidEndZone in fams)
+             and len(joint_candidate_grids(deck, declared)) > max_joint_candidates)
             or (MemberStiffness in fams and len(deck.cbars) > max_member_candidates))
 
 
@@ -272,6 +279,7 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
         if c.added_springs:
             held["deck"] = deck_with_springs(deck, c.added_springs)
         cm = dm.condensed_model(c)
+        held["condensed"] = cm
         rec = RunRecord("declared model: condensation", study.deck_path.name, cost.right_hand_sides, c.wall_s)
         ident = identify(cm, fit_obs, dm.k0, holdout=hold_obs, **dm.options.kwargs(profile=False, bootstrap=0))
         say(f"declared model: reduced chi2 = {ident.reduced_chi2:.4g} ({ident.n_obs} rows, "
@@ -371,7 +379,7 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
     limits = {**sctx.limits, **ctx.limits}
     return Prepared(study, dm, fit_obs, hold_obs, tuple(dm.holdout), bool(declared_holdout), K_deck, ident,
                     K_e, e_asym, sd, base, tuple(cands), tuple(decks), log, cost, eadapter,
-                    tuple(limits.values()))
+                    tuple(limits.values()), held.get("condensed"))
 
 
 # --------------------------------------------------------------------------------------------
@@ -531,7 +539,9 @@ def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float =
                             pr.candidates, alpha=alpha, refit_top=refit_top, max_steps=max_steps,
                             declared_prediction=ident.predicted if ident is not None else None,
                             xyz=xyz, progress=progress_step, executor=executor,
-                            load_magnitudes=load_magnitudes(study.loads))
+                            load_magnitudes=load_magnitudes(study.loads),
+                            declared_predict=(functools.partial(predict_rows, pr.declared_condensed, pr.fit_obs)
+                                              if pr.declared_condensed is not None else None))
         except EditedDeckError as exc:
             raise EditedDeckError(f"{exc}. {_nesting_cards(pr, exc.rows)}", exc.rows) from None
         say(f"verdict: {diag.verdict}: {verdict_detail(diag)}")

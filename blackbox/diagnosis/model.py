@@ -7,8 +7,10 @@ effect enters through the hooks of :class:`~blackbox.diagnosis.effects.Effect`:
 *Compliance form* (released cuts). A released connection has compliance ``D(theta) = sum theta_i D_i``.
 Replacing the ``K0`` springs by ``D^-1`` adds a parallel connection of compliance
 ``(I - D K0)^-1 D`` carrying forces ``f``; together with the stiffness-form part
-``dK = K_J(k) - K_deck + sum (x_q - nominal_q) K_q`` on the DOFs ``S`` (joint boundary plus the
-DOFs of stiffness terms, e.g. a member's ends)::
+``dK = K_J(k) - K_deck + sum (x_q - nominal_q) K_q + sum dK_e(x_e)`` on the DOFs ``S`` (joint
+boundary plus the DOFs of stiffness terms, e.g. a member's ends; ``dK_e``: an effect's nonlinear
+stiffness change, :meth:`~blackbox.diagnosis.effects.Effect.stiffness_matrix`, whose derivative
+``d dK_e / dx_q`` takes the place of ``K_q`` below)::
 
     [ I + G~_SS dK              Z~_S           ] [u_S]   [ u~0_S              ]
     [ (I - D K0) Z~_S^T dK      D + (I - D K0) S~] [ f ] = [ (I - D K0) P u~0    ]
@@ -212,6 +214,7 @@ class AugmentedModel:
         # parameter bookkeeping: joints, stiffness terms, compliances (structural), output factors
         self.p = spec.n_params
         self._stiff = []            # (param index, S indices, K_q, nominal)
+        self._nonlinear = []        # (parameter slice, S indices, effect): dK += effect.stiffness_matrix(x[slice])
         self._basis = []            # (param index, m x m matrix)
         self._outputs = []          # (param index, effect, q)
         output = np.zeros(self.p, bool)
@@ -221,6 +224,8 @@ class AugmentedModel:
                 idx = np.array([sidx[d] for d in e.stiffness_dofs])
                 nom = e.nominal
                 self._stiff += [(sl.start + q, idx, K_q, nom[q]) for q, K_q in e.stiffness_terms()]
+                if e.stiffness_matrix(nom) is not None:
+                    self._nonlinear.append((sl, idx, e))
             me = len(e.cut_pairs)
             if me:
                 for q in range(e.n_params):
@@ -279,6 +284,8 @@ class AugmentedModel:
             dK += self.assembly.matrix(x[:spec.joint_params])
         for i, idx, K_q, nom in self._stiff:
             dK[np.ix_(idx, idx)] += (x[i] - nom) * K_q
+        for sl, idx, e in self._nonlinear:
+            dK[np.ix_(idx, idx)] += e.stiffness_matrix(x[sl])
         D = np.zeros((self.m, self.m))
         for i, Dm in self._basis:
             D += x[i] * Dm
@@ -439,6 +446,10 @@ class AugmentedModel:
         stiff = {}
         for i, idx, K_q, _ in self._stiff:
             stiff.setdefault(i, []).append((idx, K_q))
+        for sl, idx, e in self._nonlinear:
+            if any(sl.start <= i < sl.stop for i in which):
+                for q, K_q in enumerate(e.stiffness_derivatives(x[sl])):
+                    stiff.setdefault(sl.start + q, []).append((idx, K_q))
         case_of = {}
         for e, sl, js, E in self._case:
             for q, i in enumerate(range(sl.start, sl.stop)):

@@ -45,14 +45,14 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, replace
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 from scipy import stats
 
 from blackbox.diagnosis.effects.base import Effect
 from blackbox.diagnosis.fit import Fit, chi2_band, fit_model
-from blackbox.diagnosis.model import AugmentedModel, ModelSpec, ObsMap
+from blackbox.diagnosis.model import RIGID_RATIO, AugmentedModel, ModelSpec, ObsMap
 from blackbox.diagnosis.residuals import hotspots, residual_structure
 from blackbox.diagnosis.runs import RunRecord
 from blackbox.diagnosis.scoring import CandidateScore, log10_sf, log10_sf_array, score_candidates
@@ -591,7 +591,8 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
              refit_top: int = 6, refine_top: int = REFINE_TOP, max_steps: int = 5, band_level: float = 0.99,
              declared_prediction: np.ndarray | None = None, xyz: dict | None = None,
              progress=None, executor=None, always_map_refits: bool = False,
-             load_magnitudes: tuple[float, float] | None = None, complete_refits: bool = True) -> Diagnosis:
+             load_magnitudes: tuple[float, float] | None = None, complete_refits: bool = True,
+             declared_predict: Callable[[np.ndarray], np.ndarray] | None = None) -> Diagnosis:
     """The loop of the module docstring. ``k_start``: the declared joints' estimate (e.g. from
     :func:`blackbox.identification.identify`); ``declared_prediction``: that estimate's fit-row
     predictions on the original deck, to measure how exactly the split deck nests the declared
@@ -601,7 +602,10 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
     load cases the report proposes to separate near-equal alternatives
     (:mod:`blackbox.diagnosis.separation`). ``complete_refits=False`` refits only the
     ``refit_top`` best by score (what the guarantee of :func:`refit_schedule` costs is measured
-    against it: ``benchmarks/refit_schedule.py``)."""
+    against it: ``benchmarks/refit_schedule.py``). ``declared_predict(k)``: the declared
+    model's fit-row predictions at any ``k``; when the estimate has springs beyond their rigid
+    limit (:meth:`AugmentedModel.rigid_limits`, where both models are rounding), the nesting is
+    checked at those limits instead, as the fit starts there."""
     t0 = time.perf_counter()
     boundary = tuple(boundary)
     o_dofs = tuple(dict.fromkeys(list(obs_fit.dofs) + [r for r in obs_fit.ref_dofs if r is not None]
@@ -618,10 +622,22 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
     x0 = np.asarray(k_start, float)
     nest = None
     if declared_prediction is not None:
+        x_nest, f_declared = x0, declared_prediction
+        limit = model.rigid_limits()
+        if declared_predict is not None and np.any(x0 > limit):
+            # a spring at 1e14-1e21 (a joint stiffer than rigid would be) leaves both predictions
+            # to rounding there, beyond any check; the fit holds it at its rigid limit anyway
+            x_nest = np.minimum(x0, limit)
+            f_declared = np.asarray(declared_predict(x_nest), float)
+            names = [n for n, a, b in zip(spec.names, x0, limit) if a > b]
+            warnings.append(f"the declared estimate has {len(names)} spring(s) beyond their rigid limit "
+                            f"({', '.join(names[:4])}{' ...' if len(names) > 4 else ''}; {RIGID_RATIO:g} x the "
+                            "structure's stiffness along each), where its predictions are rounding: the split "
+                            "deck's nesting is checked, and the diagnosis starts, at that limit")
         # the rounding of both evaluations grows with the cut pairs' conditioning and with the
-        # augmented system's at the declared fit (the identification solves the same system)
-        nest, note = check_nesting(model.predict(x0, om), declared_prediction, om, obs_fit.case_labels,
-                                   base.symmetry_error, max(base.condition, model.condition(x0)))
+        # augmented system's at the point compared (the identification solves the same system)
+        nest, note = check_nesting(model.predict(x_nest, om), f_declared, om, obs_fit.case_labels,
+                                   base.symmetry_error, max(base.condition, model.condition(x_nest)))
         if note:
             warnings.append(note)
     t_fit = time.perf_counter()

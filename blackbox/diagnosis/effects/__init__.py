@@ -22,7 +22,9 @@ from blackbox.diagnosis.effects.outlier import Outlier  # noqa: E402
 from blackbox.diagnosis.effects.sign_flip import SignFlip  # noqa: E402
 from blackbox.diagnosis.effects.channel_swap import ChannelSwap  # noqa: E402
 from blackbox.diagnosis.effects.misplaced_sensor import MisplacedSensor  # noqa: E402
+from blackbox.diagnosis.effects.rigid_end_zone import RigidEndZone  # noqa: E402
 
 __all__ = ["CandidateContext", "CandidateLimit", "Effect", "Connection", "register", "get", "kinds", "families",
            "UndeclaredJoint", "JointTranslation", "SupportFlexibility", "JointCoupling", "MemberStiffness", "JointGap",
-           "LoadScale", "SensorGain", "SensorOffset", "Outlier", "SignFlip", "ChannelSwap", "MisplacedSensor"]
+           "LoadScale", "SensorGain", "SensorOffset", "Outlier", "SignFlip", "ChannelSwap", "MisplacedSensor",
+           "RigidEndZone"]

@@ -15,7 +15,9 @@ at grid 1, member 88...). Everything that differs between families lives on the 
   is a bound, so the score test is one-sided).
 * **the augmented model** -- at most one way in, each a hook with an empty default:
   :meth:`Effect.joint_models` (the joints change model: coupling), :meth:`Effect.stiffness_terms`
-  (``dK += (x_q - nominal_q) K_q`` on some DOFs: members), :attr:`Effect.cut_pairs` with
+  (``dK += (x_q - nominal_q) K_q`` on some DOFs: members) or the nonlinear pair
+  :meth:`Effect.stiffness_matrix` / :meth:`Effect.stiffness_derivatives` (``dK += dK(x)`` on
+  some DOFs, 0 at the nominal point: rigid end zones), :attr:`Effect.cut_pairs` with
   :attr:`Effect.compliance_basis` (a released cut of the split deck: connections) and
   :meth:`Effect.output_rows` (a factor on some measured rows: load scales, sensor gains) or
   :meth:`Effect.offset_rows` (an offset added to some measured rows: sensor offsets).
@@ -206,6 +208,16 @@ class Effect:
     def stiffness_terms(self) -> list[tuple[int, np.ndarray]]:
         """``[(q, K_q)]``: ``dK += (x_q - nominal_q) K_q`` over :attr:`stiffness_dofs`."""
         return []
+
+    def stiffness_matrix(self, x_effect: np.ndarray) -> np.ndarray | None:
+        """A stiffness change nonlinear in the effect's parameters: ``dK(x_effect)`` over
+        :attr:`stiffness_dofs` (``(n_dofs, n_dofs)``, exactly 0 at :attr:`nominal`), added to
+        the linear :meth:`stiffness_terms`; ``None`` (default): none."""
+        return None
+
+    def stiffness_derivatives(self, x_effect: np.ndarray) -> np.ndarray | None:
+        """``d dK / dx_q`` of :meth:`stiffness_matrix` at ``x_effect``: ``(n_params, n_dofs, n_dofs)``."""
+        return None
 
     @property
     def case_joint(self) -> str | None:
