@@ -9,11 +9,15 @@ data:
 * ``LOAD = n`` and ``SPC = n`` select the load set and the constraint set of a subcase;
 * ``TITLE``, ``SUBTITLE``, ``LABEL`` are kept as text;
 * output requests (``DISP``, ``STRESS``, ``FORCE`` ...), output controls (``ECHO``, ``SET``,
-  ``LINE`` ...), selections a linear static solve does not use (``METHOD``, ``FREQ`` ...),
-  case-control ``PARAM`` and the plot/XY-plot packets after ``OUTPUT(PLOT)`` are recognised and
-  listed in :attr:`CaseControl.skipped` by kind, so that a caller can say once what it skipped;
+  ``LINE`` ...), selections of other solutions (``METHOD``, ``FREQ``, ``DESOBJ``, ``TSTEPNL``,
+  ``TRIM`` ...), case-control ``PARAM`` and the plot/XY-plot packets after ``OUTPUT(PLOT)`` are
+  recognised and listed in :attr:`CaseControl.skipped` by kind, so that a caller can say once what
+  it skipped; a subcase's selections of other solutions are kept in :attr:`Subcase.others`
+  (to say what a deck without a static load selects instead);
+* ``AUTOSPC = YES/NO`` is kept in :attr:`CaseControl.autospc`;
 * commands that change the static solution and that an import cannot carry over (``MPC``,
-  ``TEMPERATURE``, ``DEFORM``, ``SYMCOM`` ...) and unknown commands are errors naming the line;
+  ``TEMPERATURE``, ``DEFORM``, ``K2GG``, ``P2G``, ``LOADSET``, ``SYMCOM`` ...) are errors naming the
+  line; an unknown command is an error naming the line and the known commands closest to it;
 * ``SUBCOM`` (a combination of subcases) is skipped with its ``SUBSEQ``: the subcases it
   combines are imported themselves.
 
