@@ -30,7 +30,8 @@ displacements from MYSTRAN's, relative to each subcase's largest translation (ro
 * ``-``: MYSTRAN runs neither (a card it does not run: CBEAM, PLOAD1, ...).
 
 A summary line per half counts the decks accepted, those solved (the reference solver solves every
-case), and the disagreements above 1e-6.
+case), those with a static load case (not stopped by "no static load case to import") and the
+solved share of them, and the disagreements above 1e-6.
 """
 
 from __future__ import annotations
@@ -344,17 +345,20 @@ def main(argv: list[str] | None = None) -> int:
         if (a.half and half != a.half) or (a.only and a.only not in p):
             continue
         accepted, n, shown, value = row(a.folder / repo.replace("/", "+") / p, not a.no_mystran)
-        t = tally.setdefault(half, [0, 0, 0, 0])
+        t = tally.setdefault(half, [0, 0, 0, 0, 0])
         t[0] += 1
+        t[4] += "no static load case to import" in accepted
         t[1] += accepted.startswith(("yes", "imported"))
         t[2] += accepted == "yes"
         if value is not None and value > RTOL:
             t[3] += 1
             bad.append(p)
         print(f"| `{PurePosixPath(p).name}` | {repo} `{p}` | {half} | {accepted} | {n} | {shown} |", flush=True)
-    for half, (total, imported, solved, disagree) in sorted(tally.items()):
+    for half, (total, imported, solved, disagree, no_load) in sorted(tally.items()):
+        static = total - no_load
         print(f"\n{half}: {solved} of {total} imported and solved ({imported} imported); "
-              f"{disagree} disagree above {RTOL:g}")
+              f"{static} have a static load case, {solved} of them solved "
+              f"({100 * solved / max(static, 1):.0f} %); {disagree} disagree above {RTOL:g}")
     for p in bad:
         print(f"disagreement: {p}")
     return 0
