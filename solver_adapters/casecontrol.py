@@ -9,11 +9,15 @@ data:
 * ``LOAD = n`` and ``SPC = n`` select the load set and the constraint set of a subcase;
 * ``TITLE``, ``SUBTITLE``, ``LABEL`` are kept as text;
 * output requests (``DISP``, ``STRESS``, ``FORCE`` ...), output controls (``ECHO``, ``SET``,
-  ``LINE`` ...), selections a linear static solve does not use (``METHOD``, ``FREQ`` ...),
-  case-control ``PARAM`` and the plot/XY-plot packets after ``OUTPUT(PLOT)`` are recognised and
-  listed in :attr:`CaseControl.skipped` by kind, so that a caller can say once what it skipped;
+  ``LINE`` ...), selections of other solutions (``METHOD``, ``FREQ``, ``DESOBJ``, ``TSTEPNL``,
+  ``TRIM`` ...), case-control ``PARAM`` and the plot/XY-plot packets after ``OUTPUT(PLOT)`` are
+  recognised and listed in :attr:`CaseControl.skipped` by kind, so that a caller can say once what
+  it skipped; a subcase's selections of other solutions are kept in :attr:`Subcase.others`
+  (to say what a deck without a static load selects instead);
+* ``AUTOSPC = YES/NO`` is kept in :attr:`CaseControl.autospc`;
 * commands that change the static solution and that an import cannot carry over (``MPC``,
-  ``TEMPERATURE``, ``DEFORM``, ``SYMCOM`` ...) and unknown commands are errors naming the line;
+  ``TEMPERATURE``, ``DEFORM``, ``K2GG``, ``P2G``, ``LOADSET``, ``SYMCOM`` ...) are errors naming the
+  line; an unknown command is an error naming the line and the known commands closest to it;
 * ``SUBCOM`` (a combination of subcases) is skipped with its ``SUBSEQ``: the subcases it
   combines are imported themselves.
 
@@ -24,6 +28,7 @@ lists). ``$`` starts a comment.
 
 from __future__ import annotations
 
+import difflib
 import re
 from dataclasses import dataclass, field
 
@@ -50,21 +55,52 @@ _OUTPUT_REQUESTS = {
 _OUTPUT_CONTROLS = {
     "ECHO": "ECHO", "LINE": "LINE", "MAXL": "MAXLINES", "SET": "SET", "PAGE": "PAGE",
     "SKIP": "SKIP", "POST": "POST", "OUTR": "OUTRCV", "MODS": "MODSEL", "SORT": "SORT",
+    "ECHOON": "ECHOON", "ECHOOFF": "ECHOOFF", "MAXM": "MAXMIN", "GPRS": "GPRSORT",
+    "MONI": "MONITOR",
 }
-_NOT_STATIC = {  # selections a linear static solve does not use
+_NOT_STATIC = {  # selections of other solutions: no effect on the static solution of LOAD/SPC
     "METH": "METHOD", "SDAM": "SDAMPING", "FREQ": "FREQUENCY", "TSTE": "TSTEP", "DLOA": "DLOAD",
     "NLPA": "NLPARM", "RESV": "RESVEC", "CMET": "CMETHOD", "RAND": "RANDOM", "IC": "IC",
     "MODE": "MODES", "ANAL": "ANALYSIS", "STAT": "STATSUB", "RIGI": "RIGID", "MASS": "MASS",
+    "RMET": "RMETHOD", "FMET": "FMETHOD", "SMET": "SMETHOD", "TSTEPNL": "TSTEPNL",
+    "NONL": "NONLINEAR", "B2GG": "B2GG", "B2PP": "B2PP", "TFL": "TFL", "RGYR": "RGYRO",
+    "DESO": "DESOBJ", "DESS": "DESSUB", "DESG": "DESGLB", "DSAP": "DSAPRT", "DRSP": "DRSPAN",
+    "DESV": "DESVAR", "TRIM": "TRIM", "FLUT": "FLUTTER", "GUST": "GUST", "DIVE": "DIVERG",
+    "GENG": "GENGAF", "AESYMXY": "AESYMXY", "AESYMXZ": "AESYMXZ", "AEUX": "AEUXREF",
+    "CSSC": "CSSCHD", "MODT": "MODTRAK", "MPFA": "MPFACTOR",
+    "AECO": "AECONFIG",
 }
 _UNSUPPORTED = {  # change the static solution; an imported study cannot carry them
     "MPC": "MPC (multipoint constraints)", "TEMP": "TEMPERATURE (thermal loads)",
     "DEFO": "DEFORM (enforced element deformation)", "SUPO": "SUPORT1 (inertia relief)",
     "K2GG": "K2GG (direct matrix input)", "P2G": "P2G (direct load input)",
+    "K2PP": "K2PP (direct matrix input)", "K42G": "K42GG (direct matrix input)",
+    "M2GG": "M2GG (direct mass input: changes gravity loads)",
+    "LOADSET": "LOADSET (static load sets from LSEQ cards, not read by blackbox import)",
     "SYMC": "SYMCOM",
     "SYMS": "SYMSEQ", "REPC": "REPCASE", "BCON": "BCONTACT", "AXIS": "AXISYMMETRIC",
     "CLOA": "CLOAD", "INCL": "INCLUDE (in the case control)", "ADAP": "ADAPT",
 }
 _PLOT_PACKETS = {"PLOT", "XYPLOT", "XYOUT", "XYPUNCH", "POST", "CARDS"}
+_OTHER = ("SUBCASE", "SUBCOM", "SUBSEQ", "LOAD", "SPC", "OUTPUT", "PARAM", "BEGIN", "AUTOSPC",
+          "SEALL", "SUPER")
+
+
+def _lookup(table: dict[str, str], word: str) -> str | None:
+    """The command of ``table`` that ``word`` names (its first four letters, or the whole name
+    for a name that shares them with another: TSTEP, TSTEPNL)."""
+    for key in (word, word[:4]):
+        name = table.get(key)
+        if name is not None and _is(word, name.split()[0]):
+            return name
+    return None
+
+
+def known_commands() -> list[str]:
+    """Every case-control command this module reads (for "did you mean")."""
+    names = {n.split()[0] for t in (_TITLES, _OUTPUT_REQUESTS, _OUTPUT_CONTROLS, _NOT_STATIC,
+                                    _UNSUPPORTED) for n in t.values()}
+    return sorted(names | set(_OTHER))
 
 
 @dataclass(frozen=True)
@@ -80,6 +116,7 @@ class Subcase:
     title: str = ""
     subtitle: str = ""
     label: str = ""
+    others: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -97,6 +134,7 @@ class CaseControl:
     executive: tuple[str, ...]
     skipped: dict[str, tuple[str, ...]] = field(default_factory=dict)
     bulk_line: int = 0
+    autospc: tuple[str, int] | None = None
 
 
 def _is(word: str, name: str) -> bool:
@@ -174,6 +212,7 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
     subcases: list[tuple[int, int, dict[str, tuple[object, int]]]] = []
     current = defaults
     plot_packet = in_subcom = False
+    autospc: tuple[str, int] | None = None
     for line, stmt in _statements(lines, cend + 1, begin):
         if plot_packet:
             skip("plot commands", stmt.split(None, 1)[0].upper())
@@ -231,34 +270,50 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
         elif word == "BEGIN":
             raise DeckFormatError("only BEGIN BULK is supported (superelement bulk sections are not)",
                                   file=file, line=line, value=stmt)
-        elif key in _UNSUPPORTED and _is(word, _UNSUPPORTED[key].split()[0]):
-            raise DeckFormatError(f"the case-control command {_UNSUPPORTED[key]} changes the static "
-                                  f"solution and cannot be imported; remove it from the deck (or "
-                                  f"model its effect with supported cards) and import again",
+        elif word == "AUTOSPC":
+            # NASTRAN's automatic constraint of singular DOFs: YES is the SOL 101 default the
+            # study reader applies; NO is carried into model.bdf as PARAM,AUTOSPC,NO
+            flag = value.strip().upper() or "YES"
+            if flag not in ("YES", "NO"):
+                raise DeckFormatError("AUTOSPC must be YES or NO", file=file, line=line,
+                                      card=word, value=stmt)
+            autospc = (flag, line)
+        elif _lookup(_UNSUPPORTED, word) is not None:
+            raise DeckFormatError(f"the case-control command {_lookup(_UNSUPPORTED, word)} changes "
+                                  f"the static solution and cannot be imported; remove it from the "
+                                  f"deck (or model its effect with supported cards) and import again",
                                   file=file, line=line, card=word, value=stmt)
         else:
             for kind, table in (("output requests", _OUTPUT_REQUESTS),
                                 ("output controls", _OUTPUT_CONTROLS),
-                                ("selections not used by a linear static solve", _NOT_STATIC)):
-                name = table.get(key)
-                if name is not None and _is(word, name):
+                                ("selections of other solutions", _NOT_STATIC)):
+                name = _lookup(table, word)
+                if name is not None:
                     skip(kind, name)
+                    if table is _NOT_STATIC:
+                        current.setdefault("OTHERS", ({}, line))[0][name] = value.strip()
                     break
             else:
-                raise DeckFormatError("unknown case-control command (not read by blackbox import)",
+                close = difflib.get_close_matches(word, known_commands(), n=3, cutoff=0.6)
+                hint = f"; did you mean {' or '.join(close)}?" if close else ""
+                raise DeckFormatError("unknown case-control command (not read by blackbox import; "
+                                      "docs/import.md lists the commands it skips as having no "
+                                      f"effect on a linear static solution){hint}",
                                       file=file, line=line, card=word, value=stmt)
 
     def make(sid: int, line: int, own: dict) -> Subcase:
         merged = {**defaults, **own}
+        others = {**defaults.get("OTHERS", ({}, 0))[0], **own.get("OTHERS", ({}, 0))[0]}
         load, load_line = merged.get("LOAD", (None, 0))
         spc, spc_line = merged.get("SPC", (None, 0))
         return Subcase(sid, load, spc, line, load_line, spc_line,
                        str(merged.get("TITLE", ("", 0))[0]), str(merged.get("SUBTITLE", ("", 0))[0]),
-                       str(merged.get("LABEL", ("", 0))[0]))
+                       str(merged.get("LABEL", ("", 0))[0]),
+                       tuple(f"{k} = {v}" if v else k for k, v in others.items()))
 
     if subcases:
         cases = tuple(make(sid, line, own) for sid, line, own in subcases)
     else:
         cases = (make(1, 0, {}),)
     return CaseControl(file, cases, bool(subcases), sol, tuple(executive),
-                       {k: tuple(v) for k, v in skipped.items()}, begin + 1)
+                       {k: tuple(v) for k, v in skipped.items()}, begin + 1, autospc)

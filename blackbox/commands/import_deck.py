@@ -258,6 +258,37 @@ def _spc_members(sid: int, sets: dict[int, list]) -> set[int]:
     return members
 
 
+_STATIC_SOLS = ("1", "101", "SESTATIC", "SESTATICS", "STATICS")
+_SOL_NAMES = {"3": "normal modes", "103": "normal modes", "SEMODES": "normal modes", "MODES": "normal modes",
+              "5": "buckling", "105": "buckling", "SEBUCKL": "buckling", "106": "nonlinear statics",
+              "NLSTATIC": "nonlinear statics", "107": "complex modes", "108": "direct frequency response",
+              "109": "direct transient response", "110": "modal complex modes",
+              "111": "modal frequency response", "112": "modal transient response",
+              "129": "nonlinear transient response", "144": "static aeroelasticity",
+              "145": "flutter", "146": "aeroelastic response", "153": "steady thermal",
+              "159": "transient thermal", "200": "design optimisation", "DESOPT": "design optimisation",
+              "400": "nonlinear (SOL 400)", "402": "nonlinear (SOL 402)"}
+
+
+def _sol_text(sol: str) -> str:
+    name = _SOL_NAMES.get(sol.upper())
+    return f"SOL {sol}" + (f" ({name})" if name else "")
+
+
+def _no_static_load(cc: CaseControl | None, path: Path) -> str:
+    """The message of a deck with no static load case: what its subcases select instead."""
+    if cc is None:
+        return "no static load case to import: the deck has no case control and no load cards"
+    own = (f"the deck's solution is {_sol_text(cc.sol)}, not linear statics, and " if cc.sol
+           and cc.sol.upper() not in _STATIC_SOLS else "")
+    what = "; ".join(f"subcase {s.id}: {', '.join(s.others) or 'no selection'}"
+                     for s in cc.subcases[:8]) + (" ..." if len(cc.subcases) > 8 else "")
+    return (f"no static load case to import: {own}no subcase selects a static load set with "
+            f"LOAD = ({what}). A study needs at least one load case: add a subcase with LOAD = n "
+            f"naming a FORCE/MOMENT/PLOAD1/GRAV/LOAD set to the deck (or write loads.csv "
+            f"yourself) and import again")
+
+
 def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
         include_dirs: list | tuple = ()) -> ImportResult:
     """Read the NASTRAN input file ``deck_path`` and make the study's files (not written yet).
@@ -312,9 +343,7 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
                                   f"(or import the deck once per set)", file=str(path))
         spc_choice = spcs.pop() if spcs else None
     if not selected:
-        why = ("no subcase selects a load set with LOAD =" if cc is not None
-               else "the deck has no case control and no load cards")
-        raise DeckFormatError(f"no load case to import: {why}", file=str(path))
+        raise DeckFormatError(_no_static_load(cc, path), file=str(path))
 
     # the constraint sets kept in model.bdf
     drop_cards = list(load_cards)
@@ -375,14 +404,25 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
     if cc is not None:
         ex = [w if w != "SOL" else f"SOL {cc.sol}" for w in dict.fromkeys(cc.executive)]
         notes.append(f"skipped the executive control ({', '.join(ex)})")
-        if cc.sol and cc.sol not in ("1", "101", "SESTATIC", "STATICS"):
-            notes.append(f"note: SOL {cc.sol} is not linear statics; the loads were imported as static loads")
+        if cc.sol and cc.sol.upper() not in _STATIC_SOLS:
+            taken = ", ".join(f"{label} (LOAD = {sid})" for label, sid, _ in selected
+                              if label in cases)
+            notes.append(f"note: the deck's own solution is {_sol_text(cc.sol)}, not linear statics: "
+                         f"imported its structure and, as linear static load cases, the load sets "
+                         f"its subcases select: {taken}; the deck's own results are not these")
         titles = [t for t in ("TITLE", "SUBTITLE", "LABEL")
                   if any(getattr(s, t.lower()) for s in cc.subcases)]
+        kinds = [(kind, names) for kind, names in cc.skipped.items()]
         if titles:
-            notes.append(f"skipped {_plural(len(titles), 'title line')} ({', '.join(titles)})")
-        for kind, names in cc.skipped.items():
-            notes.append(f"skipped {len(names)} {kind if len(names) > 1 or not kind.endswith('s') else kind[:-1]} ({', '.join(names)})")
+            kinds.insert(0, ("title lines", tuple(titles)))
+        if kinds:
+            n = sum(len(names) for _, names in kinds)
+            notes.append(f"skipped {_plural(n, 'case-control command')} with no effect on a linear "
+                         f"static solution: " + "; ".join(f"{kind} ({', '.join(names)})"
+                                                         for kind, names in kinds))
+        if cc.autospc is not None and cc.autospc[0] == "NO":
+            notes.append(f"AUTOSPC = NO at {path}:{cc.autospc[1]}: written into model.bdf as "
+                         f"PARAM,AUTOSPC,NO (a singular DOF is then an error, not constrained)")
     counts = Counter(c.name for c in load_cards)
     if counts:
         notes.append(f"dropped {_plural(len(load_cards), 'load card')} from model.bdf "
@@ -408,6 +448,8 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
     bulk = source.bulk
     dropped = bulk.lines_of(drop_cards)
     kept_lines = bulk.lines_of([c for c in kept if c.file != str(path)]) if len(files) > 1 else {}
+    if cc is not None and cc.autospc is not None and cc.autospc[0] == "NO":
+        model_lines += ["$ AUTOSPC = NO of the case control:", "PARAM,AUTOSPC,NO"]
     _model_body(lines, str(path), start, bulk, kept_lines, dropped, model_lines)
     model_lines.append("ENDDATA")
 

@@ -62,11 +62,10 @@ KNOWN_UNMODELLED = frozenset({
     # rigid elements other than RBE2, RBE3
     "RBAR", "RBAR1", "RBE1", "RROD", "RTRPLT", "RTRPLT1", "RSPLINE", "RJOINT",
     # degree-of-freedom sets, scalar points, sequencing
-    "SUPORT", "SUPORT1", "ASET", "ASET1", "OMIT", "OMIT1", "QSET", "QSET1", "BSET", "BSET1",
+    "SUPORT", "SUPORT1", "QSET", "QSET1", "BSET", "BSET1",
     "CSET", "CSET1", "USET", "USET1", "SEQGP", "SPOINT", "EPOINT",
     # other coordinate systems, direct matrix input, tables, functions
-    "CORD3G", "CORD3R", "DTI", "DMI", "DMIG", "DMIJ", "DMIK", "DEQATN", "TABLED1", "TABLED2",
-    "TABLED3", "TABLED4", "BEAMOR",
+    "CORD3G", "CORD3R", "DTI", "DMI", "DMIG", "DMIJ", "DMIK", "DEQATN", "BEAMOR",
 })
 """NASTRAN cards the reader knows and does not model: with ``unmodelled="keep"`` they are kept
 for an external solver (which refuses those it cannot run), otherwise they are errors. A name

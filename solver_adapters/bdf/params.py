@@ -31,7 +31,12 @@ NO_EFFECT = frozenset({
     "NSM", "NSM1", "NSMADD", "NSML", "NSML1",
     # eigenvalue extraction, dynamic and nonlinear solution controls
     "EIGR", "EIGRL", "EIGB", "EIGC", "EIGP", "FREQ", "FREQ1", "FREQ2", "FREQ3", "FREQ4", "FREQ5",
-    "TSTEP", "TSTEPNL", "NLPARM", "NLPCI", "TABDMP1", "RANDPS",
+    "TSTEP", "TSTEPNL", "NLPARM", "NLPCI", "TABDMP1", "RANDPS", "RANDT1", "TABRND1", "TABRNDG",
+    # dynamic excitation (selected by DLOAD, never by a static LOAD) and its tables
+    "RLOAD1", "RLOAD2", "TLOAD1", "TLOAD2", "DLOAD", "DELAY", "DPHASE",
+    "TABLED1", "TABLED2", "TABLED3", "TABLED4",
+    # static condensation sets: the reduction of a linear static solution to them is exact
+    "ASET", "ASET1", "OMIT", "OMIT1",
     # output only: plot elements and monitor points
     "PLOTEL", "MONPNT1", "MONPNT3",
     # design optimisation (SOL 200): a static solution uses the properties as written

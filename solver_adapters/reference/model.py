@@ -383,7 +383,8 @@ def bush_stiffness(deck: Deck, grid_ids: np.ndarray, xyz: np.ndarray) -> sp.csr_
     length carries moments consistently: K = C^T diag(K) C, C = [-E T_A, E T_B] with E the
     element axes (twice: translations and rotations) and T_g the rigid links. GB = 0: the
     springs go to ground at p = x_A. Element axes: CID's (a cylindrical or spherical CID's
-    axes at GA), else x along GA -> GB and the orientation vector in the x-y plane."""
+    axes at GA), else x along GA -> GB and the orientation vector in the x-y plane (no
+    orientation: K1 and K4 only)."""
     n_g = 6 * len(grid_ids)
     rows, cols, vals = [], [], []
     for b in sorted(deck.bushes.values(), key=lambda e: e.eid):
@@ -396,7 +397,17 @@ def bush_stiffness(deck: Deck, grid_ids: np.ndarray, xyz: np.ndarray) -> sp.csr_
             E = np.eye(3) if b.cid == 0 else deck.coords[b.cid].frames_at(xa[None, :])[0]
         else:
             ex = xb - xa
-            if b.g0 is not None:
+            if b.g0 is None and b.x is None:
+                # no orientation and no CID: x along GA -> GB, valid only for a bush with
+                # axial and torsional stiffness alone (K1, K4; MSC QRG CBUSH remark 4), whose
+                # y and z axes are then of no consequence
+                k = deck.pbushes[b.pid].k
+                if any(k[i] != 0.0 for i in (1, 2, 4, 5)) or not np.linalg.norm(ex) > 0.0:
+                    raise ModelError(f"{where}: without an orientation vector (GO or X) or CID, "
+                                     f"a CBUSH between two distinct grids may have K1 and K4 "
+                                     f"only (its y and z axes are undefined)")
+                v = np.eye(3)[int(np.argmin(np.abs(ex)))]
+            elif b.g0 is not None:
                 v = xyz[int(_grid_pos(grid_ids, [b.g0], where)[0])] - xa
             else:
                 v = deck.displacement_frames([b.ga])[0].T @ np.array(b.x)

@@ -1,0 +1,368 @@
+"""Public decks ``blackbox import`` was not written against: how many it imports and solves,
+and how the solution agrees with MYSTRAN's (issue 20's last target).
+
+    python benchmarks/unseen_decks.py --collect FOLDER --mirror OWNER/NAME=GITDIR ...
+    python benchmarks/unseen_decks.py FOLDER [--half tuning|held-out] [--no-mystran]
+
+The decks (``DECKS`` below) are every whole input file (a CEND and a BEGIN BULK) of four public
+repositories, at the commits of ``COMMITS``, that has a line element (CBAR, CBEAM, CROD, CONROD,
+CTUBE, CELAS*, CBUSH*, CGAP, ...) and no shell or solid (CQUAD*, CTRIA*, CHEXA, CPENTA, CTETRA,
+CSHEAR, ...; INCLUDEd files counted), less: decks of ``tests/data/decks`` (the corpus the import
+was written against), exact copies, and variants of one deck that differ only in solver options
+(MYSTRAN's benchmark copies each test run as ``SB-``/``SS-`` and its modal runs per eigensolver:
+``-GIV``, ``-INV``, ``-LANCZOS...``, ``-MGIV``; the first in sorted order is kept), and decks whose
+INCLUDE is not in the repository. ``--collect`` copies them out of git mirrors of those
+repositories (``git show COMMIT:PATH``) into ``FOLDER/OWNER+NAME/PATH``.
+
+The list is split once, before any change to the import was made for it, into a tuning half and a
+held-out half: ``random.Random(20).shuffle`` of the list, the first half tuning (``split()``).
+The import was changed looking at the tuning half's failures only.
+
+For each deck, one row: the half, whether ``blackbox import`` accepts it (else the first line of
+its message), the subcases imported, and the largest difference of the reference solver's
+displacements from MYSTRAN's, relative to each subcase's largest translation (rotation):
+
+* ``deck``: MYSTRAN 18 running the original input file (its folder copied), for SOL 1/101 decks
+  it runs; the deck's own output requests decide which subcases and grids are compared;
+* ``study``: otherwise (the deck's solution is not static, or MYSTRAN fails on the original), the
+  mystran adapter solving the imported study (model.bdf and loads.csv), which checks the reference
+  solve but not the import's reading of the load cards;
+* ``-``: MYSTRAN runs neither (a card it does not run: CBEAM, PLOAD1, ...).
+
+A summary line per half counts the decks accepted, those solved (the reference solver solves every
+case), those with a static load case (not stopped by "no static load case to import") and the
+solved share of them, and the disagreements above 1e-6.
+"""
+
+from __future__ import annotations
+
+import argparse
+import random
+import subprocess
+import sys
+import tempfile
+from pathlib import Path, PurePosixPath
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from deck_corpus import _mystran, _solve                  # noqa: E402
+from blackbox.commands import import_deck                  # noqa: E402
+
+RTOL = 1e-6
+SEED = 20
+
+COMMITS = {
+    'Alneos/vega': '91b1e6516a43e55741b0bc21e5fff8dce2240116',
+    'MYSTRANsolver/MYSTRAN': '77d970d543961f549b168a9e2431fd30572331eb',
+    'MYSTRANsolver/MYSTRAN_Benchmark': 'ad765adfcd2e2fd148743f0846d6ce6e71d33c99',
+    'SteveDoyle2/pyNastran': '1d25a92442a76cd1b24bfd0bd4008644b79322b2',
+}
+DECKS = [  # (repository, deck, its INCLUDEd files)
+    ('Alneos/vega', 'testdata/nastran/alneos/rbar1mod/rbar1mod.dat', ()),
+    ('Alneos/vega', 'testdata/nastran/alneos/rod1freeforce/rod1freeforce.dat', ()),
+    ('Alneos/vega', 'testdata/nastran/caw/prob30c/prob30c.dat', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/2dof108/2dof108.bdf', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/cantibeam/cantibeam.nas', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/cbush1/cbush1.bdf', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/cbush1b/cbush1b.bdf', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/dmigstfl/dmigstfl.nas', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/dmigstfs/dmigstfs.nas', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/grav-coord/grav-coord.nas', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/n4w101/n4w101.nas', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/nas101prob2/nas101prob2.dat', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/nas102prob12/prob12.nas', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/nas102prob14a/nas102prob14a.nas', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/nas103prob1c/nas103prob1c.nas', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/nas103prob3/nas103prob3.nas', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/nas103prob4a/nas103prob4a.nas', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/nas120probF/nas120probF.nas', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/sdld21b/sdld21b.bdf', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/sdld27a/sdld27a.bdf', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/sdld27a_pvisc/sdld27a_pvisc.bdf', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/sine_test/sine_test.nas', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/ssll11a/ssll11a.nas', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/ssll11c/ssll11c.nas', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/truss1/truss1.nas', ()),
+    ('Alneos/vega', 'testdata/nastran/irt/truss3/truss3.nas', ()),
+    ('MYSTRANsolver/MYSTRAN', 'Build_Test_Cases/buckling/bar.bdf', ()),
+    ('MYSTRANsolver/MYSTRAN', 'Build_Test_Cases/statics/bar_static_large.bdf', ()),
+    ('MYSTRANsolver/MYSTRAN', 'Build_Test_Cases/statics/bar_tube.bdf', ()),
+    ('MYSTRANsolver/MYSTRAN', 'Build_Test_Cases/statics/bar_tube2.bdf', ()),
+    ('MYSTRANsolver/MYSTRAN', 'Build_Test_Cases/statics/bar_tube_dollar.bdf', ()),
+    ('MYSTRANsolver/MYSTRAN', 'Build_Test_Cases/statics/missing_continuation.bdf', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bar_01.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bar_02.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bar_03.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bar_04.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bar_05.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bar_06.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bar_11.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bar_12.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bar_13.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bar_14.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bar_15.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bar_16.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bar_17.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_01.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_02.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_03.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_04.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_05.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_06.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_07.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_08.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_09.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_10.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_11.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_12.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_13.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_14.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_15.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_16.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_51.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_52.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/bush_53.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/case_0001.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/case_0002.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/Bush_Bar/case_0003.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/EB-BAR-CC-GIV.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/EB-BAR-FF-GIV.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/EB-GUYAN-03-GIV.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-BAR-10-BUCKLING-CF-LOAD-LAN-3D.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-BAR-10-BUCKLING-CF-LOAD-LAN.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-BAR-AUTOSPC-CHECK.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-BAR-RFORCE-OFFSET.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-BAR-TE-TEST.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-BAR-THERM-CONSTR.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-BAR-THERM-FREE.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-CONM2A.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-CORD3-0.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-GUYAN-01-FULL.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-GUYAN-01-SPARSE.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-RADIAL-BARS-CYL-GLOBAL-END-LOADS.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-RADIAL-BARS-CYL-GLOBAL-RB-DISP.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-RBE2-01-CBAR-01.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-RBE2-01-CROD-03.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-RBE2-01-CROD-05-MPC-03.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-RBE3-01-CBAR-08.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-RODDISPL-N-LOAD.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-RODLOAD-MPC-FOR-SING.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-SOLVE_EQNS_1_GRID.DAT', ()),
+    ('MYSTRANsolver/MYSTRAN_Benchmark', 'Benchmark_Decks/SB-SOLVE_EQNS_1_SEQGP.DAT', ()),
+    ('SteveDoyle2/pyNastran', 'docs/pyNastran_in_MATLAB_example/BAH_Plane.bdf', ('docs/pyNastran_in_MATLAB_example/bah_Pstructure.dat', 'docs/pyNastran_in_MATLAB_example/bah_Paero.dat', 'docs/pyNastran_in_MATLAB_example/bah_Pinterface.dat')),
+    ('SteveDoyle2/pyNastran', 'models/aero/aerobeam.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/aero/bah_plane/bah_plane2.bdf', ('models/aero/bah_plane/structure_bah.inc', 'models/aero/bah_plane/aero_bah.inc', 'models/aero/bah_plane/interface_bah.inc')),
+    ('SteveDoyle2/pyNastran', 'models/aero/bah_plane/bah_plane_qhh.bdf', ('models/aero/bah_plane/structure_bah.inc', 'models/aero/bah_plane/aero_bah.inc', 'models/aero/bah_plane/interface_bah.inc')),
+    ('SteveDoyle2/pyNastran', 'models/aero/cpmopt.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/aero/fmondsp.dat', ()),
+    ('SteveDoyle2/pyNastran', 'models/aero/monpnt3/BAH_Plane_cont_gust_LINE5000000_10FREQs.bdf', ('models/aero/monpnt3/bah_Pstructure.dat', 'models/aero/monpnt3/bah_Paero.dat', 'models/aero/monpnt3/bah_Pinterface.dat')),
+    ('SteveDoyle2/pyNastran', 'models/aero/pt145.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/aero/zona/f16_ma41.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/aero/zona/ztran.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/bar3truss/vared_bar3.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/beam_modes/beam_modes.dat', ('models/beam_modes/cbar_cbeam.blk',)),
+    ('SteveDoyle2/pyNastran', 'models/beam_modes/cbarao_cbeam_modes.bdf', ('models/beam_modes/cbarao_cbeam.blk',)),
+    ('SteveDoyle2/pyNastran', 'models/beam_modes/cbarao_cbeam_static.bdf', ('models/beam_modes/cbarao_cbeam.blk',)),
+    ('SteveDoyle2/pyNastran', 'models/bugs/euler_column_linear_buckling/euler_column_linear_buckling.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/bugs/msc_2014/sdof_crod.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/cbush_psd_bug/pn_mwe_s-sol_111.dat', ()),
+    ('SteveDoyle2/pyNastran', 'models/frame_three_bars/bar1.dat', ()),
+    ('SteveDoyle2/pyNastran', 'models/freq_sine/bad_sine.dat', ()),
+    ('SteveDoyle2/pyNastran', 'models/freq_sine/good_sine.dat', ()),
+    ('SteveDoyle2/pyNastran', 'models/msc/force_vector/nas102_ws21.dat', ()),
+    ('SteveDoyle2/pyNastran', 'models/nx/rotor/rotor049.dat', ()),
+    ('SteveDoyle2/pyNastran', 'models/nx/z402cdamp1_04.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/other/ab4.dat', ()),
+    ('SteveDoyle2/pyNastran', 'models/other/ar29sadl.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/other/b3bend.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/other/dbxdra7.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/other/htrussx.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/other/mdb200.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/other/sdbush01.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/other/sdr11se_s2dclg.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/other/tst1d3.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/other/v10601s.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/other/v12902.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/satk/pn_mwe_s-solution_1.dat', ()),
+    ('SteveDoyle2/pyNastran', 'models/sol200/model_200.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/superelements/se_test_static/se_test_n11_static_10_cases.bdf', ('models/superelements/se_test_static/incl/n11_fem.bdf', 'models/superelements/se_test_static/incl/se/se_test_n11.asm', 'models/superelements/se_test_static/incl/se/se_test_n11.pch')),
+    ('SteveDoyle2/pyNastran', 'models/transfer_function/actuator_tf_modeling.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'models/unit/cbush/cbush.dat', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/bdf/cards/aero/examples/flutter/case6/agardztran.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/bdf/cards/aero/examples/mloads/case1/ha144ds.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/bdf/test/unit/obscure/d200pe10.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/bdf/test/unit/obscure/degvcn03.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/cbar.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/cbar_modes.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/cbeam.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/celas1.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/celas3.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/celas4.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/celas_mpc_series.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/conrod.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/crod.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/crod_aset.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/crod_axial.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/crod_mpc.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/crod_torsion.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/ctube.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/freq_direct_response.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/freq_response.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/inrel_test.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/test_ese_all_springs.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/dev/bdf_vectorized3/solver/test/examples/test_ese_cantilever.solver.bdf', ()),
+    ('SteveDoyle2/pyNastran', 'pyNastran/op2/test/examples/cbush_nonlinear/cbush_106_large_disp.bdf', ()),
+]
+
+
+def split() -> dict[tuple[str, str], str]:
+    """(repository, deck) -> "tuning" or "held-out": the seeded shuffle of DECKS, halved."""
+    order = [(r, p) for r, p, _ in DECKS]
+    random.Random(SEED).shuffle(order)
+    half = (len(order) + 1) // 2
+    return {key: ("tuning" if i < half else "held-out") for i, key in enumerate(order)}
+
+
+def collect(folder: Path, mirrors: dict[str, str]) -> None:
+    for repo, path, includes in DECKS:
+        git = mirrors[repo]
+        for p in (path, *includes):
+            out = folder / repo.replace("/", "+") / p
+            out.parent.mkdir(parents=True, exist_ok=True)
+            data = subprocess.run(["git", "--git-dir", git, "show", f"{COMMITS[repo]}:{p}"],
+                                  capture_output=True, check=True).stdout
+            out.write_bytes(data)
+
+
+def _study_mystran(result):
+    """The mystran adapter on the imported study: {case: {grid: [6 values]}} or None."""
+    from blackbox.adapters import make_adapter_for
+    from blackbox.study import load_study
+    with tempfile.TemporaryDirectory() as tmp:
+        result.write(Path(tmp))
+        try:
+            study = load_study(Path(tmp))
+            adapter = make_adapter_for(study, "mystran", cache=False)
+            report = list(adapter.dofs())
+            out = adapter.solve(study.loads, report)
+        except Exception:
+            return None
+    tables: dict[int, dict[int, list[float]]] = {}
+    for j, case in enumerate(out.cases):
+        if not case.lstrip("-").isdigit():
+            continue
+        table = tables.setdefault(int(case), {})
+        for i, (g, c) in enumerate(report):
+            table.setdefault(g, [0.0] * 6)[c - 1] = float(out.values[i, j])
+    return tables
+
+
+def agreement(cases, report, u, tables, size: float) -> float | None:
+    """The largest difference over the subcases MYSTRAN printed, relative to the subcase's largest
+    translation (rotation). A part (translations or rotations) is compared only when it is not
+    round-off: rotations when their largest times the model's size is above 1e-9 of the largest
+    translation, and the other way round (a pure axial load leaves rotations of 1e-18, printed as
+    noise by both solvers, and relative to that noise any difference is large)."""
+    worst, compared = 0.0, 0
+    index = {d: i for i, d in enumerate(report)}
+    for j, case in enumerate(cases):
+        table = tables.get(int(case)) if case.lstrip("-").isdigit() else None
+        if not table:
+            continue
+        grids = [g for g in sorted(table) if (g, 1) in index]
+        if not grids:
+            continue
+        ours = np.array([[u[index[(g, c)], j] if (g, c) in index else 0.0 for c in range(1, 7)]
+                         for g in grids])
+        ref = np.array([table[g] for g in grids])
+        t, r = np.abs(ref[:, :3]).max(), np.abs(ref[:, 3:]).max() * size
+        for part, scale, other in ((slice(0, 3), t, r), (slice(3, 6), r, t)):
+            if scale > 0.0 and scale > 1e-9 * other:
+                worst = max(worst, float(np.abs(ours[:, part] - ref[:, part]).max()
+                                         / np.abs(ref[:, part]).max()))
+        compared += 1
+    return worst if compared else None
+
+
+def _size(deck) -> float:
+    xyz = np.array([g.xyz for g in deck.grids.values()]) if deck.grids else np.zeros((1, 3))
+    return max(float(np.ptp(xyz, axis=0).max()), 1e-300)
+
+
+def row(path: Path, use_mystran: bool = True) -> tuple[str, str, str, float | None]:
+    """(accepted, subcases, agreement text, agreement value)."""
+    try:
+        result = import_deck.run(path)
+    except Exception as exc:            # the row says why the deck is not accepted
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        return f"no: {first.replace(str(path), path.name)[:160]}", "", "", None
+    try:
+        cases, report, u = _solve(result)
+    except Exception as exc:
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        return "imported, not solved: " + first[:140], str(len(result.cases)), "", None
+    if not use_mystran:
+        return "yes", str(len(cases)), "", None
+    value, source = None, ""
+    size = _size(result.deck)
+    from solver_adapters.casecontrol import read_case_control
+    cc = read_case_control(path.read_text(errors="replace"), str(path))
+    if cc is not None and cc.sol.upper() in ("1", "101", "SESTATIC", "SESTATICS", "STATICS"):
+        tables = _mystran(path)
+        if tables:
+            value, source = agreement(cases, report, u, tables, size), "deck"
+    if value is None:
+        tables = _study_mystran(result)
+        if tables:
+            value, source = agreement(cases, report, u, tables, size), "study"
+    shown = f"{value:.1e} ({source})" if value is not None else "-"
+    return "yes", str(len(cases)), shown, value
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("folder", type=Path)
+    ap.add_argument("--collect", action="store_true", help="copy the decks out of git mirrors")
+    ap.add_argument("--mirror", action="append", default=[], help="OWNER/NAME=GITDIR")
+    ap.add_argument("--half", choices=("tuning", "held-out"))
+    ap.add_argument("--no-mystran", action="store_true")
+    ap.add_argument("--only", help="decks whose path contains this text")
+    a = ap.parse_args(argv)
+    if a.collect:
+        collect(a.folder, dict(m.split("=", 1) for m in a.mirror))
+        return 0
+    halves = split()
+    print("| deck | source | half | accepted | subcases | agreement |\n|---|---|---|---|---|---|")
+    tally: dict[str, list[int]] = {}
+    bad = []
+    for repo, p, _ in DECKS:
+        half = halves[(repo, p)]
+        if (a.half and half != a.half) or (a.only and a.only not in p):
+            continue
+        accepted, n, shown, value = row(a.folder / repo.replace("/", "+") / p, not a.no_mystran)
+        t = tally.setdefault(half, [0, 0, 0, 0, 0])
+        t[0] += 1
+        t[4] += "no static load case to import" in accepted
+        t[1] += accepted.startswith(("yes", "imported"))
+        t[2] += accepted == "yes"
+        if value is not None and value > RTOL:
+            t[3] += 1
+            bad.append(p)
+        print(f"| `{PurePosixPath(p).name}` | {repo} `{p}` | {half} | {accepted} | {n} | {shown} |", flush=True)
+    for half, (total, imported, solved, disagree, no_load) in sorted(tally.items()):
+        static = total - no_load
+        print(f"\n{half}: {solved} of {total} imported and solved ({imported} imported); "
+              f"{static} have a static load case, {solved} of them solved "
+              f"({100 * solved / max(static, 1):.0f} %); {disagree} disagree above {RTOL:g}")
+    for p in bad:
+        print(f"disagreement: {p}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
