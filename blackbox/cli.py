@@ -240,7 +240,7 @@ def cmd_import(args) -> int:
     from blackbox.commands import import_deck
 
     out = check_out(args.out, "import")
-    res = import_deck.run(args.deck, joints=args.joint)
+    res = import_deck.run(args.deck, joints=args.joint, include_dirs=args.include_dir)
     write_output(out, "import", res.write)
     for note in res.notes:
         print(f"  {note}")
@@ -331,12 +331,15 @@ def cmd_conformance(args) -> int:
                 others = cf.conformance_decks(tmp)
                 deck_name = "cube" if "cube" in others else "generated"
                 deck, loads = others[deck_name]
-        misbehaviour = None if args.no_misbehaviour else cf.builtin_misbehaviour(name, args.misbehave_timeout)
         print(f"conformance of adapter {name!r} on {deck} ({'+'.join([deck_name, *(n for n in others if n != deck_name)])})")
+        if args.no_misbehaviour:
+            misbehaviour = None
+        else:
+            misbehaviour, which = cf.misbehaviour_for(factory, Path(deck), name, args.misbehave_timeout)
+            print(f"misbehaviour checks: {which}")
 
         def progress(check):
-            print(f"{'PASS' if check.passed else 'FAIL'}  {check.name:<34} {check.wall_s:7.2f} s  {check.detail}",
-                  flush=True)
+            print(cf.check_line(check), flush=True)
 
         report = cf.run_conformance(factory, deck, loads, misbehaviour=misbehaviour, rtol=args.rtol,
                                     agreement_decks=others, deck_name=deck_name, progress=progress)
@@ -386,6 +389,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", type=Path, required=True, help="the study folder to write")
     s.add_argument("--joint", action="append", default=[], metavar="NAME:G1,G2,...",
                    help="declare a flexible joint: its branch-end grids, the RBE2's GN first (repeatable)")
+    s.add_argument("--include-dir", action="append", default=[], type=Path, metavar="DIR",
+                   help="a folder outside the deck's own folder tree that its INCLUDEs may read "
+                        "(repeatable; also include_dirs in the user configuration)")
     s.set_defaults(func=cmd_import)
 
     s = sub.add_parser("measurements", help="rig readings (channels, repeats, zero scans) become measurements.csv")
@@ -485,6 +491,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--misbehave-timeout", type=float, default=2.0,
                    help="timeout of the 'hang' misbehaviour check (s)")
     s.add_argument("--no-misbehaviour", action="store_true", help="skip the misbehaviour checks")
+    s.add_argument("--trust-command", action="store_true",
+                   help="consent, for this run, to start the study's external command (adapter \"command\")")
     s.set_defaults(func=cmd_conformance)
     return p
 

@@ -718,10 +718,12 @@ class DesignCurve:
 
 def design_curve(space: CandidateSpace, n_max: int, n_sensors: int | None, name: str,
                  n_random: int = 50, seed: int = 0, final: Plan | None = None,
-                 restarts: int = 0) -> DesignCurve:
+                 restarts: int = 0, final_random: Sequence["Prediction"] | None = None) -> DesignCurve:
     """:class:`DesignCurve` for 1..``n_max`` load cases; ``final``: the plan already designed
     for ``n_max`` (the curve's last point), the others with ``restarts`` random starts (default
-    none: greedy + exchange only, a curve costs ``n_max`` designs)."""
+    none: greedy + exchange only, a curve costs ``n_max`` designs). ``final_random``: the random
+    plans of size ``n_max`` already predicted (the report's yardstick), so that the curve's last
+    point and the report give the same random-plan median; else drawn with seed ``seed + n``."""
     ns, dmax, dmed, rmax, rmed = [], [], [], [], []
     for n in range(1, int(n_max) + 1):
         plan = final if final is not None and n == int(n_max) else \
@@ -730,8 +732,11 @@ def design_curve(space: CandidateSpace, n_max: int, n_sensors: int | None, name:
         ns.append(n)
         dmax.append(pr.max_relative_width)
         dmed.append(pr.median_relative_width)
-        widths = [predict(space, rp.loads, rp.sensors) for rp in random_plans(space, n, n_sensors, n_random,
-                                                                               seed + n)]
+        if final_random is not None and n == int(n_max):
+            widths = list(final_random)
+        else:
+            widths = [predict(space, rp.loads, rp.sensors) for rp in random_plans(space, n, n_sensors, n_random,
+                                                                                   seed + n)]
         mx = np.array([w.max_relative_width for w in widths])
         md = np.array([w.median_relative_width for w in widths])
         with np.errstate(invalid="ignore"):                    # inf - inf of undetermined plans

@@ -37,7 +37,8 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
-from scipy import stats
+
+from blackbox.distributions import chi2_ppf
 
 __all__ = ["SIGMA_SOURCES", "ChannelNoise", "NoiseModel", "Readings", "sigma_interval", "reduce_readings",
            "RECTANGULAR", "pooled_scatter"]
@@ -69,8 +70,8 @@ def sigma_interval(s: float, dof: float, confidence: float) -> tuple[float, floa
     if dof <= 0:
         return (math.nan, math.nan)
     a = 1.0 - confidence
-    return (s * math.sqrt(dof / stats.chi2.ppf(1.0 - a / 2.0, dof)),
-            s * math.sqrt(dof / stats.chi2.ppf(a / 2.0, dof)))
+    return (s * math.sqrt(dof / chi2_ppf(1.0 - a / 2.0, dof)),
+            s * math.sqrt(dof / chi2_ppf(a / 2.0, dof)))
 
 
 @dataclass(frozen=True)

@@ -183,14 +183,14 @@ def cbar_in_cd(deck: Deck, b: CBar) -> CBar:
     return replace(b, x=to(b.ga, b.x), wa=to(b.ga, b.wa), wb=to(b.gb, b.wb))
 
 
-def write_cbar(b: CBar, fmt: str = "small") -> str:
+def write_cbar(b: CBar, fmt: str = "small", name: str = "CBAR") -> str:
     """CBAR: EID, PID, GA, GB, X1 X2 X3 (orientation vector) or G0 (then X2 X3 blank); then, when
     set, OFFT (blank: GGG), PA, PB, WA, WB (offsets in the basic system)."""
     orient: list[Field] = [b.g0, None, None] if b.g0 is not None else list(b.x)
     fields: list[Field] = [b.eid, b.pid, b.ga, b.gb, *orient]
     if b.pa or b.pb or b.wa is not None or b.wb is not None:
         fields += [None, b.pa or None, b.pb or None, *(b.wa or (None,) * 3), *(b.wb or (None,) * 3)]
-    return format_card("CBAR", fields, fmt)
+    return format_card(name, fields, fmt)
 
 
 def write_pbar(p: PBar, fmt: str = "small") -> str:
@@ -200,6 +200,15 @@ def write_pbar(p: PBar, fmt: str = "small") -> str:
     if p.k1 is not None or p.k2 is not None or p.i12:
         fields += [None] * 10 + [p.k1, p.k2, p.i12 or None]      # NSM, field 9, C1..F2 blank
     return format_card("PBAR", fields, fmt)
+
+
+def write_pbeam(p: PBar, fmt: str = "small") -> str:
+    """A PBar with a neutral axis offset (which PBAR cannot hold) as the prismatic PBEAM it came
+    from: PID MID A I1 I2 I12 J, the K line (blank K of the PBar: 0.0, no shear flexibility)
+    and the M/N line with N1, N2 at both ends."""
+    fields: list[Field] = [p.pid, p.mid, p.a, p.i1, p.i2, p.i12, p.j, None] + [None] * 8
+    fields += [p.k1 or 0.0, p.k2 or 0.0] + [None] * 6 + [None] * 4 + [p.n1, p.n2, p.n1, p.n2]
+    return format_card("PBEAM", fields, fmt)
 
 
 def write_mat1(m: Mat1, fmt: str = "small") -> str:
@@ -332,8 +341,11 @@ def write_deck(deck: Deck, fmt: str = "small") -> str:
     out += [write_grid(deck.grids[i], fmt) for i in sorted(deck.grids)]
     coords = getattr(deck, "coords", None) or {}
     out += [write_coord(coords[i], fmt) for i in sorted(coords)]
-    out += [write_cbar(cbar_in_cd(deck, deck.cbars[i]), fmt) for i in sorted(deck.cbars)]
-    out += [write_pbar(deck.pbars[i], fmt) for i in sorted(deck.pbars)]
+    beams = {pid for pid, p in deck.pbars.items() if getattr(p, "n1", 0.0) or getattr(p, "n2", 0.0)}
+    for i in sorted(deck.cbars):
+        b = deck.cbars[i]
+        out.append(write_cbar(cbar_in_cd(deck, b), fmt, "CBEAM" if b.pid in beams else "CBAR"))
+    out += [(write_pbeam if i in beams else write_pbar)(deck.pbars[i], fmt) for i in sorted(deck.pbars)]
     out += [write_rod(deck.rods[i], fmt) for i in sorted(deck.rods)]
     out += [write_prod(deck.prods[i], fmt) for i in sorted(deck.prods)]
     out += [write_mat1(deck.mat1s[i], fmt) for i in sorted(deck.mat1s)]

@@ -39,10 +39,23 @@ The checks (names as in the report)
 ``deck_edits``               the decks ``blackbox diagnose`` edits: the element deck (every member
                              alone, clamped at end a) and a split deck (grids split into members
                              tied by CELAS2, supports on CELAS2 to ground), in large field
-``misbehaviour[S]``          (adapters with a misbehave switch) switch ``S`` raises a typed
-                             :class:`SolverError` (:class:`SolverTimeoutError` for a hang, within
-                             the timeout plus a grace), never returns a result, leaves no process
-                             behind and keeps (or cleans) its run directory as documented
+``feature[F]``               the generated frame with one model feature added (:data:`FEATURES`:
+                             offsets, pin flags, shear pin flags, CD systems, a support in a CD
+                             system, rods, RBE3, springs between branch rotations, several load
+                             cases with springs) agrees with the reference, or the adapter refuses
+                             it with an :class:`UnsupportedFeatureError` naming the card
+                             (``REFUSED``: passed, and said); an adapter that ignores the feature
+                             solves another structure and fails
+``mechanism``                an unsupported, rotated frame raises a :class:`SolverError` (at best
+                             :class:`UnstableStructureError`), never returns displacements
+``misbehaviour[S]``          switch ``S`` raises a typed :class:`SolverError`
+                             (:class:`SolverTimeoutError` for a hang, within the timeout plus a
+                             grace), never returns a result, leaves no process behind and keeps
+                             (or cleans) its run directory as documented. The switches: those the
+                             adapter declares (``conformance_misbehaviour`` on its class, as
+                             ``LegacyAdapter``), else, for any adapter that runs a command
+                             (:class:`~solver_adapters.subprocess.CommandAdapter`), its command run
+                             behind ``_misbehave.py`` (:data:`COMMAND_SWITCHES`)
 
 Tolerances
 ----------
@@ -63,11 +76,14 @@ pytest is imported only when pytest runs the base class.
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import shutil
+import sys
 import tempfile
 import time
+import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
@@ -76,7 +92,7 @@ import numpy as np
 import psutil
 import scipy.sparse as sp
 
-from solver_adapters.errors import CheckFailure
+from solver_adapters.errors import CheckFailure, FeatureRefused
 from solver_adapters.protocol import (DofLabel, LoadMatrix, ScalarSpring, SolverAdapter, SolverError,
                                       SolverTimeoutError, UnknownDofError)
 
@@ -106,12 +122,15 @@ AdapterFactory = Callable[[Path], SolverAdapter]
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class CheckResult:
-    """One check: its ``name``, whether it ``passed``, what was seen (``detail``), its wall time."""
+    """One check: its ``name``, whether it ``passed``, what was seen (``detail``), its wall time;
+    ``refused``: a feature check the adapter passed by refusing the deck with a typed
+    :class:`~solver_adapters.errors.UnsupportedFeatureError` (it does not claim to model it)."""
 
     name: str
     passed: bool
     detail: str
     wall_s: float
+    refused: bool = False
 
 
 @dataclass(frozen=True)
@@ -132,13 +151,19 @@ class ConformanceReport:
     def failed(self) -> list[CheckResult]:
         return [c for c in self.checks if not c.passed]
 
+    @property
+    def refused(self) -> list[CheckResult]:
+        """Feature checks passed by a typed refusal (the adapter cannot express the feature)."""
+        return [c for c in self.checks if c.refused]
+
     def lines(self) -> list[str]:
         """One line per check (what ``blackbox conformance`` prints)."""
-        out = [f"{'PASS' if c.passed else 'FAIL'}  {c.name:<34} {c.wall_s:7.2f} s  {c.detail}"
-               for c in self.checks]
+        out = [check_line(c) for c in self.checks]
         n_ok = sum(c.passed for c in self.checks)
+        refused = [c.name for c in self.refused]
         out.append(f"{n_ok}/{len(self.checks)} checks passed for adapter {self.adapter!r} "
-                   f"(rtol {self.rtol:g}) in {self.wall_s:.1f} s")
+                   f"(rtol {self.rtol:g}) in {self.wall_s:.1f} s"
+                   + (f"; {len(refused)} refused with a typed error: {', '.join(refused)}" if refused else ""))
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -152,7 +177,7 @@ class ConformanceReport:
                 f"- deck: `{self.deck}`", f"- declared precision rtol: {self.rtol:g}",
                 f"- wall time: {self.wall_s:.2f} s", "",
                 "| check | result | wall s | detail |", "|---|---|---|---|"]
-        rows = [f"| {c.name} | {'pass' if c.passed else '**FAIL**'} | {c.wall_s:.2f} | "
+        rows = [f"| {c.name} | {'refused' if c.refused else 'pass' if c.passed else '**FAIL**'} | {c.wall_s:.2f} | "
                 f"{c.detail.replace('|', '/').replace(chr(10), ' ')} |" for c in self.checks]
         return "\n".join(head + rows) + "\n"
 
@@ -163,6 +188,12 @@ class ConformanceReport:
         (out / "conformance.json").write_text(json.dumps(self.to_dict(), indent=2))
         (out / "conformance.md").write_text(self.to_markdown())
         return out / "conformance.json", out / "conformance.md"
+
+
+def check_line(c: CheckResult) -> str:
+    """The line ``blackbox conformance`` prints for one check."""
+    word = "REFUSED" if c.refused else "PASS" if c.passed else "FAIL"
+    return f"{word}  {c.name:<34} {c.wall_s:7.2f} s  {c.detail}"
 
 
 @dataclass(frozen=True)
@@ -188,16 +219,69 @@ class Misbehaviour:
 
 
 def builtin_misbehaviour(adapter_name: str, timeout_s: float = 2.0) -> Misbehaviour | None:
-    """The misbehaviour switches of our builtin adapters (only ``legacy`` has them)."""
-    if adapter_name != "legacy":
+    """The misbehaviour switches an adapter registered under ``adapter_name`` declares itself,
+    else None: ``conformance_misbehaviour(timeout_s)`` on its factory returns a
+    :class:`Misbehaviour` or a mapping of its fields (``legacy`` declares six switches)."""
+    from solver_adapters.registry import adapter_factory
+
+    declare = getattr(adapter_factory(adapter_name), "conformance_misbehaviour", None)
+    if not callable(declare):
         return None
-    from solver_adapters.legacy import FRAMESOLVE, MISBEHAVIOURS, LegacyAdapter
+    spec = declare(timeout_s)
+    if isinstance(spec, Mapping):     # the fields of Misbehaviour (an adapter need not import this module)
+        spec = Misbehaviour(**{**spec, "switches": tuple(spec["switches"])})
+    return spec
+
+
+MISBEHAVE = Path(__file__).resolve().with_name("_misbehave.py")
+"""The program :func:`command_misbehaviour` puts in front of a command (``solver_adapters._misbehave``)."""
+
+COMMAND_SWITCHES = ("crash", "hang", "silent", "truncate")
+"""What :func:`command_misbehaviour` makes any external command do (see ``_misbehave``)."""
+
+
+def command_misbehaviour(adapter_factory: AdapterFactory, timeout_s: float = 2.0) -> Misbehaviour:
+    """Misbehaviour switches for any adapter that runs its code as a
+    :class:`~solver_adapters.subprocess.CommandAdapter` (a dialect, ours or a plug-in's): its
+    command line is run behind ``_misbehave.py MODE --``, which crashes, hangs, writes nothing, or
+    runs the code and cuts its output in half. Every one must end in a typed error, never in
+    numbers, whatever the dialect."""
+    from solver_adapters.subprocess import CommandAdapter, locate_program
 
     def make(deck: Path, switch: str, root: Path) -> SolverAdapter:
-        # the misbehave flag changes the command line of our own program: consent is implied
-        return LegacyAdapter(deck, timeout_s=timeout_s, misbehave=switch, workdir_root=root, trusted=True)
+        a = adapter_factory(deck)
+        if not isinstance(a, CommandAdapter):
+            raise TypeError(f"{type(a).__name__} is not a CommandAdapter: no command line to wrap")
+        program = locate_program(a.command[0])
+        # the adapter was built with the user's consent; the wrapper is this package's own program
+        a.command = [sys.executable, str(MISBEHAVE), switch, "--",
+                     str(program) if program is not None else a.command[0], *a.command[1:]]
+        a.timeout_s, a.workdir_root = float(timeout_s), Path(root)
+        return a
 
-    return Misbehaviour(make, tuple(MISBEHAVIOURS), str(FRAMESOLVE), timeout_s=timeout_s)
+    return Misbehaviour(make, COMMAND_SWITCHES, str(MISBEHAVE), timeout_s=timeout_s,
+                        keeps_failed_run_dir=False)
+
+
+def misbehaviour_for(adapter_factory: AdapterFactory, deck: Path, name: str | None = None,
+                     timeout_s: float = 2.0) -> tuple[Misbehaviour | None, str]:
+    """The misbehaviour checks for an adapter, and a sentence saying which: the switches it
+    declares itself (:func:`builtin_misbehaviour`, by registered ``name``), else the generic ones
+    of :func:`command_misbehaviour` when it runs an external command, else none (an in-process
+    adapter: nothing to crash or hang)."""
+    from solver_adapters.subprocess import CommandAdapter
+
+    own = builtin_misbehaviour(name, timeout_s) if name is not None else None
+    if own is not None:
+        return own, f"its own switches {', '.join(own.switches)}"
+    try:
+        external = isinstance(adapter_factory(deck), CommandAdapter)
+    except Exception:  # noqa: BLE001 - the construct check reports it
+        external = False
+    if external:
+        return (command_misbehaviour(adapter_factory, timeout_s),
+                f"its command run behind {MISBEHAVE.name} ({', '.join(COMMAND_SWITCHES)})")
+    return None, "none: it runs in this process (no command to crash, hang or cut short)"
 
 
 def adapter_rtol(adapter: Any, override: float | None = None) -> float:
@@ -993,6 +1077,198 @@ def check_probe_loads(s: Suite) -> str:
     return _agree_on(s, s.deck, "probe loads")
 
 
+# ---- model features: each deck adds one to the generated frame ------------------------------
+FEATURES: dict[str, str] = {
+    "offsets": "CBAR offsets WA/WB (basic system) on the top ring beams and a column",
+    "pin_flags": "CBAR pin flags releasing moments (5, 6), the axial force (1) and the torque (4)",
+    "shear_pin_flags": "CBAR pin flags releasing the shear forces (2, 3)",
+    "cd_systems": "grids whose components are in a rotated CORD2R and a CORD2C system: loads, "
+                  "results, a clamped support and a joint branch in them",
+    "cd_supports": "a support holding components 1 and 3 of a rotated CD system, not 2",
+    "rods": "CROD with PROD, and CONROD, as storey diagonals (axial and torsion stiffness only)",
+    "rbe3": "an RBE3 reference grid averaging the four top corners, loaded",
+    "branch_springs": "CELAS2 springs between the rotations of a joint's branch grids (tied in "
+                      "translation by an RBE2), also between different components",
+    "spring_cases": "several load cases in one run of a deck with springs and with_springs: each "
+                    "case must not keep the spring forces of the case before",
+}
+"""The feature decks (:func:`feature_deck`) and what each adds. An adapter that ignores the
+feature solves another structure and fails its ``feature[NAME]`` check; one that cannot express
+it passes only by refusing the deck with an ``UnsupportedFeatureError``."""
+
+_FEATURE_GRIDS = {"offsets": (9, 10, 11), "pin_flags": (6, 7, 9, 12), "shear_pin_flags": (6, 7, 11),
+                  "cd_systems": (9, 12, 82), "cd_supports": (4, 5), "rods": (6, 7, 12), "rbe3": (90, 11),
+                  "branch_springs": (81, 82, 83), "spring_cases": (81, 82, 83)}
+
+
+def _feature_model(base, feature: str):
+    """The generated model with ``feature`` added (a copy), and the same model as an adapter that
+    ignores the feature would solve it."""
+    from dataclasses import replace
+    from solver_adapters.deck import Coord, Grid, Prod, Rbe3, Rod, Spc1, Spring
+
+    m = copy.deepcopy(base)
+    ignored = copy.deepcopy(base)
+    if feature == "offsets":
+        for eid in (13, 14, 15, 16):
+            m.cbars[eid] = replace(m.cbars[eid], wa=(0.0, 0.02, 0.06), wb=(0.03, 0.0, 0.06))
+        m.cbars[5] = replace(m.cbars[5], wa=(0.04, -0.03, 0.0))
+    elif feature == "pin_flags":
+        for eid, pa, pb in ((17, "56", "1"), (16, "", "6"), (14, "4", ""), (2, "", "5")):
+            m.cbars[eid] = replace(m.cbars[eid], pa=pa, pb=pb)
+    elif feature == "shear_pin_flags":
+        for eid, pa, pb in ((15, "2", ""), (10, "", "3")):
+            m.cbars[eid] = replace(m.cbars[eid], pa=pa, pb=pb)
+    elif feature in ("cd_systems", "cd_supports"):
+        c, s_ = math.cos(math.radians(35.0)), math.sin(math.radians(35.0))
+        tilt = np.array([[c, s_, 0.0], [-s_, c, 0.0], [0.0, 0.0, 1.0]]) @ \
+            np.array([[1.0, 0.0, 0.0], [0.0, math.cos(0.4), math.sin(0.4)], [0.0, -math.sin(0.4), math.cos(0.4)]])
+        m.coords[5] = Coord(5, "R", (0.2, -0.1, 0.3), tuple(tuple(float(v) for v in r) for r in tilt))
+        m.coords[6] = Coord(6, "C", (0.5, 0.45, 0.0), ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), card="CORD2C")
+        ignored.coords = dict(m.coords)
+        if feature == "cd_systems":
+            for g, cd in ((9, 5), (6, 5), (82, 5), (12, 6), (7, 6), (2, 6)):
+                m.grids[g] = replace(m.grids[g], cd=cd)
+        else:
+            m.grids[4] = replace(m.grids[4], cd=5)
+            m.spc1s = [s if 4 not in s.grids or s.components != "123" else Spc1(s.sid, "13", s.grids, s.src)
+                       for s in m.spc1s]
+            ignored.spc1s = list(m.spc1s)
+    elif feature == "rods":
+        m.prods[30] = Prod(30, 1, 2.0e-4, 3.0e-8)
+        m.rods[30] = Rod(30, 6, 12, pid=30)
+        m.rods[31] = Rod(31, 2, 7, mid=1, a=1.5e-4, j=2.0e-8, card="CONROD")
+    elif feature == "rbe3":
+        corners = (9, 10, 11, 12)
+        centre = np.mean([m.grids[g].xyz for g in corners], axis=0)
+        for d in (m, ignored):
+            d.grids[90] = Grid(90, tuple(float(v) for v in centre))
+        m.rbe3s[40] = Rbe3(40, 90, "123456", ((1.0, "123", corners),))
+    elif feature in ("branch_springs", "spring_cases"):
+        for eid, k, a, b in ((910, 4.0e4, (81, 5), (82, 5)), (911, 6.0e4, (82, 6), (83, 6)),
+                             (912, -1.5e4, (81, 4), (83, 6)), (913, 3.0e4, (82, 4), (83, 5)),
+                             (914, 2.5e4, (83, 4), (81, 4))):
+            m.springs[eid] = Spring(eid, a[0], a[1], b[0], b[1], k=k)
+    else:
+        raise ValueError(f"unknown feature {feature!r}; known: {', '.join(FEATURES)}")
+    return m, ignored
+
+
+def feature_deck(folder: str | Path, feature: str) -> tuple[Path, LoadMatrix, Path]:
+    """The generated frame (:func:`write_generated_deck`) with ``feature`` (:data:`FEATURES`)
+    added, written in free field to ``folder/<feature>.bdf``; its load cases (the generated
+    deck's four and unit loads on all six components of the feature's grids); and the same deck
+    as an adapter that ignores the feature would solve it (``<feature>_ignored.bdf``)."""
+    from solver_adapters.bdf_write import write_deck
+    folder = Path(folder)
+    base_path, base_loads = write_generated_deck(folder / "base")
+    m, ignored = _feature_model(_read(base_path), feature)
+    deck, other = folder / f"{feature}.bdf", folder / f"{feature}_ignored.bdf"
+    deck.write_text(write_deck(m, "free"))
+    other.write_text(write_deck(ignored, "free"))
+    grids = _FEATURE_GRIDS[feature]
+    return deck, base_loads.hstack(LoadMatrix.unit([(g, c) for g in grids for c in range(1, 7)], prefix="at")), other
+
+
+def check_feature(s: Suite, feature: str) -> str:
+    """The adapter on :func:`feature_deck` agrees with the reference solver (normwise per case, to
+    ``rtol``), or refuses the deck with an :class:`~solver_adapters.errors.UnsupportedFeatureError`.
+    ``spring_cases`` also adds springs with ``with_springs`` and checks that the cases solved in
+    one run equal each case solved alone. The detail says how much the feature changes the
+    reference's answer (what an adapter ignoring it would be off by)."""
+    from solver_adapters.errors import UnsupportedFeatureError
+    tmp = _work_dir(s, f"feature-{feature}")
+    try:
+        deck, loads, ignored_deck = feature_deck(tmp, feature)
+        ref = s.reference_factory(deck)
+        report = ref.dofs()
+        try:
+            a = s.factory(deck)
+            extra: list[ScalarSpring] = []
+            if feature == "spring_cases":
+                extra = [ScalarSpring((82, 5), None, 2.0e4), ScalarSpring((81, 6), (83, 4), 3.5e4),
+                         ScalarSpring((9, 1), (11, 2), 1.0e5)]
+                a, ref = a.with_springs(extra), ref.with_springs(extra)
+            U = _solve(a, loads, report, feature).values
+        except UnsupportedFeatureError as exc:
+            if not exc.features:
+                raise _fail(f"raised UnsupportedFeatureError naming no card: {exc}") from None
+            raise FeatureRefused(f"refused by the adapter (UnsupportedFeatureError naming {', '.join(exc.cards[:4])}"
+                           f"{' ...' if len(exc.cards) > 4 else ''}): {exc.features[0][2][:100]}") from None
+        R = ref.solve(loads, report).values
+        worst = _compare(U, R, s.rtol * _scale(R), f"{feature} vs reference", report, loads.cases)
+        detail = f"{loads.n_cases} cases, worst {worst:.2g} of the tolerance"
+        if feature == "spring_cases":
+            # the batch's last cases, each alone: a case that kept forces of the cases before it
+            # in the run differs (the first case has nothing before it)
+            last = list(range(max(1, loads.n_cases - 4), loads.n_cases))
+            singles = np.column_stack([_solve(a, loads.select([j]), report, f"case {loads.cases[j]!r} alone")
+                                       .values[:, 0] for j in last])
+            w2 = _compare(U[:, last], singles, 2 * s.rtol * _scale(R[:, last]), "cases in one run vs each alone",
+                          report, [loads.cases[j] for j in last])
+            detail += (f"; its last {len(last)} cases equal each case solved alone within {w2:.2g} "
+                       f"of the tolerance ({len(extra)} springs added by with_springs)")
+        try:
+            ign = s.reference_factory(ignored_deck)
+            if feature == "spring_cases":
+                ign = ign.with_springs(extra)
+            keep = [i for i, d in enumerate(report) if d in set(ign.dofs())]
+            with warnings.catch_warnings():    # loads lost where the feature's grid hangs free
+                warnings.simplefilter("ignore")
+                G = ign.solve(loads, [report[i] for i in keep]).values
+            change = float(np.max(np.max(np.abs(G - R[keep]), axis=0) / _scale(R)))
+            detail += f"; the feature changes the answer by {change:.2g} of a case's largest displacement"
+        except SolverError as exc:
+            detail += f"; without the feature the structure fails ({type(exc).__name__})"
+        return detail
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def mechanism_deck(folder: str | Path) -> tuple[Path, LoadMatrix]:
+    """The generated frame turned by a seeded rotation and with every support removed: a
+    mechanism (six rigid-body motions) whose singular pivots are rounding errors, not zeros, so a
+    code that only looks for zero pivots solves it into huge displacements."""
+    from dataclasses import replace
+    from solver_adapters.bdf_write import write_deck
+    folder = Path(folder)
+    deck, loads = write_generated_deck(folder / "base")
+    m = copy.deepcopy(_read(deck))
+    R = np.linalg.qr(np.random.default_rng(SEED).standard_normal((3, 3)))[0]
+    m.grids = {g: replace(v, xyz=tuple(float(t) for t in R @ np.array(v.xyz)), ps="") for g, v in m.grids.items()}
+    m.cbars = {e: replace(b, x=tuple(float(t) for t in R @ np.array(b.x)) if b.x is not None else None)
+               for e, b in m.cbars.items()}
+    m.spc1s, m.spcadds = [], {}
+    out = folder / "mechanism.bdf"
+    out.write_text(write_deck(m, "free"))
+    return out, loads
+
+
+def check_mechanism(s: Suite) -> str:
+    """A mechanism (:func:`mechanism_deck`) must raise a :class:`SolverError`, at best an
+    :class:`~solver_adapters.errors.UnstableStructureError`, never return displacements."""
+    from solver_adapters.errors import UnstableStructureError
+    tmp = _work_dir(s, "mechanism")
+    try:
+        deck, loads = mechanism_deck(tmp)
+        try:
+            a = s.factory(deck)
+            out = a.solve(loads, a.dofs())
+        except UnstableStructureError as exc:
+            return f"raised UnstableStructureError: {str(exc).splitlines()[0][:110]}"
+        except SolverError as exc:
+            return (f"raised {type(exc).__name__} (an UnstableStructureError would tell the user what is "
+                    f"wrong): {str(exc).splitlines()[0][:90]}")
+        except Exception as exc:  # noqa: BLE001 - an untyped error is what this check reports
+            raise _fail(f"raised {type(exc).__name__} (not a SolverError): {exc}") from None
+        size = float(np.max(np.abs(out.values))) if out.values.size else 0.0
+        raise _fail(f"solved a mechanism (an unsupported, rotated frame) without an error: largest "
+                    f"displacement {size:.3g}; check the solver's return codes or the equilibrium of "
+                    f"its answer and raise UnstableStructureError")
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 CHECKS: tuple[tuple[str, Callable[[Suite], str]], ...] = (
     ("dof_labels", check_dof_labels),
     ("unknown_labels", check_unknown_labels),
@@ -1033,6 +1309,8 @@ def run_check(name: str, fn: Callable[[], str]) -> CheckResult:
     t0 = time.perf_counter()
     try:
         detail, ok = fn(), True
+    except FeatureRefused as exc:
+        return CheckResult(name, True, str(exc), time.perf_counter() - t0, refused=True)
     except CheckFailure as exc:
         detail, ok = str(exc), False
     except Exception as exc:  # noqa: BLE001 - the report names whatever the adapter raised
@@ -1100,6 +1378,9 @@ def run_conformance(adapter_factory: AdapterFactory, deck_path: str | Path, load
                 if check in REFERENCE_CHECKS:
                     record(run_check(f"{check}[{name}]", lambda fn=fn, other=other: fn(other)))
         record(run_check(f"reference_agreement[{name}]", lambda other=other: check_reference_agreement(other)))
+    for feature in FEATURES:
+        record(run_check(f"feature[{feature}]", lambda f=feature: check_feature(suite, f)))
+    record(run_check("mechanism", lambda: check_mechanism(suite)))
     if misbehaviour is not None:
         for switch in misbehaviour.switches:
             record(run_check(f"misbehaviour[{switch}]", lambda sw=switch: check_misbehaviour(suite, sw)))
@@ -1146,6 +1427,8 @@ class AdapterConformance:
                       else self.property_decks)
             names = [n for n in wanted if n in present] or ["generated"]
             metafunc.parametrize("conformance_deck", names)
+        if "conformance_feature" in metafunc.fixturenames:
+            metafunc.parametrize("conformance_feature", list(FEATURES))
         if "misbehave_switch" in metafunc.fixturenames:
             spec = self.misbehaviour()
             params = list(spec.switches) if spec else [
@@ -1204,6 +1487,18 @@ class AdapterConformance:
 
     def test_deck_edits(self, conformance_deck, tmp_path):
         self._run(check_deck_edits, conformance_deck, tmp_path)
+
+    def test_feature(self, conformance_feature, tmp_path):
+        """Passes when the adapter agrees with the reference on the feature's deck, or refuses
+        it with a typed UnsupportedFeatureError (printed, so ``pytest -rP`` shows which)."""
+        suite = self._suite("generated", tmp_path)
+        try:
+            print(check_feature(suite, conformance_feature))
+        except FeatureRefused as exc:
+            print(f"REFUSED: {exc}")
+
+    def test_mechanism(self, tmp_path):
+        print(check_mechanism(self._suite("generated", tmp_path)))
 
     def test_misbehaviour(self, misbehave_switch, tmp_path):
         deck = self.misbehaviour_deck if self.misbehaviour_deck in fixture_decks() else "generated"

@@ -115,6 +115,8 @@ class PBar:
 
     ``k1``/``k2`` ``None`` (field blank or 0.0) is NASTRAN's default: infinite transverse shear
     stiffness (Euler-Bernoulli); a value gives the shear stiffness per unit length K*A*G.
+    ``n1``/``n2``: a PBEAM's neutral axis offset from the shear-centre axis (element y, z): the
+    axial strain is taken on the neutral axis, u_N = u + n2 theta_y - n1 theta_z.
     """
     pid: int
     mid: int
@@ -127,11 +129,13 @@ class PBar:
     k2: float | None = None
     i12: float = 0.0
     card: str = "PBAR"          # the card it was read from: PBAR, PBARL, PBEAM or PBEAML
+    n1: float = 0.0             # PBEAM neutral axis (element y, z) from the shear-centre axis:
+    n2: float = 0.0             # the axial force acts on it, bending and shear on the axis
 
 
 @dataclass(frozen=True)
 class Mat1:
-    """MAT1: MID, E, G, NU as completed by the reader (NASTRAN's rule, see ``bdf._mat1``)."""
+    """MAT1: MID, E, G, NU as completed by the reader (NASTRAN's rule, see ``bdf.materials._mat1``)."""
     mid: int
     e: float
     g: float
@@ -298,6 +302,9 @@ class Deck:
     # cards the reader does not model, kept (in the deck's order) when the deck was read with
     # ``unmodelled="keep"`` for an external solver; the reference solver refuses a deck with any
     unmodelled: list[Unmodelled] = field(default_factory=list)
+    # what the reader read but did not model as written (a PBEAM's CW ignored, ends equal to
+    # printing precision): one line per kind, naming the cards; not part of the model itself
+    notes: list[str] = field(default_factory=list, compare=False)
 
     def unmodelled_grids(self) -> dict[int, list[str]]:
         """Grid -> the unmodelled cards joined to it (``"CQUAD4 10"``), for every grid of the
@@ -358,6 +365,8 @@ class Deck:
         if self.no_effect:
             text += "; accepted with no effect on a linear static solve: " + ", ".join(
                 f"{name} x{n} (first at {src})" for name, (n, src) in sorted(self.no_effect.items()))
+        if self.notes:
+            text += "; notes: " + "; ".join(self.notes)
         return text
 
     def displacement_frames(self, grid_ids) -> np.ndarray:

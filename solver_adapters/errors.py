@@ -15,6 +15,7 @@ Hierarchy::
     SolverError
     +-- DeckFormatError            unreadable deck: file, line, card, field
     +-- ModelError                 readable but inconsistent model
+    |   +-- UnsupportedFeatureError  a card the adapter's code cannot express (refused before a run)
     +-- UnstableStructureError     singular stiffness (mechanism, missing support)
     +-- UnknownDofError            a load or output label the adapter does not have
     +-- SolverRunError             an external run failed (exit code, log tail, kept run dir)
@@ -28,7 +29,10 @@ Hierarchy::
     CorruptEntry (ValueError)      a run-cache file that cannot be used (recomputed)
     +-- UnauthenticEntry           ... whose authentication does not verify
     CheckFailure (AssertionError)  a conformance check failed
+    FeatureRefused                 a conformance feature check passed by a typed refusal
     NumberFieldError (ValueError)  deck reader internal, always re-raised as DeckFormatError
+    IrregularTable, ReaderFallback  deck reader internal: the bulk path hands over to the reference path
+    ElementLoadError (ValueError)  element-load internal, always re-raised as a located DeckFormatError
     TableFormatError (ValueError)  a CSV table (loads) that cannot be used
     InsecureFileError (PermissionError)  a user configuration file others could change
     ConsentError                   an external command would run without the user's consent
@@ -67,6 +71,23 @@ class DeckFormatError(SolverError):
 
 class ModelError(SolverError):
     """A deck that reads fine but describes an inconsistent model (missing IDs, conflicts)."""
+
+
+class UnsupportedFeatureError(ModelError):
+    """The adapter's code cannot express a feature of the deck (a card, or a field of one: a pin
+    flag, an offset, a coordinate system), so it refuses the deck before running rather than
+    solve another structure. ``code`` names the code; ``features`` lists ``(card, where, why)``
+    (``card`` e.g. ``"CBAR 12"``, ``where`` ``"file:line"``), every one in the message."""
+
+    def __init__(self, code: str, features: Sequence[tuple[str, str, str]], hint: str = ""):
+        self.code = code
+        self.features = tuple((str(c), str(w), str(y)) for c, w, y in features)
+        self.cards = tuple(c for c, _, _ in self.features)
+        shown = "; ".join(f"{c}{f' ({w})' if w else ''}: {y}" for c, w, y in self.features[:20])
+        more = f"; ... and {len(self.features) - 20} more" if len(self.features) > 20 else ""
+        super().__init__(f"{code} cannot express {len(self.features)} feature(s) of this deck, so it "
+                         f"refuses the deck instead of solving another structure: {shown}{more}"
+                         + (f". {hint}" if hint else ""))
 
 
 class UnstableStructureError(SolverError):
@@ -157,9 +178,30 @@ class CheckFailure(AssertionError):
     """A conformance check saw the adapter break the protocol (message: what and where)."""
 
 
+class FeatureRefused(Exception):
+    """A conformance feature check that the adapter passed by refusing the deck with an
+    :class:`UnsupportedFeatureError` (message: what it refused); the suite reports it as
+    ``REFUSED``, a pass."""
+
+
 class NumberFieldError(ValueError):
     """A field's text is not the number its field needs (message says why). Internal to the deck
     reader, which re-raises it as :class:`DeckFormatError` with the file, line and card."""
+
+
+class IrregularTable(Exception):
+    """The deck reader's card table cannot be built (the reference tokenizer reads the deck, and
+    raises the located error). Internal to solver_adapters.bdf."""
+
+
+class ReaderFallback(Exception):
+    """The deck reader's bulk path met something only its reference path reports right.
+    Internal to solver_adapters.bdf."""
+
+
+class ElementLoadError(ValueError):
+    """A load on an element that cannot be applied: ``args = (field, message)``, the NASTRAN
+    field of its card; re-raised by the card's reader as a located DeckFormatError."""
 
 
 def located(message: str, file: str | None = None, line: int | None = None, column: str | None = None) -> str:
@@ -186,10 +228,11 @@ class InsecureFileError(PermissionError):
     how to fix it. A ``PermissionError`` (so an ``OSError``): the file cannot be used."""
 
 
-__all__ = ["located", "COMPONENT_NAMES", "SolverError", "DeckFormatError", "ModelError", "UnstableStructureError",
+__all__ = ["located", "COMPONENT_NAMES", "SolverError", "DeckFormatError", "ModelError",
+           "UnsupportedFeatureError", "UnstableStructureError",
            "UnknownDofError", "SolverRunError", "SolverTimeoutError", "FactorizationError",
            "RegistryError", "UnknownPluginError", "PluginLoadError", "PluginConflictError",
-           "OptionError", "AdapterNotFound", "CorruptEntry", "UnauthenticEntry", "CheckFailure", "NumberFieldError",
+           "OptionError", "AdapterNotFound", "CorruptEntry", "UnauthenticEntry", "CheckFailure", "FeatureRefused", "NumberFieldError",
            "TableFormatError", "InsecureFileError"]
 
 

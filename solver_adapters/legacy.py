@@ -26,7 +26,7 @@ from typing import Sequence
 import numpy as np
 
 from solver_adapters.protocol import (DofLabel, LoadMatrix, ScalarSpring, SolverRunError,
-                                      UnstableStructureError)
+                                      UnstableStructureError, UnsupportedFeatureError)
 from solver_adapters.nastran import ascii_text
 from solver_adapters.subprocess import BaseDeck, CommandAdapter, RunRecord
 
@@ -87,6 +87,47 @@ def parse_listing(text: str) -> dict[int, dict[int, list[float]]]:
     return blocks
 
 
+def unsupported_features(m) -> list[tuple[str, str, str]]:
+    """What FRAMESOLVE's cards cannot say about model ``m``: ``(card, where, why)``, every one.
+
+    Its beam is a plain Euler-Bernoulli element between two nodes in global axes, its ties are
+    RBE2's rigid links, its springs are scalar springs in global components: offsets, pin flags,
+    shear flexibility, a product of inertia, rods, RBE3, CBUSH and grids whose components are in
+    a rotated CD system are not expressible, and writing the deck without them would solve
+    another structure with exit code 0.
+    """
+    out: list[tuple[str, str, str]] = []
+    rotated = []
+    if m.grids:
+        ids = sorted(m.grids)
+        frames = m.displacement_frames(ids)
+        rotated = [g for g, f in zip(ids, frames) if not np.allclose(f, np.eye(3), rtol=0.0, atol=1e-12)]
+    for g in rotated:
+        out.append((f"GRID {g}", m.grids[g].src, f"components in the rotated CD system {m.grids[g].cd} "
+                                                 f"(FRAMESOLVE has global components only)"))
+    for b in sorted(m.cbars.values(), key=lambda b: b.eid):
+        if b.wa is not None or b.wb is not None:
+            out.append((f"{b.card} {b.eid}", b.src, "offsets WA/WB (FRAMESOLVE's beams run node to node)"))
+        if b.pa or b.pb:
+            out.append((f"{b.card} {b.eid}", b.src, f"pin flags PA={b.pa or '-'} PB={b.pb or '-'} "
+                                                    f"(FRAMESOLVE has no releases)"))
+    for p in sorted(m.pbars.values(), key=lambda p: p.pid):
+        if p.k1 is not None or p.k2 is not None:
+            out.append((f"{p.card} {p.pid}", p.src, "shear flexibility K1/K2 (FRAMESOLVE's beam is "
+                                                    "Euler-Bernoulli)"))
+        if p.i12:
+            out.append((f"{p.card} {p.pid}", p.src, f"product of inertia I12 = {p.i12:g}"))
+        if getattr(p, "n1", 0.0) or getattr(p, "n2", 0.0):
+            out.append((f"{p.card} {p.pid}", p.src, "a neutral axis off the shear centre (PBEAM N1/N2)"))
+    for r in sorted(m.rods.values(), key=lambda r: r.eid):
+        out.append((f"{r.card} {r.eid}", r.src, "rods (FRAMESOLVE has beams only)"))
+    for r in sorted(m.rbe3s.values(), key=lambda r: r.eid):
+        out.append((f"{r.card} {r.eid}", r.src, "interpolation constraints (FRAMESOLVE ties rigidly only)"))
+    for b in sorted(m.bushes.values(), key=lambda b: b.eid):
+        out.append((f"CBUSH {b.eid}", b.src, "bushes (FRAMESOLVE has scalar springs only)"))
+    return out
+
+
 class LegacyDialect:
     """FRAMESOLVE 2.3 card deck in, line-printer listing (its stdout) out."""
 
@@ -94,6 +135,14 @@ class LegacyDialect:
 
     def command(self, deck_path: Path) -> list[str]:
         return [sys.executable, str(FRAMESOLVE), "{deck}"]
+
+    def check_model(self, model) -> None:
+        """Refuse, before any run, a model with features FRAMESOLVE cannot express
+        (:func:`unsupported_features`; :class:`UnsupportedFeatureError` naming every card)."""
+        refused = unsupported_features(model)
+        if refused:
+            raise UnsupportedFeatureError("FRAMESOLVE", refused, hint="The reference solver models these "
+                                                                      "cards (adapter = \"reference\")")
 
     def write_deck(self, workdir: Path, base: BaseDeck, loads: LoadMatrix, report: Sequence[DofLabel],
                    springs: Sequence[ScalarSpring]) -> Path:
@@ -194,3 +243,14 @@ class LegacyAdapter(CommandAdapter):
         kw.setdefault("dialect", LegacyDialect())
         super().__init__(deck_path, timeout_s=timeout_s, **kw)
         self.misbehave = misbehave
+
+    @classmethod
+    def conformance_misbehaviour(cls, timeout_s: float = 2.0) -> dict:
+        """FRAMESOLVE's own failure switches for the conformance suite's ``misbehaviour[S]``
+        checks: the fields of :class:`solver_adapters.conformance.Misbehaviour`."""
+
+        def make(deck: Path, switch: str, root: Path):
+            # the misbehave flag changes the command line of our own program: consent is implied
+            return cls(deck, timeout_s=timeout_s, misbehave=switch, workdir_root=root, trusted=True)
+
+        return {"make": make, "switches": MISBEHAVIOURS, "program": str(FRAMESOLVE), "timeout_s": timeout_s}

@@ -1,4 +1,4 @@
-"""NASTRAN static load cards: FORCE, MOMENT, FORCE1, MOMENT1, FORCE2, MOMENT2 and LOAD.
+"""NASTRAN static load cards: FORCE, MOMENT, FORCE1, MOMENT1, FORCE2, MOMENT2, PLOAD1, GRAV and LOAD.
 
 The study's ``model.bdf`` carries no loads (they come from ``loads.csv``), so the bulk-data reader
 (:mod:`solver_adapters.bdf`) rejects these cards. ``blackbox import`` reads them here from the
@@ -9,15 +9,19 @@ subcase selects with ``LOAD = n`` into nodal forces and moments in the basic sys
 * ``FORCE1 SID G F G1 G2``: force F along the unit vector from G1 to G2; ``MOMENT1`` alike;
 * ``FORCE2 SID G F G1 G2 G3 G4``: force F along the unit vector of (G2 - G1) x (G4 - G3);
   ``MOMENT2`` alike;
-* ``LOAD SID S S1 L1 S2 L2 ...``: the set S * sum(Si * set Li), the Li being FORCE/MOMENT sets
-  (a LOAD set may not name another LOAD set, as in NASTRAN).
+* ``PLOAD1 SID EID TYPE SCALE X1 P1 X2 P2``: a load on a bar or beam, and ``GRAV SID CID A N1
+  N2 N3``: the acceleration A N on the lumped mass, both as NASTRAN's equivalent nodal loads
+  (:mod:`solver_adapters.elementloads`, :mod:`solver_adapters.reference.loads`);
+* ``LOAD SID S S1 L1 S2 L2 ...``: the set S * sum(Si * set Li), the Li being sets of the cards
+  above (a LOAD set may not name another LOAD set, as in NASTRAN; a pair left blank, as the
+  trailing fields of a line, is skipped).
 
 Several cards of one set add up. A CID other than 0 gives the vector in that coordinate system (CORD1R/C/S,
 CORD2R/C/S of the deck; for a cylindrical or spherical system, along its directions at the
 grid). The resolved loads are returned in each grid's displacement system (its CD; the basic
 system for CD 0), the components loads.csv holds.
-Other load cards (GRAV, PLOAD*, TEMP, SPCD, ...) are recorded by set: selecting such a set is an
-error naming the card.
+Other load cards (PLOAD, PLOAD2, PLOAD4, TEMP, SPCD, RFORCE, ...) are recorded by set: selecting
+such a set is an error naming the card.
 """
 
 from __future__ import annotations
@@ -27,16 +31,18 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from solver_adapters.bdf import parse_int, parse_real
+from solver_adapters.elementloads import MassReader, read_grav, read_pload1
 from solver_adapters.protocol import DeckFormatError
 
 __all__ = ["LOAD_CARDS", "OTHER_LOAD_CARDS", "PointLoad", "LoadCombination", "LoadCards", "read_load_cards",
            "InputFile", "read_input_file"]
 
-LOAD_CARDS = frozenset({"FORCE", "MOMENT", "FORCE1", "MOMENT1", "FORCE2", "MOMENT2", "LOAD"})
-"""The load cards this module reads."""
+LOAD_CARDS = frozenset({"FORCE", "MOMENT", "FORCE1", "MOMENT1", "FORCE2", "MOMENT2", "LOAD",
+                        "PLOAD1", "GRAV"})
+"""The load cards this module reads (PLOAD1 and GRAV through :mod:`solver_adapters.elementloads`)."""
 
 OTHER_LOAD_CARDS = frozenset({
-    "GRAV", "ACCEL", "ACCEL1", "RFORCE", "RFORCE1", "PLOAD", "PLOAD1", "PLOAD2", "PLOAD4", "PLOADX1",
+    "ACCEL", "ACCEL1", "RFORCE", "RFORCE1", "PLOAD", "PLOAD2", "PLOAD4", "PLOADX1",
     "PLOADB3", "SLOAD", "SPCD", "DEFORM", "TEMP", "TEMPD", "TEMPP1", "TEMPRB", "QBDY1", "QVOL",
     "DAREA", "LSEQ", "CLOAD", "PRESAX", "FORCEAX", "MOMAX",
 })
@@ -74,14 +80,21 @@ class LoadCombination:
 
 @dataclass
 class LoadCards:
-    """The load cards of a deck, by set ID."""
+    """The load cards of a deck, by set ID: point loads, PLOAD1 (``bar``), GRAV (``gravity``;
+    its masses read by ``masses`` from the deck's cards), LOAD combinations, other kinds."""
     point: dict[int, list[PointLoad]] = field(default_factory=dict)
     combinations: dict[int, LoadCombination] = field(default_factory=dict)
     other: dict[int, list[object]] = field(default_factory=dict)   # SID -> cards of other kinds
+    bar: dict[int, list] = field(default_factory=dict)              # SID -> PLOAD1 (BarLoad)
+    gravity: dict[int, list] = field(default_factory=dict)          # SID -> GRAV (Gravity)
+    masses: object = None                                            # elementloads.MassReader
 
     @property
     def set_ids(self) -> set[int]:
-        return set(self.point) | set(self.combinations) | set(self.other)
+        return set(self.point) | set(self.combinations) | set(self.other) | set(self.bar) | set(self.gravity)
+
+    def _has(self, sid: int) -> bool:
+        return sid in self.point or sid in self.other or sid in self.bar or sid in self.gravity
 
     def resolve(self, sid: int, deck, *, where: str = "") -> dict[tuple[int, int], float]:
         """The nodal loads of set ``sid``: ``{(grid, component): value}`` in the basic system
@@ -95,15 +108,15 @@ class LoadCards:
                 if li in self.combinations:
                     raise combo.raw.error(5 + 2 * k, f"LOAD set {li} is itself a LOAD combination; "
                                                      f"NASTRAN does not allow nested LOAD sets")
-                if li not in self.point and li not in self.other:
-                    raise combo.raw.error(5 + 2 * k, f"load set {li} not found (no FORCE/MOMENT "
-                                                     f"card with SID {li}){sel}")
+                if not self._has(li):
+                    raise combo.raw.error(5 + 2 * k, f"load set {li} not found (no FORCE, MOMENT, "
+                                                     f"PLOAD1 or GRAV card with SID {li}){sel}")
                 for dof, v in self._point_set(li, deck, sel).items():
                     total[dof] = total.get(dof, 0.0) + combo.scale * si * v
             return total
-        if sid not in self.point and sid not in self.other:
-            raise DeckFormatError(f"load set {sid}{sel} not found: no LOAD, FORCE or MOMENT card "
-                                  f"has SID {sid}")
+        if not self._has(sid):
+            raise DeckFormatError(f"load set {sid}{sel} not found: no LOAD, FORCE, MOMENT, PLOAD1 "
+                                  f"or GRAV card has SID {sid}")
         return self._point_set(sid, deck, sel)
 
     def _point_set(self, sid: int, deck, sel: str) -> dict[tuple[int, int], float]:
@@ -111,9 +124,9 @@ class LoadCards:
             c = self.other[sid][0]
             kinds = sorted({o.name for o in self.other[sid]})
             raise c.error(1, f"load set {sid}{sel} contains {', '.join(kinds)}: only FORCE, MOMENT, "
-                             f"FORCE1/2, MOMENT1/2 and LOAD are imported")
+                             f"FORCE1/2, MOMENT1/2, PLOAD1, GRAV and LOAD are imported")
         out: dict[tuple[int, int], float] = {}
-        for p in self.point[sid]:
+        for p in self.point.get(sid, ()):
             if p.grid not in deck.grids:
                 raise p.raw.error(3, f"grid {p.grid} does not exist (no GRID){sel}")
             vec = _basic_vector(p, deck)
@@ -125,7 +138,25 @@ class LoadCards:
                 if vec[k] != 0.0:
                     dof = (p.grid, base + k)
                     out[dof] = out.get(dof, 0.0) + float(vec[k])
+        for load in self.bar.get(sid, ()):
+            _add_basic(out, load.loads(deck, sel), deck)
+        for g in self.gravity.get(sid, ()):
+            _add_basic(out, g.loads(deck, self.masses, sel), deck)
         return out
+
+
+def _add_basic(out: dict, loads: dict[tuple[int, int], float], deck) -> None:
+    """Nodal loads given in basic added to ``out`` in each grid's displacement system."""
+    by_grid: dict[int, np.ndarray] = {}
+    for (g, c), v in loads.items():
+        by_grid.setdefault(g, np.zeros(6))[c - 1] += v
+    for g, v in by_grid.items():
+        if getattr(deck.grids[g], "cd", 0):
+            frame = deck.displacement_frames([g])[0]
+            v = np.concatenate([frame @ v[:3], frame @ v[3:]])
+        for k in range(6):
+            if v[k] != 0.0:
+                out[(g, k + 1)] = out.get((g, k + 1), 0.0) + float(v[k])
 
 
 def _unit(v: np.ndarray, card, i: int, what: str) -> np.ndarray:
@@ -227,6 +258,9 @@ def _combination(c) -> LoadCombination:
     i = 4
     last = max((k for k in range(4, len(c.fields) + 1) if c.text(k)), default=3)
     while i <= last:
+        if not c.text(i) and not c.text(i + 1):      # a pair left blank (a line's trailing fields)
+            i += 2
+            continue
         si, li = _real(c, i), _int(c, i + 1)
         if li in seen:
             raise c.error(i + 1, f"load set {li} appears twice in this LOAD card (NASTRAN forbids it)")
@@ -240,10 +274,42 @@ def _combination(c) -> LoadCombination:
     return LoadCombination(sid, s, tuple(terms), c.src, c)
 
 
+def _bulk_points(cards) -> dict[int, PointLoad]:
+    """FORCE and MOMENT cards of one card table read all at once (``id(card)`` -> its load), as
+    :func:`_point` reads each; the cards it leaves (any other layout, a bad field) are read by
+    :func:`_point`, which names the error."""
+    from solver_adapters.bdf.numbers import int_column, real_column
+    from solver_adapters.bdf.table import TableCard
+    picked = [c for c in cards if c.name in ("FORCE", "MOMENT")]
+    if not picked or not all(isinstance(c, TableCard) and c.table is picked[0].table for c in picked):
+        return {}
+    table = picked[0].table
+    idx = np.array([c.index for c in picked], np.int64)
+    M = table.matrix(idx, 7)                    # columns 1-7: fields 2-8
+    ok = ~(M[:, 8:] != b"").any(axis=1)
+    sid, k = int_column(M[:, 1]); ok &= k
+    g, k = int_column(M[:, 2]); ok &= k
+    cid, k = int_column(M[:, 3], 0, 0); ok &= k
+    f, k = real_column(M[:, 4]); ok &= k
+    n = np.empty((len(idx), 3))
+    for j in range(3):
+        n[:, j], k = real_column(M[:, 5 + j], 0.0); ok &= k
+    v = f[:, None] * n
+    out = {}
+    rows = np.flatnonzero(ok).tolist()
+    for i, s, gg, c, ff, vec in zip(rows, sid[rows].tolist(), g[rows].tolist(), cid[rows].tolist(),
+                                    f[rows].tolist(), map(tuple, v[rows].tolist())):
+        card = picked[i]
+        out[id(card)] = PointLoad(card.name, s, gg, c, ff, vec, (), card.src, card)
+    return out
+
+
 def read_load_cards(cards) -> LoadCards:
     """The load cards among ``cards`` (from :func:`solver_adapters.bdf.bulk_cards`), by set;
     the cards of other kinds are skipped. Errors name the file, line, card and field."""
     out = LoadCards()
+    cards = list(cards)
+    made = _bulk_points(cards)
     for c in cards:
         if c.name == "LOAD":
             combo = _combination(c)
@@ -251,16 +317,22 @@ def read_load_cards(cards) -> LoadCards:
                 raise c.error(2, f"duplicate LOAD set ID {combo.sid} (already defined at "
                                  f"{out.combinations[combo.sid].src})")
             out.combinations[combo.sid] = combo
+        elif c.name == "PLOAD1":
+            load = read_pload1(c)
+            out.bar.setdefault(load.sid, []).append(load)
+        elif c.name == "GRAV":
+            g = read_grav(c)
+            out.gravity.setdefault(g.sid, []).append(g)
         elif c.name in LOAD_CARDS:
-            p = _point(c)
+            p = made.get(id(c)) or _point(c)
             out.point.setdefault(p.sid, []).append(p)
         elif c.name in OTHER_LOAD_CARDS:
             sid = _int(c, 2)
             out.other.setdefault(sid, []).append(c)
     for sid, combo in out.combinations.items():
-        if sid in out.point or sid in out.other:
-            first = (out.point.get(sid) or [None])[0]
-            where = first.src if first is not None else out.other[sid][0].src
+        if out._has(sid):
+            first = (out.point.get(sid) or out.bar.get(sid) or out.gravity.get(sid) or [None])[0]
+            where = first.raw.src if first is not None else out.other[sid][0].src
             raise combo.raw.error(2, f"set ID {sid} is both a LOAD combination and a load set "
                                      f"({where}); NASTRAN requires LOAD set IDs to be unique")
     return out
@@ -269,22 +341,26 @@ def read_load_cards(cards) -> LoadCards:
 @dataclass(frozen=True)
 class InputFile:
     """A whole NASTRAN input file: its case control (``None`` for bulk data only), every bulk
-    card as read (:func:`solver_adapters.bdf.bulk_cards`), the files read, and the load cards by set."""
+    card as read (:func:`solver_adapters.bdf.read_bulk`), the files read, the load cards by set,
+    and the reading itself (``bulk``: the included files' texts as read)."""
     path: str
     case_control: object
     cards: list
     files: list
     loads: LoadCards
+    bulk: object = None
 
 
-def read_input_file(path, text: str | None = None) -> InputFile:
+def read_input_file(path, text: str | None = None, include_dirs=None) -> InputFile:
     """Read the input file ``path`` (``text``: its content, if already read): the case control
     (:mod:`solver_adapters.casecontrol`), the bulk cards and the load cards. The model itself is
     made from a chosen subset of the cards with :func:`solver_adapters.bdf.deck_from_cards`
-    (``blackbox import`` leaves out the load cards and the constraint sets not selected)."""
+    (``blackbox import`` leaves out the load cards and the constraint sets not selected).
+    INCLUDEs read only files inside the input file's folder tree or ``include_dirs`` (None: the
+    user's configured folders)."""
     from pathlib import Path
 
-    from solver_adapters.bdf import bulk_cards
+    from solver_adapters.bdf import read_bulk
     from solver_adapters.casecontrol import read_case_control
 
     p = Path(path)
@@ -294,6 +370,7 @@ def read_input_file(path, text: str | None = None) -> InputFile:
         except OSError as exc:
             raise DeckFormatError(f"cannot read the deck: {exc.strerror or exc}", file=str(p)) from None
     cc = read_case_control(text, str(p))
-    cards, files = bulk_cards(p, text)
-    loads = read_load_cards(c for c in cards if c.name in LOAD_CARDS or c.name in OTHER_LOAD_CARDS)
-    return InputFile(str(p), cc, cards, files, loads)
+    bulk = read_bulk(p, text, include_dirs)
+    loads = read_load_cards(c for c in bulk.cards if c.name in LOAD_CARDS or c.name in OTHER_LOAD_CARDS)
+    loads.masses = MassReader(bulk.cards)
+    return InputFile(str(p), cc, bulk.cards, bulk.files, loads, bulk)

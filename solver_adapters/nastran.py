@@ -176,15 +176,7 @@ def _bulk_cards(path: Path):
     ``fields`` (``fields[0]`` the name, then NASTRAN fields 2, 3, ... with the continuation
     markers left out). One reading of the text for both the model and the pass-through."""
     from solver_adapters import bdf
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8", errors="replace")
-    except OSError as exc:
-        raise DeckFormatError(f"cannot read the deck: {exc.strerror or exc}", file=str(p)) from None
-    reader = bdf._Reader()
-    reader.deck.files.append(str(p))
-    reader.stack.append(p.resolve())
-    return reader, reader.cards(reader.lines(text, str(p), p.parent))
+    return bdf.bulk_cards(Path(path))[0]
 
 
 def read_model(path: str | os.PathLike, unmodelled: str = "error"):
@@ -205,7 +197,7 @@ def needs_passthrough(model) -> bool:
     unmodelled cards that :func:`read_model` let pass, or any card the reader models that this
     writer does not know (the scan then names it: :func:`passthrough_cards`)."""
     from solver_adapters import bdf
-    if set(bdf._PARSERS) - WRITTEN - RAW_MODELLED:
+    if set(bdf.SUPPORTED) - WRITTEN - RAW_MODELLED:
         return True
     if getattr(model, "no_effect", None) or any(getattr(model, f, None) for f in ("rbe3s", "bushes", "pbushes")):
         return True
@@ -235,7 +227,7 @@ card of its own in the model, and MYSTRAN reads it with the same meaning."""
 
 _KNOWN_FIELDS = frozenset({"grids", "cbars", "pbars", "mat1s", "spc1s", "rbe2s", "rbe3s", "bushes",
                            "pbushes", "pelas", "springs", "spcadds", "prods", "rods", "coords", "files",
-                           "no_effect", "unmodelled"})
+                           "no_effect", "unmodelled", "notes"})
 """The parsed deck's collections of cards the run deck accounts for; a model with another non-empty
 collection cannot be written faithfully (a card the reader learnt after this writer): an error,
 not a dropped card. Scalar settings (PARAM values the reader keeps) reach MYSTRAN through the
@@ -249,22 +241,33 @@ def check_writable(model) -> None:
     if unknown:
         raise DeckFormatError(f"the MYSTRAN run deck cannot write the model's {', '.join(unknown)} "
                               f"(cards the reader models but solver_adapters.nastran does not write yet)")
+    for p in getattr(model, "pbars", {}).values():
+        if getattr(p, "n1", 0.0) or getattr(p, "n2", 0.0):
+            file, _, line = p.src.rpartition(":")
+            raise DeckFormatError(f"the mystran adapter cannot run PBEAM {p.pid}: its neutral axis is "
+                                  f"offset (N1, N2), and MYSTRAN 18 has no CBEAM (its CBAR, as which the "
+                                  f"run deck writes a CBEAM, has no neutral axis offset); the reference "
+                                  f"adapter models it", file=file or None,
+                                  line=int(line) if line.isdigit() else None, card="PBEAM")
 
 
 def passthrough_cards(path: str | os.PathLike) -> list[RawCard]:
     """The deck's cards that are not written back from the model, in the deck's order: cards
-    the reader does not model (with ``unmodelled="pass"``), those it accepts with no effect
-    (PARAM, CONM2, ...) and those of :data:`RAW_MODELLED`. A card the reader models that is in
-    neither :data:`WRITTEN` nor :data:`RAW_MODELLED` is an error (never dropped, never doubled)."""
+    the reader does not model (with ``unmodelled="pass"``), PARAM (MYSTRAN reads AUTOSPC, ...)
+    and those of :data:`RAW_MODELLED`. The other cards the reader accepts with no effect on a
+    linear static solution (CONM2, EIGRL, MDLPRM, DEBUG, ...) are left out: they cannot change
+    the displacements, and MYSTRAN warns of those it does not read. A card the reader models
+    that is in neither :data:`WRITTEN` nor :data:`RAW_MODELLED` is an error (never dropped,
+    never doubled)."""
     from solver_adapters import bdf
-    _, cards = _bulk_cards(Path(path))
+    cards = _bulk_cards(Path(path))
     out = []
     for c in cards:
-        if c.name in WRITTEN:
+        if c.name in WRITTEN or (c.name in bdf.NO_EFFECT and c.name != "PARAM"):
             continue
         if c.name in _not_passable():
             raise c.error(1, f"{c.name} cannot be handed to MYSTRAN: {_not_passable()[c.name]}")
-        if c.name in bdf._PARSERS and c.name not in RAW_MODELLED:
+        if c.name in bdf.SUPPORTED and c.name not in RAW_MODELLED:
             raise c.error(1, f"the MYSTRAN run deck does not write {c.name} yet (the reader models it; "
                              f"passing it as written could duplicate what the model holds)")
         out.append(RawCard(c.name, tuple(f.text for f in c.fields[1:]), c.src))
@@ -276,13 +279,13 @@ def raw_card_text(card: RawCard, fmt: str = RUN_FORMAT) -> str:
     real re-printed exactly (:func:`~solver_adapters.bdf_write.print_float_16`: the shortest
     digits that round-trip, so nothing a 16-character field held is lost). A word longer than 16
     characters cannot be written (MYSTRAN rejects such fields too): :class:`DeckFormatError`."""
-    from solver_adapters import bdf
+    from solver_adapters.bdf.numbers import _INT, _real_or_none
     from solver_adapters.bdf_write import format_card, print_float_16
     out: list[str | None] = []
     for i, text in enumerate(card.fields, start=2):
         t = text.strip().upper()
-        if t and not bdf._INT.fullmatch(t):
-            value = bdf._real_or_none(t)
+        if t and not _INT.fullmatch(t):
+            value = _real_or_none(t)
             if value is not None and math.isfinite(value):
                 t = print_float_16(value)
         if len(t) > FIELD_WIDTH:
@@ -588,20 +591,38 @@ def _warn_lost_loads(res: "F06Result", loads: LoadMatrix) -> None:
 # --------------------------------------------------------------------------------------------
 # the dialect
 # --------------------------------------------------------------------------------------------
+MYSTRAN_CARDS = frozenset({
+    "CHEXA", "CPENTA", "CTETRA", "CQUAD4", "CTRIA3", "CSHEAR", "CELAS3", "CELAS4", "CUSER1",
+    "CUSERIN", "PSHELL", "PCOMP", "PCOMP1", "PSHEAR", "PSOLID", "PUSER1", "PUSERIN", "MAT2",
+    "MAT8", "MAT9", "RBAR", "RBE1", "RSPLINE", "SPOINT", "ASET", "ASET1", "OMIT", "OMIT1",
+    "SEQGP", "USET", "USET1", "BEAMOR",
+})
+"""The cards the reader keeps for an external solver (``unmodelled="pass"``) that MYSTRAN 18
+runs: the entries its bulk-data reader (LOADB) processes, less those a run deck must not carry
+(loads, MPC, SUPORT). MYSTRAN matches entry names on a prefix, so it would read a CBARAO as a
+CBAR, a CBEAM3 as a CBEAM, a CQUAD8 not at all (a warning only): every kept card outside this
+set is refused by the mystran adapter before it runs (:attr:`NastranDialect.runs_cards`)."""
+
+
 class NastranDialect:
-    """NASTRAN SOL 101 input with F06 output as MYSTRAN writes it (see the module docstring)."""
+    """NASTRAN SOL 101 input with F06 output as MYSTRAN writes it (see the module docstring).
+
+    ``runs_cards``: the unmodelled cards the solver runs (None: any; the mystran adapter gives
+    :data:`MYSTRAN_CARDS`); the adapter refuses a deck with any other before it runs."""
 
     name = "nastran"
     carries_unmodelled = True   # cards the reader does not model reach the solver (raw_card_text)
 
     def __init__(self, epsilon_tol: float = EPSILON_TOL, max_cases_per_run: int = MAX_CASES_PER_RUN,
-                 autospc: bool | None = None, strict_cards: bool = True):
+                 autospc: bool | None = None, strict_cards: bool = True,
+                 runs_cards: frozenset[str] | None = None):
         if not epsilon_tol > 0 or int(max_cases_per_run) < 1:
             raise ValueError("epsilon_tol must be > 0 and max_cases_per_run >= 1")
         self.epsilon_tol = float(epsilon_tol)
         self.max_cases_per_run = int(max_cases_per_run)
         self.autospc = None if autospc is None else bool(autospc)   # None: as the deck says
         self.strict_cards = bool(strict_cards)
+        self.runs_cards = None if runs_cards is None else frozenset(runs_cards)
         self._raw: dict[Path, tuple[list, list[RawCard]]] = {}
         self._written: tuple | None = None
 
@@ -817,7 +838,8 @@ class MystranAdapter(CommandAdapter):
         binary = binary or mystran_binary()
         kw.setdefault("name", "mystran")
         kw.setdefault("command", [binary, "{deck_name}"])
-        kw.setdefault("dialect", NastranDialect(epsilon_tol, max_cases_per_run, autospc))
+        kw.setdefault("dialect", NastranDialect(epsilon_tol, max_cases_per_run, autospc,
+                                                runs_cards=MYSTRAN_CARDS))
         super().__init__(deck_path, timeout_s=timeout_s, unmodelled=unmodelled, **kw)
         self.binary = binary
         self.version = mystran_version(binary)

@@ -34,12 +34,13 @@ import scipy.sparse as sp
 # module of solver_adapters that blackbox's method layers may import
 from solver_adapters.deck import (Bush, CBar, Coord, Deck, Grid, Mat1, PBar, PBush, Pelas, Prod,  # noqa: F401
                                   Rbe2, Rbe3, Rod, Spc1, SpcAdd, Spring, Unmodelled)
-from solver_adapters.errors import (COMPONENT_NAMES, located, AdapterNotFound, CheckFailure,  # noqa: F401
+from solver_adapters.errors import (COMPONENT_NAMES, located, AdapterNotFound, CheckFailure, FeatureRefused,  # noqa: F401
                                     ConsentError, CorruptEntry, DeckFormatError, FactorizationError,
                                     InsecureFileError, ModelError, OptionError, PluginConflictError,
                                     PluginLoadError, RegistryError, SolverError, SolverRunError,
                                     SolverTimeoutError, TableFormatError, UnauthenticEntry,
-                                    UnknownDofError, UnknownPluginError, UnstableStructureError)
+                                    UnknownDofError, UnknownPluginError, UnstableStructureError,
+                                    UnsupportedFeatureError)
 
 DofLabel = tuple[int, int]
 """``(grid id, component 1..6)``."""

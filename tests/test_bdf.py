@@ -378,7 +378,7 @@ MALFORMED = [
     ("CBAR pin flags PB repeated", "CBAR,9,1,1,2,0.,0.,1.\n,,4566\n", 9, "CBAR", 11, "repeats"),
     ("CBAR offset not a real", "CBAR,9,1,1,2,0.,0.,1.\n,,,abc\n", 9, "CBAR", 12, "not a real"),
     ("CBAR OFFT", "CBAR,9,1,1,2,0.,0.,1.,EEG\n", 8, "CBAR", 9, "OFFT"),
-    ("CBAR OFFT element system", "CBAR,9,1,1,2,0.,0.,1.,GOO\n", 8, "CBAR", 9, "OFFT"),
+    ("CBAR OFFT orientation in the offset system", "CBAR,9,1,1,2,0.,0.,1.,OOO\n", 8, "CBAR", 9, "OFFT"),
     ("BAROR twice", "BAROR,,1,,,0.,0.,1.\nBAROR,,1\n", 9, "BAROR", 1, "only one BAROR"),
     ("BAROR G0 and X2", "BAROR,,1,,,3,1.\n", 8, "BAROR", 7, "G0"),
     ("CBAR G0 with X2", "CBAR,9,1,1,2,3,1.,0.\n", 8, "CBAR", 7, "G0"),

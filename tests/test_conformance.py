@@ -11,6 +11,7 @@ Precision: the reference and FRAMESOLVE hand over double-precision digits (rtol 
 from __future__ import annotations
 
 import json
+import re
 import tempfile
 
 import numpy as np
@@ -65,8 +66,16 @@ class TestLegacyConformance(AdapterConformance):
 # --------------------------------------------------------------------------------------------
 # ... and through the command
 # --------------------------------------------------------------------------------------------
+REFUSED_BY = {  # the feature decks each adapter cannot express and refuses with a typed error
+    "reference": set(), "mystran": set(),
+    "legacy": {"offsets", "pin_flags", "shear_pin_flags", "cd_systems", "cd_supports", "rods", "rbe3"},
+}
+
+
 @pytest.mark.parametrize("name", ["reference", pytest.param("mystran", marks=MYSTRAN_MARKS), "legacy"])
 def test_cli_conformance_passes(name, tmp_path, capsys):
+    import re
+
     assert main(["conformance", name, "--out", str(tmp_path / "out")]) == 0
     printed = capsys.readouterr().out
     rep = json.loads((tmp_path / "out" / "conformance.json").read_text())
@@ -75,13 +84,22 @@ def test_cli_conformance_passes(name, tmp_path, capsys):
     for check in ("dof_labels", "unknown_labels", "linearity_superposition", "maxwell_betti",
                   "batch_equals_one_by_one", "determinism", "with_springs", "stats_counters",
                   "reference_agreement[cube]", "reference_agreement[car]", "reference_agreement[generated]",
-                  "probe_loads", "field_formats", "grounded_springs", "deck_edits"):
+                  "probe_loads", "field_formats", "grounded_springs", "deck_edits", "mechanism"):
         assert check in names
-        assert f"PASS  {check}" in printed
+        assert re.search(rf"^PASS +{re.escape(check)} ", printed, re.M), check
+    refused = {c["name"][len("feature["):-1] for c in rep["checks"] if c["refused"]}
+    assert {f"feature[{f}]" for f in cf.FEATURES} <= set(names) and refused == REFUSED_BY[name]
+    for f in refused:
+        assert re.search(rf"^REFUSED +feature\[{f}\] .*UnsupportedFeatureError naming ", printed, re.M)
     if name == "legacy":
         assert {f"misbehaviour[{s}]" for s in ("crash", "hang", "garbage", "truncate", "wrong_cases", "nan")} <= set(names)
+        assert "misbehaviour checks: its own switches" in printed
+    elif name == "mystran":   # any external code: its command behind the misbehaving wrapper
+        assert {f"misbehaviour[{s}]" for s in cf.COMMAND_SWITCHES} <= set(names)
+    else:
+        assert "misbehaviour checks: none: it runs in this process" in printed
     assert "| check | result |" in (tmp_path / "out" / "conformance.md").read_text()
-    assert rep["wall_s"] < 40.0  # "well under a minute" (measured: reference 0.1 s, MYSTRAN 1 s, legacy 10 s)
+    assert rep["wall_s"] < 60.0  # about a minute at most (measured: reference 0.4 s, MYSTRAN 6 s, legacy 13 s)
 
 
 @needs_mystran
@@ -106,7 +124,9 @@ def test_cli_conformance_on_a_given_deck(tmp_path):
     deck, _ = cf.write_generated_deck(tmp_path / "g")
     assert main(["conformance", "reference", "--deck", str(deck), "--out", str(tmp_path / "o")]) == 0
     rep = json.loads((tmp_path / "o" / "conformance.json").read_text())
-    assert [c["name"] for c in rep["checks"]][-1] == "reference_agreement[generated]"
+    names = [c["name"] for c in rep["checks"]]
+    assert names[names.index("deck_edits") + 1] == "reference_agreement[generated]"
+    assert names[-1] == "mechanism" and rep["passed"]
 
 
 # --------------------------------------------------------------------------------------------
@@ -306,6 +326,106 @@ def test_misbehaviour_check_fails_when_the_error_is_untyped(tmp_path):
     suite = cf.Suite(Wrapper, FIXTURES / "cube" / "model.bdf", None, misbehaviour=spec)
     with pytest.raises(CheckFailure, match="not a SolverError"):
         cf.check_misbehaviour(suite, "crash")
+
+
+# --------------------------------------------------------------------------------------------
+# the feature decks and the mechanism check have teeth
+# --------------------------------------------------------------------------------------------
+class IgnoresFeatures(Wrapper):
+    """Solves every deck as a code that silently drops offsets, pin flags, CD systems, rods,
+    RBE3 and springs would: the reference on the deck with those cards taken out."""
+
+    def __init__(self, deck, inner=None):
+        import copy
+        from dataclasses import replace
+
+        from solver_adapters.bdf import read_deck
+        m = copy.deepcopy(read_deck(deck))
+        m.cbars = {e: replace(b, wa=None, wb=None, pa="", pb="") for e, b in m.cbars.items()}
+        m.grids = {g: replace(v, cd=0) for g, v in m.grids.items()}
+        m.rods, m.rbe3s, m.springs = {}, {}, {}
+        super().__init__(deck, inner if inner is not None else ReferenceAdapter(m))
+
+    def solve(self, loads, report):
+        import warnings
+        with warnings.catch_warnings():      # loads on grids left hanging by a dropped RBE3
+            warnings.simplefilter("ignore")
+            return self.inner.solve(loads, report)
+
+    def with_springs(self, springs):
+        return type(self)(self.deck, self.inner)       # drops these too
+
+
+@pytest.mark.parametrize("feature", list(cf.FEATURES))
+def test_an_adapter_that_ignores_a_feature_fails_its_check(feature, tmp_path):
+    """The feature decks have teeth: dropping the feature changes the answer far beyond any
+    adapter's tolerance (the detail's "changes the answer by" is what such an adapter is off)."""
+    suite = cf.Suite(IgnoresFeatures, FIXTURES / "cube" / "model.bdf", None)
+    with pytest.raises(CheckFailure, match="vs reference"):
+        cf.check_feature(suite, feature)
+    detail = cf.check_feature(cf.Suite(ReferenceAdapter, FIXTURES / "cube" / "model.bdf", None), feature)
+    change = float(re.search(r"changes the answer by ([0-9.e+-]+)", detail)[1])
+    assert change > 0.1, detail    # measured 0.37-3.4 of a case's largest displacement
+
+
+def test_a_typed_refusal_passes_and_is_reported_as_such(tmp_path):
+    from solver_adapters.protocol import UnsupportedFeatureError
+
+    class RefusesRods(Wrapper):
+        def __init__(self, deck, inner=None):
+            from solver_adapters.bdf import read_deck
+            if read_deck(deck).rods:
+                raise UnsupportedFeatureError("MyCode", [("CROD 30", "rods.bdf:12", "no rod element")])
+            super().__init__(deck, inner)
+
+    r = cf.run_check("feature[rods]", lambda: cf.check_feature(cf.Suite(RefusesRods, FIXTURES / "cube" / "model.bdf"), "rods"))
+    assert r.passed and r.refused and "UnsupportedFeatureError naming CROD 30" in r.detail
+    assert cf.check_line(r).startswith("REFUSED  feature[rods]")
+    rep = cf.ConformanceReport("x", "d", 1e-9, (r,), 0.1)
+    assert rep.passed and "1 refused with a typed error: feature[rods]" in rep.lines()[-1]
+    assert "| feature[rods] | refused |" in rep.to_markdown()
+
+
+def test_the_mechanism_check_fails_a_code_that_stays_silent(tmp_path):
+    """A code whose solver returns numbers for a singular stiffness (as OpenSees with a rounding
+    pivot does: 1e8-sized displacements, exit code 0) fails the check."""
+    class Silent(Wrapper):
+        def __init__(self, deck, inner=None):
+            self.deck, self.name, self._dofs = deck, "silent", ReferenceAdapter(FIXTURES / "cube" / "model.bdf")
+            from solver_adapters.bdf import read_deck
+            self.grids = sorted(read_deck(deck).grids)
+
+        @property
+        def stats(self):
+            return SolverStats()
+
+        def dofs(self):
+            return tuple((g, c) for g in self.grids for c in range(1, 7))
+
+        def solve(self, loads, report):
+            return Displacements(tuple(report), np.full((len(report), loads.n_cases), 3.2e8), loads.cases)
+
+    with pytest.raises(CheckFailure, match="solved a mechanism .* largest displacement 3.2e"):
+        cf.check_mechanism(cf.Suite(Silent, FIXTURES / "cube" / "model.bdf"))
+
+
+def test_misbehaviour_of_any_command_adapter_from_the_cli(tmp_path, capsys):
+    """An adapter that declares no switches but runs a command (a plug-in's CommandAdapter with
+    the legacy dialect, here through ``--study``) gets the generic command misbehaviours."""
+    study = copy_fixture("cube", tmp_path / "cube")
+    from solver_adapters.legacy import FRAMESOLVE
+    import sys
+    toml = (study / "study.toml").read_text().replace(
+        'adapter = "reference"',
+        f'adapter = "command"\ncommand = ["{sys.executable}", "{FRAMESOLVE}", "{{deck}}"]\ndialect = "legacy"')
+    (study / "study.toml").write_text(toml)
+    assert main(["conformance", "command", "--study", str(study), "--trust-command", "--out", str(tmp_path / "o")]) == 0
+    rep = json.loads((tmp_path / "o" / "conformance.json").read_text())
+    got = {c["name"]: c for c in rep["checks"]}
+    for switch in cf.COMMAND_SWITCHES:
+        assert got[f"misbehaviour[{switch}]"]["passed"], got[f"misbehaviour[{switch}]"]
+    assert "Timeout" in got["misbehaviour[hang]"]["detail"]
+    assert "misbehaviour checks: its command run behind _misbehave.py" in capsys.readouterr().out
 
 
 # --------------------------------------------------------------------------------------------

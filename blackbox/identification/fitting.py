@@ -32,9 +32,9 @@ from __future__ import annotations
 from typing import Callable
 
 import numpy as np
-from scipy import stats
 
 from blackbox.condensation import CondensedModel
+from blackbox.distributions import norm_ppf, t_ppf
 from blackbox.errors import IdentificationError
 from blackbox.fitting.lm import STATUS_MESSAGES
 from blackbox.fitting.statistics import FitStatistics, HoldoutStats, plausibility_warning
@@ -184,8 +184,8 @@ def identify(model: CondensedModel, obs: Observations, k0, *, fixed_point: bool 
     t_dof = dof if scaled else (float(sigma_dof) if sigma_dof is not None and np.isfinite(sigma_dof) else None)
     if t_dof is not None and not t_dof > 0:
         raise IdentificationError(f"sigma_dof must be > 0, got {sigma_dof!r}")
-    z = float(stats.t.ppf(0.5 + confidence / 2.0, t_dof) if t_dof is not None
-              else stats.norm.ppf(0.5 + confidence / 2.0))
+    z = float(t_ppf(0.5 + confidence / 2.0, t_dof) if t_dof is not None
+              else norm_ppf(0.5 + confidence / 2.0))
     lg = prob.log_mask
     lin, half = linear_intervals(k, std, z, lg, ident)
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):

@@ -83,23 +83,32 @@ def summary_markdown(result, plots: list[str]) -> str:
             lines.append(f"- **{o.name}** ({o.status}): {first}")
     if plots:
         lines += ["", *(f"![{Path(p).stem}]({p})" for p in plots)]
+        if len(cols) > PLOT_PANELS:
+            lines += ["", f"The plot shows the first {PLOT_PANELS} of the {len(cols)} parameters; the "
+                          f"table above has all of them."]
     else:
         lines += ["", "No plot: matplotlib is not installed (`pip install 'blackbox-joints[plots]'`) "
                       "or no study reported parameters."]
     return "\n".join(lines) + "\n"
 
 
-def summary_plot(outcomes: Sequence, path: Path, max_panels: int = 12) -> bool:
+PLOT_PANELS = 48
+"""Parameters drawn at most in ``summary.png`` (a complex joint of 4 branches has 27); beyond, the
+plot and ``summary.md`` say how many are left out (all are in the table and ``summary.csv``)."""
+
+
+def summary_plot(outcomes: Sequence, path: Path, max_panels: int = PLOT_PANELS) -> bool:
     """Each parameter across the studies (value with its interval, log scale when all values are
     positive) and the reduced chi-square, one panel each; False when nothing to draw or no
-    matplotlib."""
+    matplotlib. Every parameter up to ``max_panels``; beyond, the title says how many are left out."""
     plt = pyplot()
-    cols = parameter_columns(outcomes)[:max_panels]
+    every = parameter_columns(outcomes)
+    cols = every[:max_panels]
     if plt is None or not cols:
         return False
     names = [o.name for o in outcomes]
     n = len(cols) + 1
-    ncol = min(3, n)
+    ncol = min(3 if n <= 12 else 4, n)
     nrow = math.ceil(n / ncol)
     fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 2.8 * nrow), squeeze=False)
     x = list(range(len(outcomes)))
@@ -134,6 +143,9 @@ def summary_plot(outcomes: Sequence, path: Path, max_panels: int = 12) -> bool:
     ax.set_xticklabels(names, rotation=45, ha="right", fontsize=7)
     for ax in list(axes.flat)[n:]:
         ax.set_visible(False)
+    if len(every) > len(cols):
+        fig.suptitle(f"the first {len(cols)} of {len(every)} parameters; all of them are in summary.csv "
+                     f"and summary.md", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)

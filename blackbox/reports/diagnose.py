@@ -225,16 +225,19 @@ def diagnosis_plots(diag: Diagnosis, deck: Deck, out_dir: Path) -> list[str]:
         kinds = sorted({c.effect.kind for c in sc})
         cmap = plt.get_cmap("tab10")
         y = np.arange(len(sc))[::-1]
-        val = [min(-c.log10_p, 300.0) for c in sc]
+        # -log10 p as it is (a strong effect has thousands: capping it would draw every bar to
+        # the cap), on a log axis wide enough for the longest bar and its label
+        val = [max(-c.log10_p, 1e-3) if math.isfinite(c.log10_p) else 1e6 for c in sc]
         ax.barh(y, val, color=[cmap(kinds.index(c.effect.kind)) for c in sc])
         ax.set_yticks(y, [f"{c.effect.kind} @ {', '.join(map(str, c.effect.where))[:24]}" for c in sc], fontsize=7)
         n_hyp = len(steps[0].scores) + sum(c.effect.variant_tests for c in steps[0].scores)
         thr = -math.log10(diag.alpha / (2.0 * max(n_hyp, 1)))
         ax.axvline(thr, color="k", ls="--", lw=1, label=f"round-1 level ({n_hyp} hypotheses, alpha / 2)")
-        for yi, c in zip(y, sc):
+        for yi, v, c in zip(y, val, sc):
             if c.refit is not None:
-                ax.text(min(-c.log10_p, 300.0), yi, f" dBIC {c.delta_bic:.3g}", va="center", fontsize=6)
-        ax.set_xscale("symlog", linthresh=10)
+                ax.text(v, yi, f" dBIC {c.delta_bic:.3g}", va="center", fontsize=6, clip_on=True)
+        ax.set_xscale("log")
+        ax.set_xlim(min(0.5, 0.5 * min(val), 0.5 * thr), 30.0 * max(max(val), thr))
         ax.set_xlabel("-log10 p (score test)")
         ax.set_title("Candidate ranking, round 1")
         ax.legend(fontsize=7, loc="lower right")

@@ -183,6 +183,22 @@ def global_stiffness(R: np.ndarray, k_local: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(kg.transpose(2, 0, 1))
 
 
+def neutral_axis(k: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """A PBEAM's neutral axis offset ``n`` ``(m, 2)`` (element y, z) from the element axis (the
+    shear centre): the local stiffness ``(m, 12, 12)`` with the axial strain taken on the
+    neutral axis, whose axial displacement is u_N = u + n_z theta_y - n_y theta_z at each end,
+    while bending, shear and torsion stay on the element axis: ``T^T k T`` with ``T`` the identity
+    but for those two rows (MSC Nastran Reference Manual, CBEAM: the axial force acts at the
+    neutral axis, the shear forces at the shear centre)."""
+    m = k.shape[0]
+    T = np.broadcast_to(np.eye(12), (m, 12, 12)).copy()
+    for u in (0, 6):
+        T[:, u, u + 4] = n[:, 1]
+        T[:, u, u + 5] = -n[:, 0]
+    out = np.einsum("mji,mjk,mkl->mil", T, k, T)
+    return 0.5 * (out + out.transpose(0, 2, 1))
+
+
 def release_pins(k: np.ndarray, released: list[int]) -> np.ndarray:
     """Pin flags: the local stiffness ``(m, 12, 12)`` with the local DOFs ``released`` (0-11; end A
     0-5, end B 6-11, order u v w theta_x theta_y theta_z) condensed out by static condensation,

@@ -149,6 +149,11 @@ def _element_arrays(deck: Deck, grid_ids: np.ndarray, xyz: np.ndarray):
     # pin flags as a bit mask of released local DOFs (bit i: DOF i, end A 0-5, end B 6-11)
     pins = np.zeros(ne, np.int64)
     offs = None
+    nax = None                          # PBEAM neutral axis offsets (element y, z)
+    for pid in [p for p in table if deck.pbars[p].n1 or deck.pbars[p].n2]:
+        if nax is None:
+            nax = np.zeros((ne, 2))
+        nax[:nb][pids == pid] = (deck.pbars[pid].n1, deck.pbars[pid].n2)
     for k, b in enumerate(bars):
         if b.pa or b.pb:
             pins[k] = sum(1 << (int(ch) - 1) for ch in b.pa) + sum(1 << (int(ch) + 5) for ch in b.pb)
@@ -156,14 +161,21 @@ def _element_arrays(deck: Deck, grid_ids: np.ndarray, xyz: np.ndarray):
             if offs is None:
                 offs = np.zeros((ne, 6))
             offs[k] = (*(b.wa or (0.0, 0.0, 0.0)), *(b.wb or (0.0, 0.0, 0.0)))
-    return elems, ia, ib, xa, xb, v, props, pins, offs
+    return elems, ia, ib, xa, xb, v, props, pins, offs, nax
 
 
-def _pins_and_offsets(kl: np.ndarray, kg_of, s: int, pins: np.ndarray, offs, elems) -> np.ndarray:
-    """Chunk ``s:s+m`` of the element stiffnesses: pin flags condensed out of the local matrices
-    ``kl`` (entry-major), then the global matrices ``kg_of(kl)`` moved to the grids by the rigid
-    offsets. Only elements with pins or offsets are touched (others stay bit for bit as they were)."""
+def _pins_and_offsets(kl: np.ndarray, kg_of, s: int, pins: np.ndarray, offs, elems,
+                      nax: np.ndarray | None = None) -> np.ndarray:
+    """Chunk ``s:s+m`` of the element stiffnesses: a PBEAM's neutral axis offset applied to the
+    local matrices ``kl`` (entry-major), pin flags condensed out of them, then the global
+    matrices ``kg_of(kl)`` moved to the grids by the rigid offsets. Only elements with a neutral
+    axis offset, pins or offsets are touched (others stay bit for bit as they were)."""
     m = kl.shape[2]
+    if nax is not None:
+        idx = np.flatnonzero(np.any(nax[s:s + m] != 0.0, axis=1))
+        if idx.size:
+            kl[:, :, idx] = frame.neutral_axis(kl[:, :, idx].transpose(2, 0, 1),
+                                               nax[s + idx]).transpose(1, 2, 0)
     chunk_pins = pins[s:s + m]
     for mask in np.unique(chunk_pins[chunk_pins != 0]).tolist():
         idx = np.flatnonzero(chunk_pins == mask)
@@ -188,7 +200,8 @@ def _pins_and_offsets(kl: np.ndarray, kg_of, s: int, pins: np.ndarray, offs, ele
 
 def _assemble_bars(ia: np.ndarray, ib: np.ndarray, R: np.ndarray, L: np.ndarray,
                    props: np.ndarray, n_grids: int, pins: np.ndarray | None = None,
-                   offs: np.ndarray | None = None, elems=None) -> sp.csr_matrix:
+                   offs: np.ndarray | None = None, elems=None,
+                   nax: np.ndarray | None = None) -> sp.csr_matrix:
     """Sum of the bars' global stiffness matrices, assembled by 6x6 grid blocks.
 
     ``pins`` (bit masks of released local DOFs) and ``offs`` (WA, WB per element, ``(ne, 6)``)
@@ -204,9 +217,10 @@ def _assemble_bars(ia: np.ndarray, ib: np.ndarray, R: np.ndarray, L: np.ndarray,
     for s in range(0, ne, _CHUNK):
         e = slice(s, s + _CHUNK)
         kl = frame.local_stiffness_em(L[e], *props[e].T)
-        if (pins is not None and pins[e].any()) or (offs is not None and offs[e].any()):
+        if (pins is not None and pins[e].any()) or (offs is not None and offs[e].any()) or \
+                (nax is not None and nax[e].any()):
             kg = _pins_and_offsets(kl, lambda k: frame.global_stiffness_em(R[e], k), s, pins,
-                                   offs, elems)
+                                   offs, elems, nax)
         else:
             kg = frame.global_stiffness_em(R[e], kl)
         m = kg.shape[2]
@@ -240,7 +254,7 @@ def assemble(deck: Deck, extra_springs: tuple[ScalarSpring, ...] = (),
     grid_ids = np.array(sorted(deck.grids), dtype=np.int64)
     n_g = 6 * len(grid_ids)
     xyz = np.array([deck.grids[g].xyz for g in grid_ids.tolist()], float).reshape(-1, 3)
-    bars, ia, ib, xa, xb, v, props, pins, offs = _element_arrays(deck, grid_ids, xyz)
+    bars, ia, ib, xa, xb, v, props, pins, offs, nax = _element_arrays(deck, grid_ids, xyz)
     tm["elements_read_s"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     K_gg = sp.csr_matrix((n_g, n_g))
@@ -258,7 +272,7 @@ def assemble(deck: Deck, extra_springs: tuple[ScalarSpring, ...] = (),
             b = bars[int(np.flatnonzero(L <= 0)[0])]
             raise ModelError(f"{b.src}: {getattr(b, 'card', 'CBAR')} {b.eid}: zero length "
                              f"(GA={b.ga}, GB={b.gb} coincide)")
-        K_gg = _assemble_bars(ia, ib, R, L, props, len(grid_ids), pins, offs, bars)
+        K_gg = _assemble_bars(ia, ib, R, L, props, len(grid_ids), pins, offs, bars, nax)
     if deck.bushes:
         K_gg = (K_gg + bush_stiffness(deck, grid_ids, xyz)).tocsr()
     D = displacement_transform(deck, grid_ids)

@@ -1,0 +1,50 @@
+"""PARAM and the cards with no effect on a linear static solution."""
+
+from __future__ import annotations
+
+from solver_adapters.bdf.fields import _real
+
+
+def _param(r, c) -> None:
+    """PARAM,AUTOSPC (YES/NO; the last one of the deck wins; without one AUTOSPC is on, NASTRAN's
+    SOL 101 default) and PARAM,EPZERO (its singularity ratio) are read; every other PARAM has no
+    effect on the reference solver."""
+    name = c.text(2)
+    if name == "AUTOSPC":
+        value = c.text(3)
+        if value not in ("YES", "Y", "NO", "N"):
+            raise c.error(3, "PARAM,AUTOSPC must be YES or NO")
+        r.deck.autospc = value.startswith("Y")
+        r.deck.autospc_src = c.src
+    elif name == "EPZERO":
+        value = _real(c, 3)
+        if not 0.0 < value < 1.0:
+            raise c.error(3, "PARAM,EPZERO must be in (0, 1)")
+        r.deck.epzero = value
+
+
+NO_EFFECT = frozenset({
+    # solver and model parameters (DEBUG: MYSTRAN's printout switches)
+    "PARAM", "MDLPRM", "DEBUG", "DOPTPRM",
+    # mass: no effect on a linear static solution (GRAV reads the masses it uses from the cards)
+    "CONM1", "CONM2", "CMASS1", "CMASS2", "CMASS3", "CMASS4", "PMASS",
+    "NSM", "NSM1", "NSMADD", "NSML", "NSML1",
+    # eigenvalue extraction, dynamic and nonlinear solution controls
+    "EIGR", "EIGRL", "EIGB", "EIGC", "EIGP", "FREQ", "FREQ1", "FREQ2", "FREQ3", "FREQ4", "FREQ5",
+    "TSTEP", "TSTEPNL", "NLPARM", "NLPCI", "TABDMP1", "RANDPS",
+    # output only: plot elements and monitor points
+    "PLOTEL", "MONPNT1", "MONPNT3",
+    # design optimisation (SOL 200): a static solution uses the properties as written
+    "DESVAR", "DVPREL1", "DVPREL2", "DVMREL1", "DVMREL2", "DVCREL1", "DVCREL2", "DLINK",
+    "DRESP1", "DRESP2", "DRESP3", "DCONSTR", "DCONADD", "DSCREEN", "DTABLE",
+    # static aeroelasticity and flutter: the aerodynamic model adds nothing to a SOL 101 solution
+    "AERO", "AEROS", "CAERO1", "CAERO2", "CAERO3", "CAERO4", "CAERO5", "PAERO1", "PAERO2",
+    "PAERO3", "PAERO4", "PAERO5", "SPLINE1", "SPLINE2", "SPLINE4", "SPLINE5", "SET1", "SET2",
+    "AEFACT", "AELIST", "AESTAT", "AESURF", "AESURFS", "AELINK", "AEPARM", "TRIM", "FLFACT",
+    "FLUTTER", "MKAERO1", "MKAERO2", "GUST",
+})
+"""Cards with no effect on a linear static solve: accepted, counted in ``Deck.no_effect`` (one
+line of :meth:`~solver_adapters.deck.Deck.summary`), never handed to an external solver but
+PARAM (which MYSTRAN reads: AUTOSPC, ...), and never a reason to choose another adapter."""
+
+PARSERS = {}

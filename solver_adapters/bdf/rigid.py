@@ -1,0 +1,91 @@
+"""RBE2 and RBE3: rigid and interpolation elements."""
+
+from __future__ import annotations
+
+from solver_adapters.bdf.fields import _blank, _components, _id_list, _int, _real
+from solver_adapters.bdf.numbers import _INT, _real_or_none
+from solver_adapters.deck import Rbe2, Rbe3
+
+
+def _rbe2(r, c) -> None:
+    eid, gn = _int(c, 2), _int(c, 3)
+    cm = _components(c, 4, required=True)
+    last = len(c.fields)
+    # optional ALPHA [TREF] after the grid list (thermal expansion: read, then ignored). Both are
+    # reals, so they are told from grid IDs by their decimal point or exponent.
+    nonblank = [i for i in range(5, last + 1) if c.text(i)]
+    tail = [i for i in nonblank
+            if not _INT.fullmatch(c.text(i)) and _real_or_none(c.text(i)) is not None]
+    if tail:
+        after = [i for i in nonblank if i > tail[0]]
+        if len(after) > 1 or any(_INT.fullmatch(c.text(i)) for i in after):
+            raise c.error(tail[0], "integer field given a real (only ALPHA and TREF, both reals, "
+                                   "may follow the grid list)")
+        for i in [tail[0]] + after:
+            _real(c, i)
+        last = tail[0] - 1
+    gm: list[int] = []
+    for item in _id_list(c, 5, last):
+        if isinstance(item, tuple):
+            if item[1] - item[0] > 1_000_000:
+                raise c.error(5, f"THRU range {item[0]}-{item[1]} is too long")
+            gm.extend(range(item[0], item[1] + 1))
+        else:
+            gm.append(item)
+    if not gm:
+        raise c.error(5, "RBE2 needs at least one dependent grid GM")
+    r.claim("element", eid, c, 2)
+    r.deck.rbe2s[eid] = Rbe2(eid, gn, cm, tuple(gm), c.src)
+
+
+def _rbe3(r, c) -> None:
+    """RBE3: EID (blank) REFGRID REFC WT1 C1 G1,1 G1,2 ... WT2 C2 G2,1 ... [ALPHA a [TREF t]].
+
+    Each weight group is a real WT, component digits C and one or more grids (blank fields
+    between them are skipped). UM (dependent components moved to independent grids) is not
+    supported (error); ALPHA and TREF are read and have no effect."""
+    eid = _int(c, 2)
+    _blank(c, 3, "field 3")
+    ref = _int(c, 4)
+    refc = _components(c, 5, required=True)
+    last = len(c.fields)
+    groups: list[tuple[float, str, tuple[int, ...]]] = []
+    i = 6
+    while i <= last:
+        text = c.text(i)
+        if not text:
+            i += 1
+            continue
+        if text == "UM":
+            raise c.error(i, "UM (dependent components on the independent grids) not supported")
+        if text in ("ALPHA", "TREF"):
+            j = next((k for k in range(i + 1, last + 1) if c.text(k)), None)
+            if j is None:
+                raise c.error(i, f"{text} must be followed by a real value")
+            _real(c, j)
+            i = j + 1
+            continue
+        if _INT.fullmatch(text):
+            raise c.error(i, "weight WT must be a real (e.g. 1.0); an integer here would be a "
+                             "grid without its weight and components")
+        w = _real(c, i)
+        if not w > 0.0:
+            raise c.error(i, "weight WT must be > 0")
+        comps = _components(c, i + 1, required=True)
+        grids: list[int] = []
+        j = i + 2
+        while j <= last and (not c.text(j) or _INT.fullmatch(c.text(j))):
+            if c.text(j):
+                grids.append(_int(c, j))
+            j += 1
+        if not grids:
+            raise c.error(i + 2, "weight group needs at least one grid")
+        groups.append((w, comps, tuple(grids)))
+        i = j
+    if not groups:
+        raise c.error(6, "RBE3 needs at least one weight group WT C G...")
+    r.claim("element", eid, c, 2)
+    r.deck.rbe3s[eid] = Rbe3(eid, ref, refc, tuple(groups), c.src)
+
+
+PARSERS = {"RBE2": _rbe2, "RBE3": _rbe3}

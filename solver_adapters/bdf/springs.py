@@ -1,0 +1,108 @@
+"""CBUSH/PBUSH bushings and the scalar springs PELAS, CELAS1, CELAS2."""
+
+from __future__ import annotations
+
+import re
+
+from solver_adapters.bdf.fields import _ignored_reals, _int, _max_fields, _orientation, _real
+from solver_adapters.deck import Bush, PBush, Pelas, Spring
+
+
+def _cbush(r, c) -> None:
+    """CBUSH: EID PID GA GB GO/X1 X2 X3 CID / S OCID S1 S2 S3 (MSC QRG). The element axes are
+    CID's (CID >= 0) or, with CID blank, x from GA to GB and the orientation vector (GO, or X
+    in GA's CD system) in the x-y plane. S (default 0.5) places the springs on the line GA-GB.
+    OCID and S1-S3 (a spring location off that line) are not supported: errors."""
+    _max_fields(c, 14)
+    eid = _int(c, 2)
+    pid = _int(c, 3, eid)
+    ga, gb = _int(c, 4), _int(c, 5, 0, minimum=0)
+    x, g0 = _orientation(c)
+    cid = _int(c, 9, None, minimum=0) if c.text(9) else None
+    s = _real(c, 10, 0.5)
+    if not 0.0 <= s <= 1.0:
+        raise c.error(10, "spring location S must be in [0, 1]")
+    if _int(c, 11, -1, minimum=-1) != -1:
+        raise c.error(11, "OCID (spring location off the line GA-GB) not supported: blank or -1")
+    for i in (12, 13, 14):
+        if _real(c, i, 0.0) != 0.0:
+            raise c.error(i, "offset S1-S3 of the spring location not supported: blank or 0.0")
+    if cid is None and x is None and g0 is None and gb == 0:
+        raise c.error(9, "a grounded CBUSH needs CID (or an orientation) for its element axes")
+    if cid is not None and cid not in r.cords and cid != 0:
+        r.pending_cids.append((c, cid))
+    r.claim("element", eid, c, 2)
+    r.deck.bushes[eid] = Bush(eid, pid, ga, gb, x, g0, cid, s, c.src)
+
+
+def _pbush(r, c) -> None:
+    """PBUSH: PID "K" K1..K6 / blank "B" B1..B6 / blank "GE" GE1..GE6 / blank "RCV" SA ST EA ET
+    (one line each, any order, the keywords in field 3 of each line). The K line is the stiffness (blank: 0); damping B, GE and the stress recovery
+    coefficients RCV are read and have no effect on a static solve. Other keywords (M, the
+    frequency-dependent FREQ lines) are errors."""
+    pid = _int(c, 2)
+    k = (0.0,) * 6
+    seen = set()
+    # keyword fields: 3 on the first line, then the second field of each continuation line
+    # (the first one blank), so that the keywords line up in field 3 of every line
+    for i in range(3, len(c.fields) + 1, 8):
+        key = c.text(i)
+        if i > 3 and c.text(i - 1):
+            raise c.error(i - 1, "field must be blank (a PBUSH continuation line starts with a "
+                                 "blank field, then the keyword K, B, GE or RCV)")
+        if not any(c.text(j) for j in range(i, i + 7)):
+            continue
+        if key not in ("K", "B", "GE", "RCV") or key in seen:
+            raise c.error(i, f"PBUSH line keyword {key or '(blank)'} not supported: one each of "
+                             f"K, B, GE, RCV")
+        seen.add(key)
+        values = tuple(_real(c, j, 0.0) for j in range(i + 1, i + 7))
+        if key == "K":
+            k = values
+    if "K" not in seen:
+        raise c.error(3, "PBUSH needs a K line (stiffnesses K1..K6)")
+    r.claim("property", pid, c, 2)
+    r.deck.pbushes[pid] = PBush(pid, k, c.src)
+
+
+def _pelas(r, c) -> None:
+    _max_fields(c, 9)
+    for base in (2, 6):
+        if base == 6 and not any(c.text(i) for i in range(6, 10)):
+            break
+        pid, k = _int(c, base), _real(c, base + 1)
+        _ignored_reals(c, (base + 2, base + 3))  # GE, S
+        r.claim("property", pid, c, base)
+        r.deck.pelas[pid] = Pelas(pid, k, c.src)
+
+
+def _spring_end(c, ig: int) -> tuple[int, int]:
+    g = _int(c, ig, 0, minimum=0)
+    text = c.text(ig + 1)
+    if g == 0:
+        if text not in ("", "0"):
+            raise c.error(ig + 1, "component given for a grounded end (G blank or 0)")
+        return 0, 0
+    if not re.fullmatch(r"[1-6]", text):
+        raise c.error(ig + 1, "component must be one digit 1-6 (scalar points are not supported)")
+    return g, int(text)
+
+
+def _celas(r, c) -> None:
+    _max_fields(c, 7 if c.name == "CELAS1" else 9)
+    eid = _int(c, 2)
+    if c.name == "CELAS1":
+        pid, k = _int(c, 3, eid), None
+    else:
+        pid, k = None, _real(c, 3)
+        _ignored_reals(c, (8, 9))  # GE, S
+    (g1, c1), (g2, c2) = _spring_end(c, 4), _spring_end(c, 6)
+    if g1 == 0:
+        if g2 == 0:
+            raise c.error(4, "both ends of the spring are grounded")
+        (g1, c1), (g2, c2) = (g2, c2), (g1, c1)
+    r.claim("element", eid, c, 2)
+    r.deck.springs[eid] = Spring(eid, g1, c1, g2, c2, k, pid, c.name, c.src)
+
+
+PARSERS = {"CBUSH": _cbush, "PBUSH": _pbush, "PELAS": _pelas, "CELAS1": _celas, "CELAS2": _celas}

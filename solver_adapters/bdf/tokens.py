@@ -1,0 +1,308 @@
+"""Physical lines into cards, one line at a time: comments, the three formats, continuations,
+INCLUDE, BEGIN BULK / ENDDATA.
+
+Formats, mixed freely within one deck:
+
+* small field: 8-column fields, 10 per line (name, 8 data fields, continuation marker in columns 73-80);
+* large field: name ending in ``*`` (``GRID*``), 16-column data fields, 4 per line, ``*`` continuations;
+* free field: comma separated (``GRID,1,,0.,0.,0.``; ``GRID*,`` gives 4 data fields per line);
+* a line containing tabs is expanded to 8-column tab stops and then read as small/large field.
+
+Continuations are either explicit (marker ``+xxx`` in field 10 matched by ``+xxx``/``*xxx`` in field 1
+of the next line) or implicit (the next line's field 1 is blank, ``+`` or ``*``; in free field the
+line starts with ``,``, ``+`` or ``*``). ``$`` starts a comment anywhere. ``BEGIN BULK`` and ``ENDDATA``
+are optional; a deck with executive/case control (a ``CEND`` line) is read from ``BEGIN BULK`` on.
+``INCLUDE 'file'`` is resolved relative to the including file (nested, loops detected), within
+the limits of :class:`IncludePolicy`.
+
+This is the reader's reference tokenizer: :mod:`.table` splits the same lines in bulk and falls
+back to this one for anything irregular, so both give the same cards and the same errors.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from solver_adapters.protocol import DeckFormatError
+
+
+@dataclass(frozen=True)
+class _Field:
+    text: str   # stripped, as written
+    line: int   # physical line number (1-based)
+    pos: int    # field position on that line (2..9 small, 2..5 large)
+
+
+@dataclass
+class _Line:
+    file: str
+    line: int
+    first: str            # field 1: card name or continuation marker
+    data: list[str]
+    cont: str             # field 10 (continuation marker), stripped
+
+
+@dataclass
+class _Card:
+    name: str
+    file: str
+    line: int
+    fields: list[_Field]  # fields[0] is the name (NASTRAN field 1)
+    cont: str = ""
+
+    @property
+    def src(self) -> str:
+        return f"{self.file}:{self.line}"
+
+    @property
+    def last_line(self) -> int:
+        """The physical line of the card's last field."""
+        return max(f.line for f in self.fields)
+
+    @property
+    def lines(self) -> set[int]:
+        """The physical lines the card was read from."""
+        return {f.line for f in self.fields}
+
+    def text(self, i: int) -> str:
+        """Field ``i`` stripped and upper-cased ("" beyond the end)."""
+        return self.fields[i - 1].text.upper() if i <= len(self.fields) else ""
+
+    def error(self, i: int, message: str) -> DeckFormatError:
+        """A DeckFormatError at NASTRAN field ``i`` (1-based) of this card."""
+        return card_error(self, i, message)
+
+
+def card_error(card, i: int, message: str) -> DeckFormatError:
+    """A DeckFormatError at NASTRAN field ``i`` of ``card`` (anything with ``name``, ``file``,
+    ``line`` and ``fields``): the physical line of that field, and which field of that line."""
+    if i <= len(card.fields):
+        f = card.fields[i - 1]
+        line, value = f.line, f.text
+        if line != card.line:
+            message += f" (continuation line, field {f.pos} of that line)"
+    else:
+        line, value = card.fields[-1].line, ""
+    return DeckFormatError(message, file=card.file, line=line, card=card.name, field=i, value=value)
+
+
+def _strip_comment(raw: str) -> str:
+    """Text before the first ``$`` (on an INCLUDE line: the first ``$`` outside single quotes)."""
+    if not raw.lstrip()[:7].upper() == "INCLUDE":
+        return raw.partition("$")[0]
+    quoted = False
+    for i, ch in enumerate(raw):
+        if ch == "'":
+            quoted = not quoted
+        elif ch == "$" and not quoted:
+            return raw[:i]
+    return raw
+
+
+def _is_continuation(first: str) -> bool:
+    return first == "" or first[0] in "+*"
+
+
+def _split(raw: str, file: str, lineno: int) -> _Line:
+    """One physical (comment-free, non-blank) line into field 1, data fields and field 10."""
+    def fail(message: str) -> DeckFormatError:
+        return DeckFormatError(message, file=file, line=lineno, value=raw.strip())
+
+    if "," in raw:
+        items = [s.strip() for s in raw.replace("\t", " ").split(",")]
+        first = items[0].upper()
+        large = first.endswith("*") or first.startswith("*")
+        width = 4 if large else 8
+        while len(items) > width + 2 and items[-1] == "":
+            items.pop()                   # trailing commas beyond field 10
+        if len(items) > width + 2:
+            raise fail(f"free-field line has {len(items) - 1} fields after field 1; at most "
+                       f"{width} data fields and a continuation marker fit on one line")
+        data = items[1:width + 1]
+        cont = items[width + 1] if len(items) > width + 1 else ""
+        return _Line(file, lineno, first, data + [""] * (width - len(data)), cont)
+    line = raw.expandtabs(8).rstrip()
+    if len(line) > 80:
+        raise fail("text beyond column 80 of a fixed-field line")
+    line = line.ljust(80)
+    first = line[:8].strip().upper()
+    large = first.endswith("*") or first.startswith("*")
+    width = 16 if large else 8
+    data = [line[8 + width * k: 8 + width * (k + 1)].strip() for k in range(64 // width)]
+    return _Line(file, lineno, first, data, line[72:80].strip().upper())
+
+
+BOUNDARY = object()  # between files: a card never continues across an INCLUDE
+_INCLUDE = re.compile(r"INCLUDE\s*(?:'([^']*)'|\"([^\"]*)\"|([^\s'\"]+))\s*", re.IGNORECASE)
+CARD_NAME = re.compile(r"[A-Z][A-Z0-9]{0,7}\*?|[+*].{0,7}|")
+"""Field 1 of a bulk-data line: a card name (a letter, then letters and digits, at most 8;
+``*`` for large field) or a continuation (blank, ``+...`` or ``*...``)."""
+
+
+def not_bulk_data(file: str, lineno: int) -> DeckFormatError:
+    """The error for a line of an included file that is no bulk-data card: it names the line,
+    never what the line holds (the file may be anything a deck points to)."""
+    return DeckFormatError("the included file is not bulk data: this line is no card (field 1 "
+                           "is neither a card name nor a continuation); its content is not shown",
+                           file=file, line=lineno, field=1)
+BEGIN_BULK = re.compile(r"BEGIN\s+BULK\b.*", re.IGNORECASE)
+
+
+def is_include(stripped: str) -> bool:
+    """A comment-free, stripped line that is an INCLUDE statement."""
+    return stripped[:7].upper() == "INCLUDE" and (len(stripped) == 7 or not stripped[7].isalnum())
+
+
+def bulk_start(uncommented: list[str], file: str) -> int:
+    """Index of the first bulk-data line: 0, or after BEGIN BULK when the file has a CEND line."""
+    if not any(u.strip().upper() == "CEND" for u in uncommented):
+        return 0
+    begin = next((i for i, u in enumerate(uncommented) if BEGIN_BULK.fullmatch(u.strip())), None)
+    if begin is None:
+        raise DeckFormatError("the deck has a CEND line (executive/case control) but no "
+                              "BEGIN BULK", file=file)
+    return begin + 1
+
+
+@dataclass(frozen=True)
+class IncludePolicy:
+    """Where an INCLUDE may read: regular files inside the folder tree of the deck the reading
+    started from (``root``; None: any folder, for text read without a file) or inside one of
+    ``allowed`` (folders the user allows, ``--include-dir``). Symbolic links are resolved first,
+    so a link inside the tree that points outside it is outside."""
+    root: Path | None = None
+    allowed: tuple[Path, ...] = ()
+
+    def inside(self, path: Path) -> bool:
+        if self.root is None:
+            return True
+        return any(path == d or d in path.parents for d in (self.root, *self.allowed))
+
+
+@dataclass
+class Includes:
+    """The state of one reading: the files read (as named in messages), the chain of files being
+    read (for loops) and the policy. Shared by both tokenizers."""
+    policy: IncludePolicy = field(default_factory=IncludePolicy)
+    files: list[str] = field(default_factory=list)
+    stack: list[Path] = field(default_factory=list)
+    texts: dict[str, str] = field(default_factory=dict)            # shown name -> text read
+    included: dict[tuple[str, int], str] = field(default_factory=dict)  # (file, INCLUDE line) -> shown
+
+    def open(self, stripped: str, file: str, lineno: int, base_dir: Path) -> tuple[str, str, Path]:
+        """``(text, shown name, resolved path)`` of the file an INCLUDE line names, read; a
+        located error (the INCLUDE line, field 2) for a bad statement, a loop, a file outside
+        the policy, anything but a regular file, or one that cannot be read. The error never
+        quotes what the named file holds."""
+        m = _INCLUDE.fullmatch(stripped)
+        if m is None:
+            raise DeckFormatError("expected INCLUDE 'file' (quoted, on one line)", file=file,
+                                  line=lineno, card="INCLUDE", field=2, value=stripped[7:].strip())
+        name = next(g for g in m.groups() if g is not None)
+
+        def fail(message: str) -> DeckFormatError:
+            return DeckFormatError(message, file=file, line=lineno, card="INCLUDE", field=2, value=name)
+
+        path = (base_dir / name).resolve()
+        if path in self.stack:
+            raise fail(f"INCLUDE loop: {' -> '.join(str(p) for p in self.stack + [path])}")
+        if not self.policy.inside(path):
+            raise fail(f"included file {path} is outside the deck's folder "
+                       f"{self.policy.root}{' (symbolic links followed)' if path != Path(os.path.abspath(base_dir / name)) else ''}; "
+                       f"allow its folder with --include-dir (or include_dirs in the user "
+                       f"configuration) if you trust it")
+        try:
+            if path.exists() and not path.is_file():
+                raise fail(f"included path {path} is not a regular file")
+            text = path.read_text(encoding="utf-8", errors="replace")
+        except OSError as exc:
+            raise fail(f"cannot read included file {path}: {exc.strerror or exc}") from None
+        if any(_strip_comment(u).strip().upper() == "CEND" for u in text.splitlines()):
+            raise fail(f"included file {path} is not bulk data: it has a CEND line (executive and "
+                       f"case control belong in the input file itself)")
+        shown = str(base_dir / name)
+        self.texts[shown] = text
+        self.included[(file, lineno)] = shown
+        return text, shown, path
+
+
+class LineReader:
+    """The physical data lines of a deck and its includes (the reference tokenizer)."""
+
+    def __init__(self, includes: Includes) -> None:
+        self.inc = includes
+        self.ended = False
+
+    def lines(self, text: str, file: str, base_dir: Path, included: bool = False):
+        raw_lines = text.removeprefix("\ufeff").splitlines()
+        uncommented = [_strip_comment(r) for r in raw_lines]
+        start = 0 if included else bulk_start(uncommented, file)
+        for k in range(start, len(raw_lines)):
+            body, lineno = uncommented[k], k + 1
+            stripped = body.strip()
+            if not stripped or BEGIN_BULK.fullmatch(stripped):
+                continue
+            if is_include(stripped):
+                yield BOUNDARY
+                yield from self.include(stripped, file, lineno, base_dir)
+                yield BOUNDARY
+                if self.ended:
+                    return
+                continue
+            line = _split(body, file, lineno)
+            if line.first.rstrip("*") == "ENDDATA":
+                self.ended = True
+                return
+            if included and not CARD_NAME.fullmatch(line.first):
+                raise not_bulk_data(file, lineno)
+            yield line
+
+    def include(self, stripped: str, file: str, lineno: int, base_dir: Path):
+        text, shown, path = self.inc.open(stripped, file, lineno, base_dir)
+        self.inc.files.append(shown)
+        self.inc.stack.append(path)
+        yield from self.lines(text, shown, path.parent, included=True)
+        self.inc.stack.pop()
+
+
+def group_cards(lines):
+    """Physical lines (and BOUNDARY markers) into cards."""
+    card: _Card | None = None
+    for line in lines:
+        if line is BOUNDARY:
+            if card is not None:
+                yield card
+            card = None
+            continue
+        if _is_continuation(line.first):
+            if card is None:
+                raise DeckFormatError("continuation line without a card before it",
+                                      file=line.file, line=line.line, field=1, value=line.first)
+            marker = line.first[1:]
+            if card.cont and marker and card.cont[1:] != marker and card.cont != marker:
+                raise DeckFormatError(f"continuation marker does not match {card.cont!r} of the "
+                                      f"card above", file=line.file, line=line.line,
+                                      card=card.name, field=1, value=line.first)
+        else:
+            if card is not None:
+                yield card
+            name = line.first.rstrip("*")
+            card = _Card(name, line.file, line.line, [_Field(name, line.line, 1)])
+        card.fields.extend(_Field(t, line.line, p) for p, t in enumerate(line.data, start=2))
+        card.cont = line.cont
+    if card is not None:
+        yield card
+
+
+def card_from_lines(lines: list[_Line]) -> _Card:
+    """The card of one head line and its continuation lines (already split)."""
+    head = lines[0]
+    name = head.first.rstrip("*")
+    card = _Card(name, head.file, head.line, [_Field(name, head.line, 1)])
+    for line in lines:
+        card.fields.extend(_Field(t, line.line, p) for p, t in enumerate(line.data, start=2))
+        card.cont = line.cont
+    return card
