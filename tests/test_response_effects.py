@@ -403,7 +403,7 @@ def _within(p: dict, truth: float, n_std: float = 4.0) -> None:
     assert abs(p["value"] - truth) <= n_std * p["std"], (p, truth)
 
 
-def test_joint_softening_found(tmp_module):
+def test_joint_softening_found(tmp_module, saved_figures):
     """The base 2.5 times stiffer at no amplitude than at the largest (s = 0.6), under the load
     sequence, measured with noise of 0.5-2 % of the responses: the amplitude each case's
     measurements show and the response they show are one fixed point (found by iterating the
@@ -423,9 +423,71 @@ def test_joint_softening_found(tmp_module):
         phi = new
     else:
         raise AssertionError("the amplitudes did not settle")
-    a = _found(_diagnose(root), "joint_softening")
+    res = diagnose_command.run(root)            # with the plots (when matplotlib is installed)
+    a = _found(res.document, "joint_softening")
     assert a["where"] == ["base"]
     _within(a["parameters"][0], s)
+    if _has_matplotlib():
+        _check_response_plots(res, root / "out", saved_figures)
+
+
+def _has_matplotlib() -> bool:
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+@pytest.fixture
+def saved_figures(monkeypatch):
+    """The figures saved during the test, by file name, as they were when saved (none without
+    matplotlib)."""
+    figures: dict = {}
+    if not _has_matplotlib():
+        return figures
+    from matplotlib.figure import Figure
+
+    original = Figure.savefig
+
+    def keep(self, fname, *args, **kwargs):
+        figures[str(fname).rsplit("/", 1)[-1]] = self
+        return original(self, fname, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", keep)
+    return figures
+
+
+def _check_response_plots(res, out: Path, saved: dict) -> None:
+    """diagnose's load-displacement plot draws the measured path and both models' predictions of
+    the top channel against the load, case by case: the declared model's is one straight line
+    through the origin (displacement / load the same in every case, to rounding), the final
+    model's follows the measured path closer (RMS distance smaller); the residual-against-
+    amplitude plot has the two models' points, ``(measured - predicted) x sign(measured)``."""
+    out.mkdir()
+    files = res.write(out)
+    assert {"load_displacement.png", "residual_amplitude.png"} <= set(files)
+    assert "![load_displacement](load_displacement.png)" in (out / "report.md").read_text()
+    ax = saved["load_displacement.png"].axes[0]
+    assert ax.get_xlabel() == f"displacement at grid {TOP}, component 1"
+    lines = {ln.get_label().split(" (")[0]: ln for ln in ax.get_lines() if not ln.get_label().startswith("_")}
+    meas, before, after = (lines[k] for k in ("measured", "declared model", "after the added effects"))
+    y = np.asarray(meas.get_ydata())
+    assert np.array_equal(y, before.get_ydata()) and np.array_equal(y, after.get_ydata())
+    ratio = np.asarray(before.get_xdata()) / y
+    assert np.ptp(ratio) < 1e-9 * np.max(np.abs(ratio))
+    m = np.asarray(meas.get_xdata())
+    rms = [float(np.sqrt(np.mean((np.asarray(ln.get_xdata()) - m) ** 2))) for ln in (before, after)]
+    assert rms[1] < 0.5 * rms[0], rms
+    ax = saved["residual_amplitude.png"].axes[0]
+    pts = {ln.get_label(): ln for ln in ax.get_lines() if ln.get_label() in ("declared model", "after the added effects")}
+    fo, d = res.prepared.fit_obs, res.diagnosis
+    top = np.array([c <= 3 for _, c in fo.dofs])             # the translations' panel
+    sign = np.where(fo.values < 0, -1.0, 1.0)
+    assert np.asarray(pts["declared model"].get_ydata()) == pytest.approx(
+        ((fo.values - d.declared.predicted) * sign)[top], rel=1e-12)
+    assert np.asarray(pts["after the added effects"].get_ydata()) == pytest.approx(
+        ((fo.values - d.final.predicted) * sign)[top], rel=1e-12)
 
 
 def test_joint_unloading_found(tmp_module):
@@ -480,6 +542,31 @@ def test_p_delta_found(tmp_module):
     a = _found(_diagnose(root), "p_delta")
     assert a["where"] == [TOP] and a["members"] == N_EL
     _within(a["parameters"][0], 1.0)
+
+
+def test_bounds_and_rejection_rules(sequence_study, tmp_module):
+    """Each kind's box and the refits it refuses: ``s`` at its upper bound (the data asking for
+    a negative compliance at small amplitude), ``r`` at 0.05 or 20, ``theta`` at -10 or 10 (a
+    factor beyond any plausible value); inside the box, however close to a bound, it stands."""
+    from blackbox.diagnosis.effects.joint_softening import S_MAX
+
+    pr = sequence_study[2]
+    soft = next(e for e in pr.candidates if isinstance(e, JointSoftening))
+    unload = next(e for e in pr.candidates if isinstance(e, JointUnloading))
+    assert [b.tolist() for b in soft.bounds] == [[0.0], [S_MAX]] and soft.one_sided.tolist() == [True]
+    assert "negative at small amplitude" in soft.rejection(np.array([S_MAX]))
+    assert soft.rejection(np.array([0.9987])) is None and soft.rejection(np.array([0.0])) is None
+    assert [b.tolist() for b in unload.bounds] == [[0.05], [20.0]] and unload.nominal.tolist() == [1.0]
+    for r, bad in ((0.05, True), (20.0, True), (0.051, False), (19.9, False), (1.0, False)):
+        assert (unload.rejection(np.array([r])) is not None) == bad, r
+    root = tmp_module / "bounds_pd"
+    shutil.copytree(sequence_study[0], root, ignore=shutil.ignore_patterns("decks"))
+    with open(root / "study.toml", "a") as fh:
+        fh.write(f"\n[[preloads]]\ngrid = {TOP}\ncomponent = 3\nvalue = -1.0e5\n")
+    pd = next(e for e in _prepared(root, ["p_delta"]).candidates if isinstance(e, PDelta))
+    assert [b.tolist() for b in pd.bounds] == [[-10.0], [10.0]] and pd.nominal.tolist() == [0.0]
+    for t, bad in ((-10.0, True), (10.0, True), (-9.9, False), (1.0, False), (0.0, False)):
+        assert (pd.rejection(np.array([t])) is not None) == bad, t
 
 
 # ---- no false alarm ------------------------------------------------------------------------------

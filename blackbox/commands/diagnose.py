@@ -418,16 +418,19 @@ class DiagnosisResult:
 
     def write(self, out: Path) -> list[str]:
         from blackbox.reports.diagnose import diagnosis_plots, diagnosis_report
-        from blackbox.reports.response import amplitude_before_after
+        from blackbox.reports.response import amplitude_before_after, before_after_plots
 
         out = Path(out)
         (out / "diagnosis.json").write_text(json.dumps(self.document, indent=2))
         files = ["diagnosis.json"]
+        d, fo = self.diagnosis, self.prepared.fit_obs
+        same_rows = len(d.declared.residuals) == len(fo) == len(d.final.residuals)
         if self.plots:
             files += diagnosis_plots(self.diagnosis, self.prepared.deck, out)
+            if same_rows:       # the fitted rows measured and predicted, before and after
+                files += before_after_plots(self.study.loads, fo, d.declared.predicted, d.final.predicted, out)
         text = diagnosis_report(self.study, self.document, files)
-        d, fo = self.diagnosis, self.prepared.fit_obs
-        if len(d.declared.residuals) == len(fo) == len(d.final.residuals):
+        if same_rows:
             text += amplitude_before_after(fo.values, fo.sigma, d.declared.residuals, d.final.residuals)
         (out / "report.md").write_text(text)
         files.append("report.md")
