@@ -10,10 +10,13 @@ softening. It is the form ``k_0 / (1 + b a_c)`` with ``b = s / (1 - s)`` and the
 zero amplitude ``k_0 = k / (1 - s)``. Nested at ``s = 0`` (the declared, linear joint; one-sided:
 softening), bounded above by ``1 - 1e-6``: ``s -> 1`` is a compliance proportional to the
 amplitude, a force that no longer grows with the deformation (the joint yields), the physical
-end of the range. A refit that ends *at* that bound is rejected (:meth:`JointSoftening.rejection`):
-the data then ask for ``s > 1``, a negative compliance at small amplitude, which no joint has;
-the effect would be absorbing a misfit it does not describe. Inside the bound, however close to
-1, it is a yielding joint and stands.
+end of the range, not an arbitrary box: at ``s = 1`` the joint's force is the same at every
+amplitude (``k / a_c`` times a deformation proportional to ``a_c``: an elastic-perfectly-plastic
+joint read at its secant), so a refit that ends there stands and reads "the joint has yielded
+over the measured range", ``k`` its secant stiffness at the largest amplitude
+(:meth:`JointSoftening.rejection`; the stiffness at zero amplitude, ``k / (1 - s)``, is then
+only bounded below). The default rule of the other kinds (a parameter held at a bound other than
+its nested value is refused) would refuse the one reading a yielded joint has.
 
 The covariate ``a_c`` is the case's *amplitude*: its largest measured displacement magnitude
 over its translation rows (its rotation rows when the study measures no translation), divided by
@@ -144,13 +147,8 @@ class JointSoftening(Effect):
         return np.broadcast_to((1.0 - a) / (1.0 - s + s * a) ** 2, np.shape(rel)).copy()[None]
 
     def rejection(self, x_effect):
-        """``s`` held at its upper bound: the data ask for a negative compliance at small
-        amplitude (module docstring); a value below it stands."""
-        s = float(np.asarray(x_effect)[0])
-        if s >= S_MAX * (1.0 - 1e-12):
-            return (f"{self.names[0]} ends at its upper bound {S_MAX:.7g}: the data ask for a joint whose compliance "
-                    "would be negative at small amplitude, which no joint has; the effect absorbs a misfit it "
-                    "does not describe")
+        """``None``: both ends of ``[0, S_MAX]`` are physical (nested at 0; at ``S_MAX`` the
+        yield limit, module docstring), so no refit in the box is refused for where it ends."""
         return None
 
     def refit_starts(self, x2, step, lo, hi, first):
