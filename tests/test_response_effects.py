@@ -238,7 +238,8 @@ def _model(pr, effects, x_effects, o=None, k=(K_BASE,)):
     for e in effects:
         spec, x = spec.add(e, x)
         pr.base.ensure_columns(e.refit_columns(), "test")
-    x[len(k):] = np.concatenate([np.atleast_1d(v) for v in x_effects])
+    if effects:
+        x[len(k):] = np.concatenate([np.atleast_1d(v) for v in x_effects])
     o = list(dict.fromkeys(pr.study.measurements.all_dofs)) if o is None else o
     return dg.AugmentedModel(pr.base, spec, pr.boundary, pr.K_deck, o), x, o
 
@@ -363,7 +364,7 @@ def test_case_dependent_joint_is_the_case_by_case_truth(sequence_study, monkeypa
 
 def test_p_delta_jacobian(sequence_study, tmp_module):
     """The p_delta term's Jacobian (joint and theta) against central differences at theta = 0.7,
-    alone and beside the amplitude-dependent joint (the case-by-case path)."""
+    alone and beside the amplitude-dependent joint (the case-by-case path); its score column."""
     root = tmp_module / "sequence_pd"
     shutil.copytree(sequence_study[0], root, ignore=shutil.ignore_patterns("decks"))
     with open(root / "study.toml", "a") as fh:
@@ -382,6 +383,16 @@ def test_p_delta_jacobian(sequence_study, tmp_module):
             xm[i] -= h
             fd = (model.predict(xp, om) - model.predict(xm, om)) / (2 * h)
             assert np.max(np.abs(J[:, i] - fd)) < 1e-6 * np.max(np.abs(fd)), ([e.kind for e in effects], i)
+    # the score column by reciprocity (no unit-load column at K_G's DOFs) is the augmented
+    # model's Jacobian column at theta = 0, with one joint stiffness and with one per case
+    # (both exact linear algebra on the same split run: 1e-8 of the column)
+    for effects, xe in (([], []), ([soft], [0.5])):
+        model, x, o = _model(pr, effects, xe)
+        om = dg.ObsMap.of(pr.fit_obs, {dof: i for i, dof in enumerate(o)})
+        col = PDelta.batch_columns(model, model.state(x), x, om, [pd])[:, 0]
+        model2, x2, _ = _model(pr, effects + [pd], xe + [0.0])
+        J = model2.jacobian(x2, om)[:, -1]
+        assert np.max(np.abs(col - J)) < 1e-8 * np.max(np.abs(J)), [e.kind for e in effects]
 
 
 # ---- found when planted --------------------------------------------------------------------------
