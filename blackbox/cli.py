@@ -359,10 +359,20 @@ def add_cache_options(s: argparse.ArgumentParser) -> None:
                    help="keep solver results here instead of STUDY/.blackbox_cache/")
 
 
+def add_allow_outside(s: argparse.ArgumentParser) -> None:
+    """``--allow-outside DIR`` (repeatable): a study's files may lie in DIR although it is outside
+    the study folder (``main`` hands it to ``blackbox.study.ALLOW_OUTSIDE``)."""
+    s.add_argument("--allow-outside", type=Path, action="append", default=[], metavar="DIR",
+                   help="let the study's files (deck, loads...) lie in DIR outside the study folder, for "
+                        "this run (or list DIR under allow_outside in your ~/.config/blackbox/config.toml)")
+
+
 def _cache_choice(args) -> bool | Path:
     if args.no_cache:
         return False
-    return args.cache_dir if args.cache_dir is not None else True
+    # a folder the user names may be reached through their own links: use its real path (the
+    # cache refuses a linked folder, which is what a study's own .blackbox_cache must not be)
+    return args.cache_dir.resolve() if args.cache_dir is not None else True
 
 
 def _study_command(sub, name: str, help: str, func, *, cache: bool = True) -> argparse.ArgumentParser:
@@ -373,6 +383,7 @@ def _study_command(sub, name: str, help: str, func, *, cache: bool = True) -> ar
     s.add_argument("--out", type=Path, required=True)
     s.add_argument("--trust-command", action="store_true",
                    help="consent, for this run, to start the study's external command (adapter \"command\")")
+    add_allow_outside(s)
     if cache:
         add_cache_options(s)
     s.set_defaults(func=func)
@@ -456,6 +467,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--model", choices=["simple", "complex"], default=None)
     s.add_argument("--trust-command", action="store_true",
                    help="consent, for this run, to start the studies' external command (adapter \"command\")")
+    add_allow_outside(s)
     add_cache_options(s)
     add_parallel_options(s)
     s.set_defaults(func=cmd_batch)
@@ -577,12 +589,14 @@ def main(argv: list[str] | None = None) -> int:
     from solver_adapters.subprocess import install_termination_handlers
 
     from blackbox.adapters import ADAPTER_CACHE, SOLVER_PROGRESS, TRUST_COMMAND
+    from blackbox.study import ALLOW_OUTSIDE
 
     import threading
     previous = (install_termination_handlers()      # SIGTERM/SIGHUP end a run as Ctrl-C does
                 if threading.current_thread() is threading.main_thread() else {})
     trust_token = TRUST_COMMAND.set(bool(getattr(args, "trust_command", False)))
     beat_token = SOLVER_PROGRESS.set(_heartbeat)
+    allow_token = ALLOW_OUTSIDE.set(tuple(getattr(args, "allow_outside", None) or ()))
     cache_token = None
     if hasattr(args, "no_cache"):  # a sub-command with --no-cache / --cache-dir (add_cache_options)
         cache_token = ADAPTER_CACHE.set(_cache_choice(args))
@@ -611,6 +625,7 @@ def main(argv: list[str] | None = None) -> int:
             signal.signal(sig, handler)
         TRUST_COMMAND.reset(trust_token)
         SOLVER_PROGRESS.reset(beat_token)
+        ALLOW_OUTSIDE.reset(allow_token)
         if cache_token is not None:
             ADAPTER_CACHE.reset(cache_token)
 

@@ -34,7 +34,7 @@ from blackbox.condensation import Condensed, CondensedModel, condense
 from blackbox.errors import StudyError
 from blackbox.joints import (PLANES, ComplexJoint, JointModel, SimpleJoint, actual_joint_stub_kc, make_joint,
                              spring_network)
-from blackbox.study import Study, joint_branches, read_text
+from blackbox.study import Study, joint_branches, read_text, study_file
 from solver_adapters.protocol import (Deck, DofLabel, LoadMatrix, ScalarSpring, SolverAdapter, Spring,
                                      UnstableStructureError)
 
@@ -413,8 +413,9 @@ def read_truth(path: Path) -> "TruthConfig":
 def read_truth_record(study: Study) -> dict | None:
     """``truth.json`` written by ``blackbox simulate`` into a study (``None`` for real data)."""
     p = study.root / "truth.json"
-    if not p.exists():
+    if not p.exists() and not p.is_symlink():
         return None
+    study_file(study.root, "truth.json")
     try:
         rec = json.loads(read_text(p))
     except json.JSONDecodeError as exc:

@@ -368,13 +368,20 @@ _SKIP_DIRS = {".blackbox_cache", "__pycache__", ".git"}
 def pack_study(folder: str | os.PathLike, *, skip: Sequence[str] = ()) -> StudyPackage:
     """Read a study folder into memory: every regular file under it (the run cache and symbolic
     links leading out of it left out), and a deck (with its INCLUDEs) that lives outside the
-    folder under ``_external/``, ``study.toml`` rewritten to point there. ``ValueError`` for a
-    folder that is not a study (no ``study.toml``)."""
+    folder -- in a folder the user allows (:func:`blackbox.study.study_file`) -- under
+    ``_external/``, ``study.toml`` rewritten to point there. ``ValueError`` for a folder that is
+    not a study (no ``study.toml``); :class:`~blackbox.errors.StudyError` for a study file
+    (``study.toml``, ``loads.csv``, ``measurements.csv``, ``truth.json``, the deck and its
+    INCLUDEs) that leads out of the folder without that permission."""
     import tomllib
+
+    from blackbox.study import study_file
 
     root = Path(folder).resolve()
     if not (root / "study.toml").is_file():
         raise ValueError(f"{folder}: not a study folder (no study.toml)")
+    for name in ("study.toml", "loads.csv", "measurements.csv", "truth.json"):
+        study_file(root, name)          # a link leading out of the study is refused, not left out
     files: dict[str, bytes] = {}
     for here, dirs, names in os.walk(root, followlinks=False):
         rel = Path(here).relative_to(root)
@@ -388,11 +395,11 @@ def pack_study(folder: str | os.PathLike, *, skip: Sequence[str] = ()) -> StudyP
                 files[(rel / n).as_posix()] = real.read_bytes()
     cfg = tomllib.loads(files["study.toml"].decode("utf-8-sig"))
     deck_name = str(cfg.get("solver", {}).get("deck", "model.bdf"))
-    deck = (root / deck_name).resolve()
+    deck = study_file(root, deck_name, f"[solver] deck = {deck_name!r}", named_in=root / "study.toml")
     if deck.is_file():
         from solver_adapters.cache import deck_files
 
-        deck_set = [p for p in deck_files(deck) if p.is_file()]
+        deck_set = [study_file(root, p, f"the deck's INCLUDE {p}") for p in deck_files(deck) if p.is_file()]
         if any(not p.is_relative_to(root) for p in deck_set):
             # the deck or one of its INCLUDEs lives outside the folder: the whole deck travels
             # under _external/ with the layout of its files, and study.toml points there

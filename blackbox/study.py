@@ -2,6 +2,12 @@
 ``measurements.csv``. Everything is checked before any solver work, and every rejection names
 the file, the line and the column.
 
+Every file a study names resolves inside the study folder (:func:`study_file`): a study is data
+someone else may send, and it must not make blackbox read the user's other files. A path or a
+symbolic link that leads out of the folder is refused unless the user allows that folder, for one
+run (``--allow-outside DIR``, :data:`ALLOW_OUTSIDE`) or in their own configuration file
+(``allow_outside`` in ``~/.config/blackbox/config.toml``, :mod:`solver_adapters.userconfig`).
+
 This is wiring, not method: it may read the deck (to check grids and joint ties) and pick the
 adapter; the method modules only ever see the adapter through ``solver_adapters.protocol``.
 """
@@ -10,7 +16,10 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
+import stat
 import tomllib
+from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -145,6 +154,63 @@ class Study:
     @property
     def name(self) -> str:
         return self.config.name
+
+
+# --------------------------------------------------------------------------------------------
+# the study's files stay in the study folder
+# --------------------------------------------------------------------------------------------
+ALLOW_OUTSIDE: ContextVar[tuple[Path, ...]] = ContextVar("blackbox_allow_outside", default=())
+"""Folders outside a study that its files may lie in, for the running command (the CLI's
+``--allow-outside``); the user's ``config.toml`` (``allow_outside``) adds its own."""
+
+_KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a named pipe"), (stat.S_ISCHR, "a character device"),
+          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def allowed_folders() -> tuple[Path, ...]:
+    """Where a study's files may lie outside its folder: :data:`ALLOW_OUTSIDE` and the user's
+    ``allow_outside`` (absolute, symlink-free)."""
+    from solver_adapters.userconfig import allowed_outside
+
+    return tuple(Path(p).expanduser().resolve() for p in ALLOW_OUTSIDE.get()) + tuple(allowed_outside())
+
+
+def study_file(root: str | os.PathLike, name: str | os.PathLike, what: str | None = None, *,
+               named_in: Path | None = None) -> Path:
+    """``root / name`` as an absolute, symlink-free path, after checking that it stays in the
+    study folder ``root`` and, when it exists, that it is a regular file.
+
+    ``what`` names the file in messages (default: ``name``; e.g. ``[solver] deck = '...'``);
+    ``named_in``: the file that names it (the error is located there). A path or a symbolic link
+    (the file itself or a folder on its way) leading out of the folder raises :class:`StudyError`
+    naming both the given and the real path and how to allow it, unless the real path lies in an
+    :func:`allowed_folders` folder. Nothing of the outside file is read."""
+    root = Path(root)
+    top = root.resolve()
+    given = root / name
+    real = given.resolve()
+    what = what or str(name)
+    where = str(named_in if named_in is not None else given)
+    if not real.is_relative_to(top):
+        lexical = Path(os.path.normpath(given.absolute()))
+        how = ("through a symbolic link" if lexical.is_relative_to(Path(os.path.normpath(root.absolute())))
+               else "by its path")
+        if not any(real.is_relative_to(a) for a in allowed_folders()):
+            from solver_adapters.userconfig import config_file
+
+            raise StudyError(f"{what} leads outside the study folder {top} ({how}, to {real}): refused, "
+                             f"because a study may come from someone else and must not make blackbox read "
+                             f"your other files. Put the file in the study folder, or allow its folder: "
+                             f"--allow-outside {real.parent} for this run, or allow_outside = "
+                             f"[\"{real.parent}\"] in your own {config_file()}", file=where)
+    try:
+        mode = os.stat(real).st_mode
+    except OSError:
+        return real                     # missing: the reader says so where it needs the file
+    if not stat.S_ISREG(mode):
+        kind = next((k for test, k in _KINDS if test(mode)), "not a regular file")
+        raise StudyError(f"{what} is {kind}, not a regular file", file=where)
+    return real
 
 
 # --------------------------------------------------------------------------------------------
@@ -372,8 +438,9 @@ def load_study(root: str | Path, *, need_measurements: bool = False) -> Study:
     if not root.is_dir():
         raise StudyError("study folder not found", file=str(root))
     toml_path = root / "study.toml"
+    study_file(root, "study.toml")
     config = read_config(toml_path)
-    deck_path = (root / config.solver.deck).resolve()
+    deck_path = study_file(root, config.solver.deck, f"[solver] deck = {config.solver.deck!r}", named_in=toml_path)
     if not deck_path.is_file():
         raise StudyError(f"deck {config.solver.deck!r} not found", file=str(toml_path))
     # read for any adapter: cards the reference solver does not model (shells, solids) are kept
@@ -383,8 +450,10 @@ def load_study(root: str | Path, *, need_measurements: bool = False) -> Study:
     grids = set(deck.grids)
     check_joints(config, deck, toml_path)
     check_preloads(config, deck, toml_path)
+    study_file(root, "loads.csv")
     loads = read_loads(root / "loads.csv", grids)
     meas_path = root / "measurements.csv"
+    study_file(root, "measurements.csv")
     measurements = None
     if meas_path.exists():
         measurements = read_measurements(meas_path, set(loads.cases), grids, config.measurements,

@@ -41,6 +41,20 @@ rewritten by the recomputed result. A failed run raises before anything is writt
 never cached. The cache never makes a solve fail: an unwritable directory is counted
 (``store_errors``) and warned about once.
 
+What is opened
+--------------
+The cache folder travels with the study, so whoever sent the study chose what is in it, and entry
+names can be computed from the study alone. So the cache folder and its two-letter sub-folders
+are opened as real directories only (never through a symbolic link; every later step works
+relative to the opened directory), and an entry is opened without following a link and without
+blocking (a named pipe would otherwise wait for a writer forever), then checked on the open file
+before a byte is read: a regular file, owned by this user, and no larger than
+:func:`entry_size_cap` for the request. Anything else is :class:`~solver_adapters.errors.UnsafeEntry`:
+never read, counted (``corrupt`` and ``unsafe``), warned about, recomputed and replaced by the
+new entry (the rename replaces the name, it does not write through it). A cache folder that is
+a symbolic link or not a directory (:class:`~solver_adapters.errors.UnsafeCacheFolder`) turns
+the cache off for the run, with a warning: nothing is read from or written through it.
+
 Authentication
 --------------
 A checksum only catches accidents: whoever can write the cache folder (it travels with the
@@ -66,7 +80,7 @@ import json
 import os
 import re
 import secrets
-import tempfile
+import stat
 import threading
 import time
 import warnings
@@ -76,7 +90,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from solver_adapters.errors import CorruptEntry, UnauthenticEntry
+from solver_adapters.errors import CorruptEntry, UnauthenticEntry, UnsafeCacheFolder, UnsafeEntry
 from solver_adapters.protocol import (Displacements, DofLabel, LoadMatrix, ScalarSpring, SolverAdapter,
                                       SolverStats)
 from solver_adapters.userconfig import InsecureFileError, config_dir, read_private
@@ -92,6 +106,12 @@ _RESULT_OPTIONS = ("version", "command", "backend", "misbehave")
 _COUNT_LOCK = threading.Lock()   # counters are shared by a CachedAdapter and its with_springs copies
 KEY_FILE = "cache.key"
 MAC_PREFIX = b"hmac-sha256 "
+HEADER_FIXED_BYTES = 64 * 1024
+"""Room in an entry's header line for everything but the report labels and the case names (key,
+shape, dtype, sizes, sha256, time, adapter name, run count: a few hundred bytes in practice)."""
+_DIR_FLAGS = os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+_READ_FLAGS = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
+_NOFOLLOW_OK = hasattr(os, "O_NOFOLLOW") and os.open in os.supports_dir_fd
 
 
 @dataclass
@@ -106,6 +126,7 @@ class CacheStats:
     bypassed: int = 0
     not_stored: int = 0
     unauthenticated: int = 0
+    unsafe: int = 0
 
     def snapshot(self) -> dict[str, int]:
         return dict(vars(self))
@@ -197,7 +218,7 @@ def deck_files(path: str | os.PathLike) -> list[Path]:
             return
         out.append(p)
         try:
-            text = p.read_text(encoding="latin-1")
+            text = _read_regular(p).decode("latin-1")
         except OSError:
             return
         for line in text.splitlines():
@@ -210,11 +231,24 @@ def deck_files(path: str | os.PathLike) -> list[Path]:
     return out
 
 
+def _read_regular(path: Path) -> bytes:
+    """The bytes of ``path`` if it is a regular file (links followed: a deck may be one), opened
+    without blocking; ``OSError`` for anything else (a named pipe, a device, a folder)."""
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(f"{path} is not a regular file")
+        with os.fdopen(fd, "rb", closefd=False) as fh:
+            return fh.read()
+    finally:
+        os.close(fd)
+
+
 def _files_digest(files: Sequence[Path]) -> str:
     h = hashlib.sha256()
     for f in files:
         try:
-            data = f.read_bytes()
+            data = _read_regular(f)
         except OSError:
             data = b"<unreadable>"
         h.update(hashlib.sha256(data).digest())
@@ -314,10 +348,131 @@ def entry_path(cache_dir: str | os.PathLike, key: str) -> Path:
     return Path(cache_dir) / key[:2] / f"{key}{SUFFIX}"
 
 
+def entry_size_cap(report: Sequence[DofLabel], cases: Sequence[str]) -> int:
+    """The largest size an entry for ``report`` x ``cases`` can have: the magic line, a header
+    line of at most :data:`HEADER_FIXED_BYTES` plus the JSON of the report labels and of the
+    case names (as the writer spells them), the MAC line and 8 bytes per value. A file larger
+    than this is not one of our entries and is not read."""
+    labels = json.dumps([[int(g), int(c)] for g, c in report])
+    names = json.dumps(list(cases))
+    return (len(MAGIC) + HEADER_FIXED_BYTES + len(labels) + len(names) + 1
+            + len(MAC_PREFIX) + 64 + 1 + 8 * len(report) * len(cases))
+
+
+def _open_dir(name: str | os.PathLike, dir_fd: int | None = None, *, create: bool = False) -> int:
+    """A descriptor of the directory ``name`` (relative to ``dir_fd`` when given), opened without
+    following a symbolic link; made (mode 0777 & ~umask) first when ``create``. Raises
+    :class:`UnsafeCacheFolder` for a link or anything but a directory, ``OSError`` otherwise."""
+    if create:
+        try:
+            os.mkdir(name, dir_fd=dir_fd) if dir_fd is not None else Path(name).mkdir(parents=True)
+        except FileExistsError:
+            pass
+    try:
+        return os.open(name, _DIR_FLAGS, dir_fd=dir_fd)
+    except OSError as exc:
+        try:
+            st = os.stat(name, dir_fd=dir_fd, follow_symlinks=False)
+        except OSError:
+            raise exc from None
+        shown = name if dir_fd is None else f"{name} (in the cache folder)"
+        if stat.S_ISLNK(st.st_mode):
+            raise UnsafeCacheFolder(f"cache folder {shown} is a symbolic link; the cache reads and writes "
+                                    f"only a real folder (remove the link, or give the real folder with "
+                                    f"--cache-dir)") from None
+        if not stat.S_ISDIR(st.st_mode):
+            raise UnsafeCacheFolder(f"cache folder {shown} is not a folder") from None
+        raise
+
+
+class _EntryDir:
+    """The folder of one entry, opened as a real directory: ``cache_dir`` (when given) and the
+    entry's sub-folder, each without following links. A context manager; ``fd`` is the entry's
+    folder. Without ``cache_dir``, only the entry's own folder is checked."""
+
+    def __init__(self, path: Path, cache_dir: Path | None = None, *, create: bool = False):
+        self.path, self.cache_dir, self.create = Path(path), cache_dir, create
+        self.fd: int | None = None
+
+    def __enter__(self) -> "_EntryDir":
+        if not _NOFOLLOW_OK:                     # no O_NOFOLLOW / dir_fd: plain paths (Windows)
+            if self.create:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+            return self
+        if self.cache_dir is not None and self.path.parent.parent == self.cache_dir:
+            top = _open_dir(self.cache_dir, create=self.create)
+            try:
+                self.fd = _open_dir(self.path.parent.name, top, create=self.create)
+            finally:
+                os.close(top)
+        else:
+            self.fd = _open_dir(self.path.parent, create=self.create)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
+
+    def at(self) -> dict:
+        """``dir_fd`` keyword for calls relative to the folder (none without descriptors)."""
+        return {"dir_fd": self.fd} if self.fd is not None else {}
+
+    def name(self, leaf: str) -> str | Path:
+        return leaf if self.fd is not None else self.path.parent / leaf
+
+
+def _read_capped(path: Path, folder: _EntryDir, cap: int) -> bytes:
+    """The bytes of the entry ``path`` after checking the opened file: a regular file, owned by
+    this user, at most ``cap`` bytes. ``FileNotFoundError`` if absent, :class:`UnsafeEntry`
+    for anything else (never read)."""
+    try:
+        fd = os.open(folder.name(path.name), _READ_FLAGS, **folder.at())
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        try:
+            link = stat.S_ISLNK(os.stat(folder.name(path.name), follow_symlinks=False, **folder.at()).st_mode)
+        except OSError:
+            link = False
+        if link:
+            raise UnsafeEntry("a symbolic link, not an entry (not followed)") from None
+        raise
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            kind = ("a named pipe" if stat.S_ISFIFO(st.st_mode) else "a device" if stat.S_ISCHR(st.st_mode)
+                    or stat.S_ISBLK(st.st_mode) else "a folder" if stat.S_ISDIR(st.st_mode) else "a socket"
+                    if stat.S_ISSOCK(st.st_mode) else "not a regular file")
+            raise UnsafeEntry(f"{kind}, not an entry (not read)")
+        if hasattr(os, "getuid") and st.st_uid != os.getuid():
+            raise UnsafeEntry(f"owned by user id {st.st_uid}, not by you (not read)")
+        if st.st_size > cap:
+            raise UnsafeEntry(f"{st.st_size} bytes, more than the {cap} an entry for this request can have "
+                              f"(not read)")
+        chunks, left = [], cap + 1
+        while left > 0:
+            chunk = os.read(fd, min(left, 1 << 20))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            left -= len(chunk)
+        if left <= 0:
+            raise UnsafeEntry(f"grew beyond {cap} bytes while being read (not used)")
+        return b"".join(chunks)
+    finally:
+        os.close(fd)
+
+
 def write_entry(path: Path, key: str, result: Displacements, extra: dict[str, Any] | None = None, *,
-                secret: bytes | None = None) -> None:
+                secret: bytes | None = None, cache_dir: str | os.PathLike | None = None) -> None:
     """Write ``result`` as the entry ``path`` atomically (temp file, fsync, ``os.replace``),
-    authenticated with ``secret`` (default: this user's key, :func:`load_cache_key`)."""
+    authenticated with ``secret`` (default: this user's key, :func:`load_cache_key`).
+
+    The entry's folder (and ``cache_dir`` when ``path`` is its entry) is opened as a real
+    directory and every step works inside it: a linked folder raises :class:`UnsafeCacheFolder`
+    and nothing is written through it; whatever is at the entry's name (a planted pipe or link)
+    is replaced, not written through."""
     secret = load_cache_key() if secret is None else secret
     values = np.ascontiguousarray(result.values, dtype="<f8")
     raw = values.tobytes()
@@ -325,43 +480,50 @@ def write_entry(path: Path, key: str, result: Displacements, extra: dict[str, An
               "sha256": hashlib.sha256(raw).hexdigest(),
               "dofs": [[int(g), int(c)] for g, c in result.dofs], "cases": list(result.cases),
               "created": time.time(), **(extra or {})}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    _remove_stale_tmp(path.parent)
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".part", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            line = json.dumps(header).encode()
-            fh.write(MAGIC)
-            fh.write(line + b"\n")
-            fh.write(MAC_PREFIX + _mac(secret, line, raw) + b"\n")
-            fh.write(raw)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
+    path = Path(path)
+    with _EntryDir(path, Path(cache_dir) if cache_dir is not None else None, create=True) as folder:
+        _remove_stale_tmp(folder)
+        tmp = f".tmp-{os.getpid()}-{secrets.token_hex(6)}.part"
+        fd = os.open(folder.name(tmp), os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
+                     | getattr(os, "O_CLOEXEC", 0), 0o600, **folder.at())
         try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    try:  # make the rename itself durable (best effort: not every file system allows it)
-        dfd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-    except OSError:
-        pass
+            with os.fdopen(fd, "wb") as fh:
+                line = json.dumps(header).encode()
+                fh.write(MAGIC)
+                fh.write(line + b"\n")
+                fh.write(MAC_PREFIX + _mac(secret, line, raw) + b"\n")
+                fh.write(raw)
+                fh.flush()
+                os.fsync(fh.fileno())
+            if folder.fd is not None:
+                os.replace(tmp, path.name, src_dir_fd=folder.fd, dst_dir_fd=folder.fd)
+            else:
+                os.replace(folder.name(tmp), path)
+        except BaseException:
+            try:
+                os.unlink(folder.name(tmp), **folder.at())
+            except OSError:
+                pass
+            raise
+        if folder.fd is not None:  # make the rename itself durable (best effort)
+            try:
+                os.fsync(folder.fd)
+            except OSError:
+                pass
 
 
 def read_entry(path: Path, key: str, report: Sequence[DofLabel], cases: Sequence[str], *,
-               secret: bytes | None = None) -> Displacements:
+               secret: bytes | None = None, cache_dir: str | os.PathLike | None = None) -> Displacements:
     """The stored result for ``key``; :class:`CorruptEntry` unless the file is a complete entry
     with matching checksum, :class:`UnauthenticEntry` unless its HMAC verifies with ``secret``
     (default: this user's key), :class:`CorruptEntry` unless it is for exactly this key, report
-    and cases; ``FileNotFoundError`` if absent."""
+    and cases; ``FileNotFoundError`` if absent. Before anything is read, the entry's folder (and
+    ``cache_dir``) must be real directories (:class:`UnsafeCacheFolder`) and the entry a regular
+    file of this user no larger than :func:`entry_size_cap` (:class:`UnsafeEntry`)."""
     secret = load_cache_key() if secret is None else secret
-    data = path.read_bytes()
+    path = Path(path)
+    with _EntryDir(path, Path(cache_dir) if cache_dir is not None else None) as folder:
+        data = _read_capped(path, folder, entry_size_cap(report, cases))
     if not data.startswith(MAGIC):
         raise CorruptEntry("bad magic")
     end = data.find(b"\n", len(MAGIC))
@@ -396,12 +558,20 @@ def read_entry(path: Path, key: str, report: Sequence[DofLabel], cases: Sequence
     return Displacements(tuple(report), values, tuple(cases))
 
 
-def _remove_stale_tmp(folder: Path) -> None:
+def _remove_stale_tmp(folder: _EntryDir) -> None:
+    """Remove temporary files (``.tmp-*.part``) older than :data:`STALE_TMP_S` from the entry's
+    folder: left by a writer that died. Links are removed, never followed."""
     now = time.time()
-    for p in folder.glob(".tmp-*.part"):
+    try:
+        names = os.listdir(folder.fd) if folder.fd is not None else os.listdir(folder.path.parent)
+    except OSError:
+        return
+    for n in names:
+        if not (n.startswith(".tmp-") and n.endswith(".part")):
+            continue
         try:
-            if now - p.stat().st_mtime > STALE_TMP_S:
-                p.unlink()
+            if now - os.stat(folder.name(n), follow_symlinks=False, **folder.at()).st_mtime > STALE_TMP_S:
+                os.unlink(folder.name(n), **folder.at())
         except OSError:
             pass
 
@@ -427,9 +597,10 @@ class CachedAdapter:
 
     def __init__(self, inner: SolverAdapter, cache_dir: str | os.PathLike, *,
                  springs: Sequence[ScalarSpring] = (), cache_stats: CacheStats | None = None,
-                 secret: bytes | None = None):
+                 secret: bytes | None = None, _shared: dict | None = None):
         self.inner = inner
         self.cache_dir = Path(cache_dir)
+        self._shared = _shared if _shared is not None else {"unsafe_folder": None}
         self.name = inner.name
         self.cache_stats = cache_stats if cache_stats is not None else CacheStats()
         self._springs = tuple(springs)
@@ -460,7 +631,7 @@ class CachedAdapter:
     def with_springs(self, springs: Sequence[ScalarSpring]) -> "CachedAdapter":
         return CachedAdapter(self.inner.with_springs(springs), self.cache_dir,
                              springs=self._springs + tuple(springs), cache_stats=self.cache_stats,
-                             secret=self._secret if self._secret is not None else b"")
+                             secret=self._secret if self._secret is not None else b"", _shared=self._shared)
 
     @property
     def progress(self) -> Any:
@@ -478,13 +649,20 @@ class CachedAdapter:
             return self.inner.solve(loads, report)
         key = self.key(loads, report, deck)
         path = entry_path(self.cache_dir, key)
+        if self._unsafe_folder is not None:             # a linked cache folder: never used
+            self._count("bypassed")
+            return self.inner.solve(loads, report)
         try:
-            hit = read_entry(path, key, report, loads.cases, secret=self._secret)
+            hit = read_entry(path, key, report, loads.cases, secret=self._secret, cache_dir=self.cache_dir)
         except FileNotFoundError:
             hit = None
-        except UnauthenticEntry as exc:
+        except UnsafeCacheFolder as exc:
+            self._folder_unsafe(exc)
+            self._count("bypassed")
+            return self.inner.solve(loads, report)
+        except (UnauthenticEntry, UnsafeEntry) as exc:
             self._count("corrupt")
-            self._count("unauthenticated")
+            self._count("unauthenticated" if isinstance(exc, UnauthenticEntry) else "unsafe")
             warnings.warn(f"solver cache: ignored {path}: {exc}; recomputing", RuntimeWarning, stacklevel=2)
             hit = None
         except (CorruptEntry, OSError):
@@ -497,6 +675,20 @@ class CachedAdapter:
         out = self.inner.solve(loads, report)          # a failure propagates: nothing is stored
         self._store(path, key, out, loads, report)
         return out
+
+    def _folder_unsafe(self, exc: UnsafeCacheFolder) -> None:
+        """Turn the cache off for this adapter (and its ``with_springs`` copies), warning once."""
+        with _COUNT_LOCK:
+            first = self._shared["unsafe_folder"] is None
+            self._shared["unsafe_folder"] = str(exc)
+        if first:
+            self._count("unsafe")
+            warnings.warn(f"solver cache: {exc}; the cache is off for this run (nothing read or written "
+                          f"there)", RuntimeWarning, stacklevel=3)
+
+    @property
+    def _unsafe_folder(self) -> str | None:
+        return self._shared["unsafe_folder"]
 
     # ---- helpers -----------------------------------------------------------------------------
     def key(self, loads: LoadMatrix, report: Sequence[DofLabel], deck: str | None = None) -> str:
@@ -514,7 +706,11 @@ class CachedAdapter:
             return
         try:
             write_entry(path, key, Displacements(report, values, loads.cases),
-                        {"adapter": self.name, "inner_runs": self.inner.stats.runs}, secret=self._secret)
+                        {"adapter": self.name, "inner_runs": self.inner.stats.runs}, secret=self._secret,
+                        cache_dir=self.cache_dir)
+        except UnsafeCacheFolder as exc:
+            self._folder_unsafe(exc)
+            return
         except OSError as exc:
             self._count("store_errors")
             if not self._warned:

@@ -244,3 +244,18 @@ class ConsentError(Exception):
 
 
 __all__ += ["ConsentError"]
+
+
+# ---- what the run cache will not open (solver_adapters.cache) ----------------------------------
+class UnsafeEntry(CorruptEntry):
+    """A cache entry that is not a regular file owned by this user, or larger than any entry for
+    the request can be: never opened for reading (a planted named pipe would block, a link to a
+    device would never end). Ignored and recomputed."""
+
+
+class UnsafeCacheFolder(OSError):
+    """A cache folder (or one of its sub-folders) that is not a real directory: a symbolic link
+    would make the cache read and write elsewhere. The cache is off for that run."""
+
+
+__all__ += ["UnsafeEntry", "UnsafeCacheFolder"]

@@ -39,8 +39,8 @@ from solver_adapters.errors import (COMPONENT_NAMES, located, AdapterNotFound, C
                                     InsecureFileError, ModelError, OptionError, PluginConflictError,
                                     PluginLoadError, RegistryError, SolverError, SolverRunError,
                                     SolverTimeoutError, TableFormatError, UnauthenticEntry,
-                                    UnknownDofError, UnknownPluginError, UnstableStructureError,
-                                    UnsupportedFeatureError)
+                                    UnknownDofError, UnknownPluginError, UnsafeCacheFolder, UnsafeEntry,
+                                    UnstableStructureError, UnsupportedFeatureError)
 
 DofLabel = tuple[int, int]
 """``(grid id, component 1..6)``."""

@@ -22,13 +22,16 @@ A legacy code's exit status means little (MYSTRAN exits 0 after fatal errors, ``
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import hashlib
 import json
 import os
+import re
 import select
 import shutil
 import signal
+import socket
 import stat
 import subprocess
 import sys
@@ -38,7 +41,7 @@ import time
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Protocol, Sequence, runtime_checkable
+from typing import Any, Callable, Iterator, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 import psutil
@@ -466,36 +469,95 @@ def resolve_program(program: str, env: dict[str, str] | None = None) -> Path | N
     return found.resolve() if found is not None else None
 
 
-def trusted_commands(config_dir: str | os.PathLike | None = None) -> list[Path]:
-    """The programs listed under ``trusted_commands`` in the user's ``config.toml`` (resolved).
-    ``ValueError`` for a list that is not one of absolute paths."""
+PLACEHOLDERS = ("{deck}", "{deck_name}", "{workdir}")
+"""What blackbox puts into a command line (:meth:`CommandAdapter._command_for`): an argument made
+of these alone carries nothing the study chose."""
+
+LAUNCHERS = re.compile(
+    r"(python|pypy|perl|ruby|node|nodejs|deno|bun|php|lua|luajit|tclsh|wish|julia|octave|octave-cli|matlab|"
+    r"rscript|r|java|scilab|sage|maxima|mono|dotnet|wine|osascript|pwsh|powershell|sh|bash|dash|zsh|ksh|mksh|"
+    r"csh|tcsh|fish|busybox|env|xargs|nice|nohup|timeout|stdbuf|setsid|sudo|doas|su|awk|gawk|mawk|sed|make|"
+    r"cmake|gdb)[0-9.]*(\.exe)?", re.IGNORECASE)
+"""Programs that run whatever their arguments name (interpreters, shells, launchers): one of them
+alone is never a trusted command, only a whole command line is."""
+
+
+@dataclass(frozen=True)
+class TrustedCommand:
+    """One entry of ``trusted_commands``: ``program`` (absolute, symlink-free) and, for a whole
+    command line, its ``arguments`` exactly as the study gives them (None: a program alone)."""
+
+    program: Path
+    arguments: tuple[str, ...] | None
+    given: Any
+
+    def allows(self, program: Path, arguments: Sequence[str]) -> bool:
+        if program != self.program:
+            return False
+        if self.arguments is not None:
+            return tuple(arguments) == self.arguments
+        return not is_launcher(program) and only_placeholders(arguments)
+
+
+def is_launcher(program: Path) -> bool:
+    """Whether ``program`` (by its name) is an interpreter, shell or launcher (:data:`LAUNCHERS`)."""
+    return LAUNCHERS.fullmatch(Path(program).name) is not None
+
+
+def only_placeholders(arguments: Sequence[str]) -> bool:
+    """Whether every argument is made of :data:`PLACEHOLDERS` alone (nothing the study chose)."""
+    def empty(arg: str) -> str:
+        for p in PLACEHOLDERS:
+            arg = arg.replace(p, "")
+        return arg
+    return all(arg and not empty(arg) for arg in arguments)
+
+
+def trusted_commands(config_dir: str | os.PathLike | None = None) -> list[TrustedCommand]:
+    """The entries under ``trusted_commands`` in the user's ``config.toml``: a whole command line
+    (a list: the program's absolute path, then the arguments as the study gives them) or a
+    program alone (a string: trusted only with nothing but the deck as its arguments, and never
+    an interpreter). ``ValueError`` for a malformed list."""
     cfg = read_config(config_dir)
     listed = cfg.get("trusted_commands", [])
     where = config_file(config_dir)
-    if not isinstance(listed, list) or not all(isinstance(x, str) for x in listed):
-        raise ValueError(f"{where}: trusted_commands must be a list of strings (absolute paths of programs)")
+    shape = ("a list whose entries are whole command lines, e.g. [\"/opt/solver/bin/solve\", \"{deck}\"], "
+             "or absolute paths of programs")
+    if not isinstance(listed, list):
+        raise ValueError(f"{where}: trusted_commands must be {shape}")
     out = []
     for entry in listed:
-        p = Path(entry).expanduser()
+        words = [entry] if isinstance(entry, str) else entry
+        if not (isinstance(words, list) and words and all(isinstance(w, str) for w in words)):
+            raise ValueError(f"{where}: trusted_commands entry {entry!r} is not a command line; each entry is "
+                             f"{shape}")
+        p = Path(words[0]).expanduser()
         if not p.is_absolute():
-            raise ValueError(f"{where}: trusted_commands entry {entry!r} is not an absolute path; "
-                             f"write the full path of the program, e.g. {shutil.which(entry) or '/path/to/' + entry!r}")
-        out.append(p.resolve())
+            raise ValueError(f"{where}: trusted_commands entry {entry!r} does not start with an absolute path; "
+                             f"write the full path of the program, e.g. "
+                             f"{shutil.which(words[0]) or '/path/to/' + words[0]!r}")
+        out.append(TrustedCommand(p.resolve(), None if isinstance(entry, str) else tuple(words[1:]), entry))
     return out
+
+
+def _toml_list(words: Sequence[str]) -> str:
+    return "[" + ", ".join(json.dumps(w) for w in words) + "]"
 
 
 def check_command_consent(command: Sequence[str], *, trusted: bool,
                           config_dir: str | os.PathLike | None = None) -> Path | None:
     """Refuse to prepare a run of ``command`` the user has not agreed to.
 
-    Passes when ``trusted`` (the CLI's ``--trust-command``) or when the program ``command[0]``,
-    resolved to an absolute path (:func:`resolve_program`), is listed under ``trusted_commands``
-    in the user's own ``config.toml`` (``config_dir`` or :func:`~solver_adapters.userconfig.config_dir`;
-    never a file of the study). Returns the resolved program (None if it cannot be found and
-    ``trusted``). Raises :class:`~solver_adapters.errors.ConsentError` saying how to give consent.
-
-    Consent is per program: trusting an interpreter (``python``, ``sh``) trusts every script
-    it may be given.
+    Passes when ``trusted`` (the CLI's ``--trust-command``: consent for this run) or when the
+    user's own ``config.toml`` (``config_dir`` or :func:`~solver_adapters.userconfig.config_dir`;
+    never a file of the study) lists the command under ``trusted_commands``
+    (:func:`trusted_commands`): the whole command line -- the program, resolved to an absolute
+    path (:func:`resolve_program`), and every argument exactly as given -- or the program alone
+    when the arguments are nothing but the deck (:data:`PLACEHOLDERS`) and the program is no
+    interpreter (:data:`LAUNCHERS`). Trusting ``python`` therefore trusts no script: a script
+    is an argument, and the entry must name it. Returns the resolved program (None if it cannot
+    be found and ``trusted``). Raises :class:`~solver_adapters.errors.ConsentError` saying how to
+    give consent, and why an older entry naming a program alone no longer covers this command.
     """
     cmd = [str(c) for c in command]
     if not cmd:
@@ -511,18 +573,29 @@ def check_command_consent(command: Sequence[str], *, trusted: bool,
                            f"cannot be checked against your trusted commands. Give its absolute "
                            f"path in the command, then consent as described when you run it again "
                            f"(or pass {TRUST_FLAG} to run it without the check).")
-    if program in trusted_commands(config_dir):
+    entries = trusted_commands(config_dir)
+    if any(e.allows(program, cmd[1:]) for e in entries):
         return program
-    listed = where.is_file()
+    line = [str(program), *cmd[1:]]
+    alone = [e for e in entries if e.program == program and e.arguments is None]
+    why = ""
+    if alone:
+        why = (f"Your configuration lists the program {json.dumps(str(program))} alone, which trusts it only "
+               + ("with nothing but the deck as its arguments; this command line gives it more. "
+                  if not is_launcher(program) else
+                  "-- never, for an interpreter, shell or launcher like this one: trusting it would trust "
+                  "any script a study names for it. ")
+               + "Consent names the whole command line now: replace that entry by the line below.\n")
     raise ConsentError(
         f"the external command `{shown}` will not run without your consent: it executes the "
-        f"program {program} on this machine, and this command line comes from the study (or its "
-        f"caller), not from you.\n"
-        f"If you trust that program, either\n"
+        f"program {program} with the arguments {cmd[1:]} on this machine, and this command line "
+        f"comes from the study (or its caller), not from you.\n" + why +
+        f"If you trust this command line, either\n"
         f"  * pass {TRUST_FLAG} (consent for this run only), or\n"
-        f"  * list it in your own configuration file {where}"
-        + (" (add it to the existing trusted_commands list):" if listed else ":") + "\n"
-        f"        trusted_commands = [\"{program}\"]")
+        f"  * list the whole command line -- program and arguments, as the study gives them; a "
+        f"program alone, such as an interpreter, is not enough -- in your own configuration file {where}"
+        + (" (add it to the existing trusted_commands list):" if where.is_file() else ":") + "\n"
+        f"        trusted_commands = [{_toml_list(line)}]")
 
 
 # --------------------------------------------------------------------------------------------
@@ -532,37 +605,55 @@ RUN_PREFIX = "blackbox-run-"
 """Name prefix of every run folder :class:`CommandAdapter` makes."""
 
 RUN_MARKER = ".blackbox-run.json"
-"""File in every run folder: JSON with ``blackbox_run``, the creating process (``pid``,
-``pid_created``), ``created`` (epoch seconds) and the ``command``. A folder is recognised as ours
-only with both the prefix and a valid marker."""
+"""File in every run folder (and every temporary folder made by :func:`owned_tempdir`), written
+at creation: JSON with ``blackbox_run``, the creating process (``pid``, ``pid_created``: its start
+time as psutil reports it), the machine (``host``, ``boot_time``), ``created`` (epoch seconds)
+and the ``command``. A folder is recognised as ours only with both the prefix and a valid marker."""
 
 STALE_RUN_S = 24 * 3600.0
-"""A run folder older than this whose process is gone was left by a killed run."""
+"""Age after which a run folder with a marker that does not name this machine (an older
+blackbox's, or one made on another machine sharing the folder) counts as left by a killed run
+once its pid is not running. A marker naming this machine needs no age: its process is either
+running (same pid, same start time) or gone."""
 
-_CLEANED_ROOTS: set[str] = set()
+_CLEANED_ROOTS: set[tuple[str, str]] = set()
 _CLEAN_LOCK = threading.Lock()
+
+
+def _marker_for(command: Sequence[str]) -> dict[str, Any]:
+    me = psutil.Process()
+    return {"blackbox_run": 1, "pid": me.pid, "pid_created": me.create_time(), "host": socket.gethostname(),
+            "boot_time": psutil.boot_time(), "created": time.time(), "command": [str(c) for c in command]}
+
+
+def make_owned_dir(prefix: str, root: str | os.PathLike | None = None, command: Sequence[str] = ()) -> Path:
+    """A fresh folder ``<root>/<prefix>XXXX`` (root: the system temporary folder by default)
+    holding its :data:`RUN_MARKER`, so that the next run can tell it was ours and whether its
+    process is gone (:func:`clean_stale_run_dirs`)."""
+    if root is not None:
+        Path(root).mkdir(parents=True, exist_ok=True)
+    folder = Path(tempfile.mkdtemp(prefix=prefix, dir=root))
+    (folder / RUN_MARKER).write_text(json.dumps(_marker_for(command)))
+    return folder
 
 
 def make_run_dir(root: str | os.PathLike | None, name: str, command: Sequence[str] = ()) -> Path:
     """A fresh run folder ``<root>/blackbox-run-<name>-XXXX`` (root: the system temporary
     folder by default) with its :data:`RUN_MARKER`."""
-    if root is not None:
-        Path(root).mkdir(parents=True, exist_ok=True)
     safe = "".join(c if c.isascii() and (c.isalnum() or c in "-_.") else "_" for c in name) or "run"
-    workdir = Path(tempfile.mkdtemp(prefix=f"{RUN_PREFIX}{safe}-", dir=root))
-    me = psutil.Process()
-    marker = {"blackbox_run": 1, "pid": me.pid, "pid_created": me.create_time(), "created": time.time(),
-              "command": [str(c) for c in command]}
-    (workdir / RUN_MARKER).write_text(json.dumps(marker))
-    return workdir
+    return make_owned_dir(f"{RUN_PREFIX}{safe}-", root, command)
 
 
-def _run_dir_age(folder: Path, now: float) -> float | None:
-    """Seconds since ``folder`` was made, if it is one of our run folders whose process is gone
-    (None otherwise: not ours, not this user's, a symlink, or its process still running)."""
+def _run_dir_age(folder: Path, now: float, max_age_s: float = STALE_RUN_S) -> float | None:
+    """Whether ``folder`` is one of ours whose process is gone: its age in seconds when it may be
+    removed, None otherwise (not ours, not this user's, a symbolic link, its process still
+    running, or a marker of another machine younger than ``max_age_s``)."""
     try:
         st = os.lstat(folder)
         if not stat.S_ISDIR(st.st_mode) or (hasattr(os, "getuid") and st.st_uid != os.getuid()):
+            return None
+        mst = os.lstat(folder / RUN_MARKER)
+        if not stat.S_ISREG(mst.st_mode) or mst.st_size > 1 << 20:
             return None
         marker = json.loads((folder / RUN_MARKER).read_text())
         if not (isinstance(marker, dict) and marker.get("blackbox_run") == 1):
@@ -571,53 +662,74 @@ def _run_dir_age(folder: Path, now: float) -> float | None:
         pid, pid_created = int(marker["pid"]), float(marker["pid_created"])
     except (OSError, ValueError, KeyError, TypeError):
         return None
+    here = marker.get("host") == socket.gethostname()
+    try:
+        rebooted = here and abs(float(marker["boot_time"]) - psutil.boot_time()) > 1.0
+    except (KeyError, TypeError, ValueError):
+        here, rebooted = False, False
+    if rebooted:
+        return max(now - created, 0.0)    # every process of an earlier boot is gone
     try:
         if abs(psutil.Process(pid).create_time() - pid_created) < 1.0:
             return None  # the process that made it is still running
     except psutil.Error:
         pass
-    return now - created
+    if not here and now - created <= max_age_s:
+        return None      # cannot be sure the pid was this machine's: wait for max_age_s
+    return max(now - created, 0.0)
 
 
 def clean_stale_run_dirs(root: str | os.PathLike | None = None, *, max_age_s: float = STALE_RUN_S,
-                         now: float | None = None) -> list[Path]:
-    """Remove our run folders under ``root`` (default: the system temporary folder) older than
-    ``max_age_s`` whose process has ended, i.e. left behind by a killed run; return them.
+                         now: float | None = None, prefix: str = RUN_PREFIX) -> list[Path]:
+    """Remove our folders named ``<prefix>*`` under ``root`` (default: the system temporary
+    folder) whose process has ended, i.e. left behind by a killed run; return them.
 
-    Only folders named ``blackbox-run-*`` that hold a valid :data:`RUN_MARKER` and belong to
-    this user are considered; a folder of a run still in progress is never touched.
+    Only folders that hold a valid :data:`RUN_MARKER` and belong to this user are considered; a
+    folder of a run still in progress (its pid running with the recorded start time) is never
+    touched. ``max_age_s`` applies to markers that do not name this machine (:data:`STALE_RUN_S`).
     """
     folder = Path(root) if root is not None else Path(tempfile.gettempdir())
     now = time.time() if now is None else now
     removed = []
     try:
-        candidates = [p for p in folder.iterdir() if p.name.startswith(RUN_PREFIX)]
+        candidates = [p for p in folder.iterdir() if p.name.startswith(prefix)]
     except OSError:
         return removed
     for p in sorted(candidates):
-        age = _run_dir_age(p, now)
-        if age is not None and age > max_age_s:
+        if _run_dir_age(p, now, max_age_s) is not None:
             shutil.rmtree(p, ignore_errors=True)
             if not p.exists():
                 removed.append(p)
     return removed
 
 
-def _clean_stale_once(root: Path | None) -> list[Path]:
-    """:func:`clean_stale_run_dirs` the first time a run folder root is used in this process,
-    reported as a warning when it removed anything."""
+def _clean_stale_once(root: Path | None, prefix: str = RUN_PREFIX) -> list[Path]:
+    """:func:`clean_stale_run_dirs` the first time a folder root is used in this process (per
+    prefix), reported as a warning when it removed anything."""
     key = str(Path(root).resolve() if root is not None else Path(tempfile.gettempdir()).resolve())
     with _CLEAN_LOCK:
-        if key in _CLEANED_ROOTS:
+        if (key, prefix) in _CLEANED_ROOTS:
             return []
-        _CLEANED_ROOTS.add(key)
-    removed = clean_stale_run_dirs(root)
+        _CLEANED_ROOTS.add((key, prefix))
+    removed = clean_stale_run_dirs(root, prefix=prefix)
     if removed:
-        warnings.warn(f"removed {len(removed)} stale blackbox run folder(s) left by killed runs "
-                      f"(older than {STALE_RUN_S / 3600:g} h) in {key}: "
+        warnings.warn(f"removed {len(removed)} stale blackbox folder(s) left by killed runs in {key}: "
                       f"{', '.join(p.name for p in removed[:5])}{' ...' if len(removed) > 5 else ''}",
                       RuntimeWarning, stacklevel=3)
     return removed
+
+
+@contextlib.contextmanager
+def owned_tempdir(prefix: str, root: str | os.PathLike | None = None) -> Iterator[Path]:
+    """A temporary folder ``<prefix>XXXX`` with a :data:`RUN_MARKER`, removed at the end (a
+    context manager). Folders of the same prefix left by killed processes are removed first
+    (:func:`clean_stale_run_dirs`, once per process and root)."""
+    _clean_stale_once(Path(root) if root is not None else None, prefix)
+    folder = make_owned_dir(prefix, root)
+    try:
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 # --------------------------------------------------------------------------------------------
@@ -742,8 +854,9 @@ class CommandAdapter:
     ``max_cases_per_run``) in a fresh run folder ``blackbox-run-<name>-*`` under ``workdir_root``
     (default: the system temporary folder; :func:`make_run_dir`), deleted on success. A failed
     run's folder is deleted too, after its log tail went into the error, unless ``keep_failed``
-    (then its path is in the error). Run folders that a killed process left behind for more than
-    :data:`STALE_RUN_S` are removed, with a warning, the first time a root is used.
+    (then its path is in the error). Run folders that a killed process left behind (its marker
+    says which process made it; that process is gone) are removed, with a warning, the first
+    time a root is used (:func:`clean_stale_run_dirs`).
 
     Consent: the command runs only when ``trusted`` (the CLI's ``--trust-command``) or its
     program is listed in the user's own ``config.toml`` (:func:`check_command_consent`, checked

@@ -57,7 +57,8 @@ def rows(path: str | Path, header: Sequence[str], optional: Sequence[str] = ()) 
     extra = got[len(header):]
     if first is None or got[:len(header)] != list(header) or extra != list(optional)[:len(extra)]:
         allowed = ",".join(header) + "".join(f"[,{o}]" for o in optional)
-        raise TableFormatError(f"header must be {allowed}, got {','.join(first or [])!r}", file=str(path), line=1)
+        raise TableFormatError(f"header must be {allowed}: {_header_mismatch(got if first else None, header, optional)}",
+                               file=str(path), line=1)
     for row in reader:
         line = reader.line_num
         if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
@@ -65,6 +66,20 @@ def rows(path: str | Path, header: Sequence[str], optional: Sequence[str] = ()) 
         if len(row) != len(got):
             raise TableFormatError(f"expected {len(got)} columns, got {len(row)}", file=str(path), line=line)
         yield line, {h: c.strip() for h, c in zip(got, row)}
+
+
+def _header_mismatch(got: list[str] | None, header: Sequence[str], optional: Sequence[str]) -> str:
+    """Where a header line differs from the expected one, said without quoting the line: the
+    file may not be a table at all, and an error message must not show what it holds."""
+    if got is None:
+        return "the file is empty"
+    want = list(header) + list(optional)
+    for i, (g, h) in enumerate(zip(got, want)):
+        if g != h:
+            return f"column {i + 1} of line 1 is not {h!r}"
+    if len(got) < len(header):
+        return f"line 1 has {len(got)} column(s), {len(header)} are needed"
+    return f"line 1 has {len(got)} columns, at most {len(want)} are known"
 
 
 def parse_int(text: str, path: str | Path, line: int, col: str) -> int:

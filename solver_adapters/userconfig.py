@@ -8,7 +8,11 @@ The folder is ``$BLACKBOX_CONFIG_DIR`` when set (tests point it at a temporary f
 
 ``config.toml`` (optional)::
 
-    trusted_commands = ["/opt/solver/bin/solve", "/usr/local/bin/mystran"]
+    # whole command lines (program and arguments as the study gives them), or a program alone,
+    # which then runs only with the deck as its argument (see solver_adapters.subprocess)
+    trusted_commands = [["/usr/bin/python3", "/opt/solver/solve.py", "{deck}"], "/usr/local/bin/mystran"]
+    # folders outside a study that its files (deck, loads, ...) may lie in
+    allow_outside = ["/data/shared-decks"]
     include_dirs = ["/home/me/nastran/common"]    # folders a deck's INCLUDE may read
 
 Files here are only used when they are owned by the user and (for the key) not readable by
@@ -109,3 +113,25 @@ def configured_include_dirs(folder: str | os.PathLike | None = None) -> tuple[Pa
     if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
         raise ValueError(f"{config_file(folder)}: include_dirs must be a list of folder names")
     return tuple(Path(v).expanduser() for v in value)
+
+
+ALLOW_OUTSIDE_KEY = "allow_outside"
+
+
+def allowed_outside(folder: str | os.PathLike | None = None) -> list[Path]:
+    """The folders listed under ``allow_outside`` in the user's ``config.toml`` (absolute,
+    symlink-free): a study's files may lie in them although they are outside the study folder.
+    ``ValueError`` for an entry that is not an absolute path."""
+    cfg = read_config(folder)
+    listed = cfg.get(ALLOW_OUTSIDE_KEY, [])
+    where = config_file(folder)
+    if not isinstance(listed, list) or not all(isinstance(x, str) for x in listed):
+        raise ValueError(f"{where}: {ALLOW_OUTSIDE_KEY} must be a list of strings (absolute paths of folders)")
+    out = []
+    for entry in listed:
+        p = Path(entry).expanduser()
+        if not p.is_absolute():
+            raise ValueError(f"{where}: {ALLOW_OUTSIDE_KEY} entry {entry!r} is not an absolute path; "
+                             f"write the full path of the folder")
+        out.append(p.resolve())
+    return out

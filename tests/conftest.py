@@ -65,6 +65,28 @@ def copy_fixture(name: str, dest: Path, *ignore: str) -> Path:
     return dest
 
 
+def _fixture_state() -> dict[str, tuple[int, int]]:
+    """Every path under ``fixtures/`` (ignored ones included, e.g. a solver cache) with its size
+    and modification time."""
+    out = {}
+    for p in sorted(FIXTURES.rglob("*")):
+        st = p.lstat()
+        out[p.relative_to(FIXTURES).as_posix()] = (st.st_size, st.st_mtime_ns)
+    return out
+
+
+@pytest.fixture(scope="session", autouse=True)
+def fixtures_stay_untouched():
+    """No test writes into ``fixtures/`` (a test that needs to change a fixture study copies it
+    with :func:`copy_fixture`; a command run on a fixture itself passes ``--no-cache``): checked
+    over the whole session, so that a checkout stays clean after ``pytest``."""
+    before = _fixture_state()
+    yield
+    after = _fixture_state()
+    changed = sorted(k for k in before.keys() | after.keys() if before.get(k) != after.get(k))
+    assert not changed, f"tests changed fixtures/: {changed[:20]}"
+
+
 @pytest.fixture
 def cube(tmp_path) -> Path:
     """A copy of the cube fixture study that a test may edit (``tmp_path/cube``, no plots, no cache)."""

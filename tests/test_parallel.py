@@ -94,9 +94,11 @@ def test_without_dask_workers_runs_serially_and_says_how_to_enable(monkeypatch):
 
 
 def test_study_package_travels_without_the_folder(tmp_path):
-    """A study whose deck lives outside its folder (with an INCLUDE) is packed with the deck,
-    and rebuilt elsewhere it reads as the original."""
-    from blackbox.study import load_study
+    """A study whose deck lives outside its folder (with an INCLUDE), in a folder the user
+    allows, is packed with the deck, and rebuilt elsewhere it reads as the original. Without that
+    permission the outside deck is refused, not packed."""
+    from blackbox.errors import StudyError
+    from blackbox.study import ALLOW_OUTSIDE, load_study
 
     ext = tmp_path / "decks"
     ext.mkdir()
@@ -111,11 +113,17 @@ def test_study_package_travels_without_the_folder(tmp_path):
     (study / "study.toml").write_text(toml)
     (study / ".blackbox_cache").mkdir()
     (study / ".blackbox_cache" / "x.bbc").write_bytes(b"not travelling")
-    pkg = pack_study(study)
-    assert not any(k.startswith(".blackbox_cache") for k in pkg.files)
-    assert {"_external/main.bdf", "_external/grids.bdf"} <= set(pkg.files)
-    rebuilt = unpack_study(pkg, tmp_path / "elsewhere")
-    a, b = load_study(study, need_measurements=True), load_study(rebuilt, need_measurements=True)
+    with pytest.raises(StudyError, match="leads outside the study folder"):
+        pack_study(study)
+    allowed = ALLOW_OUTSIDE.set((ext,))
+    try:
+        pkg = pack_study(study)
+        assert not any(k.startswith(".blackbox_cache") for k in pkg.files)
+        assert {"_external/main.bdf", "_external/grids.bdf"} <= set(pkg.files)
+        rebuilt = unpack_study(pkg, tmp_path / "elsewhere")
+        a, b = load_study(study, need_measurements=True), load_study(rebuilt, need_measurements=True)
+    finally:
+        ALLOW_OUTSIDE.reset(allowed)
     assert b.deck_path.is_relative_to(rebuilt)
     assert sorted(a.deck.grids) == sorted(b.deck.grids) and len(a.measurements) == len(b.measurements)
     with pytest.raises(ValueError, match="not a study folder"):

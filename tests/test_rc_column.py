@@ -89,7 +89,7 @@ def test_identify_on_the_early_steps_is_the_closed_form(identified):
 
 def test_identify_cli_on_the_fixture(tmp_path, capsys):
     """The README's command: exit 0, the selection, the sigma source, the reference spring."""
-    assert main(["identify", str(RC), "--out", str(tmp_path / "id")]) == 0
+    assert main(["identify", str(RC), "--out", str(tmp_path / "id"), "--no-cache"]) == 0
     out = capsys.readouterr().out
     assert "fitted the 4 case(s) matching ['s00[1-4]-*']; 543 other case(s) predicted" in out
     assert "chi-square test fails; with sigma scaled to the residuals" in out
@@ -111,7 +111,7 @@ def test_diagnose_on_the_whole_record_says_unexplained(tmp_path, capsys):
     kN/m there, README) and softer while unloading; p_delta offered (the declared 744 kN) but not
     added; the verdict unexplained (exit 4), the hotspots the 78 mm unloading branches, the misfit
     after the additions reduced most at the smallest amplitudes; the two response plots."""
-    assert main(["diagnose", str(RC), "--out", str(tmp_path / "dg"), "--effects", README_EFFECTS]) == 4
+    assert main(["diagnose", str(RC), "--out", str(tmp_path / "dg"), "--effects", README_EFFECTS, "--no-cache"]) == 4
     assert "unexplained (exit 4)" in capsys.readouterr().err
     doc = json.loads((tmp_path / "dg" / "diagnosis.json").read_text())
     assert doc["verdict"] == "unexplained" and doc["before"]["reduced_chi2"] > 1e4

@@ -19,9 +19,11 @@ import json
 import os
 import shutil
 import signal
+import socket
 import stat
 import subprocess
 import sys
+import tempfile
 import textwrap
 import time
 import warnings
@@ -319,11 +321,14 @@ def test_no_solver_process_outlives_its_driver(sig, tmp_path):
     assert gone, [p.info["cmdline"] for p in left]
     if sig == signal.SIGKILL:
         assert driver.returncode == -signal.SIGKILL
-        # the killed driver could not remove its run folder: it is recognisably ours, and stale
+        # the killed driver could not remove its run folder: it is recognisably ours (its marker
+        # names the driver's pid and start time), the driver is gone, so the next run removes it
         (folder,) = runs.iterdir()
         assert folder.name.startswith(RUN_PREFIX) and (folder / RUN_MARKER).is_file()
-        assert clean_stale_run_dirs(runs) == []                   # not yet 24 h old
-        assert clean_stale_run_dirs(runs, max_age_s=0.0) == [folder] and not folder.exists()
+        assert json.loads((folder / RUN_MARKER).read_text())["pid"] == driver.pid
+        with pytest.warns(RuntimeWarning, match=rf"removed 1 stale blackbox folder.*{folder.name}"):
+            LegacyAdapter(CUBE, workdir_root=runs, trusted=True)
+        assert not folder.exists()
     else:
         assert driver.returncode == 130 and f"interrupted: terminated by {sig.name}" in out, (out, err)
         assert list(runs.iterdir()) == []                         # the run folder was handled
@@ -395,6 +400,8 @@ def _dead_pid() -> tuple[int, float]:
 
 
 def test_stale_run_folders_of_killed_runs_are_cleaned_and_reported(deck, tmp_path):
+    """Markers that do not name the machine (written by an older blackbox) are judged by their
+    pid and, because the pid may be another machine's, only after 24 h."""
     runs = tmp_path / "runs"
     runs.mkdir()
     day = 24 * 3600
@@ -419,7 +426,7 @@ def test_stale_run_folders_of_killed_runs_are_cleaned_and_reported(deck, tmp_pat
     unmarked = folder(f"{RUN_PREFIX}legacy-a4", None)
     foreign = folder("legacy-a5", {"blackbox_run": 1, "pid": pid, "pid_created": created,
                                    "created": now - 3 * day, "command": ["x"]})
-    with pytest.warns(RuntimeWarning, match=r"removed 1 stale blackbox run folder.*legacy-a1"):
+    with pytest.warns(RuntimeWarning, match=r"removed 1 stale blackbox folder.*legacy-a1"):
         CommandAdapter(deck, [str(toy_solver(tmp_path / "s.py")), "{deck}"], ToyDialect(), workdir_root=runs,
                        trusted=True)
     assert not stale.exists()
@@ -432,6 +439,80 @@ def test_make_run_dir_writes_the_marker(tmp_path):
     assert f.name.startswith(f"{RUN_PREFIX}my_solver__-") and f.name.isascii()
     marker = json.loads((f / RUN_MARKER).read_text())
     assert marker["pid"] == os.getpid() and marker["command"] == ["prog", "{deck}"]
+    assert marker["pid_created"] == psutil.Process().create_time()
+    assert marker["host"] == socket.gethostname() and marker["boot_time"] == psutil.boot_time()
+
+
+def test_only_folders_provably_ours_and_whose_process_is_gone_are_removed(tmp_path):
+    """A marker naming this machine needs no waiting: its pid with the recorded start time is
+    running or not. Kept: a live process's folder, one whose pid now belongs to another process
+    started later is removed; a marker of another machine (younger than 24 h), a folder without
+    marker, a link, a folder without the prefix, a marker that is a link."""
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    pid, created = _dead_pid()
+    me = psutil.Process()
+    host, boot = socket.gethostname(), psutil.boot_time()
+
+    def folder(name, **marker):
+        f = runs / name
+        f.mkdir()
+        if marker:
+            (f / RUN_MARKER).write_text(json.dumps({"blackbox_run": 1, "created": time.time(), "command": [],
+                                                    "host": host, "boot_time": boot, **marker}))
+        return f
+
+    dead = folder(f"{RUN_PREFIX}a1", pid=pid, pid_created=created)
+    reused = folder(f"{RUN_PREFIX}a2", pid=me.pid, pid_created=me.create_time() - 100.0)   # pid reused since
+    rebooted = folder(f"{RUN_PREFIX}a3", pid=me.pid, pid_created=me.create_time(), boot_time=boot - 3600.0)
+    alive = folder(f"{RUN_PREFIX}a4", pid=me.pid, pid_created=me.create_time())
+    elsewhere = folder(f"{RUN_PREFIX}a5", pid=pid, pid_created=created, host=host + "-other")
+    unmarked = folder(f"{RUN_PREFIX}a6")
+    other_prefix = folder("blackbox-diagnose-a7", pid=pid, pid_created=created)
+    outside = tmp_path / "precious"
+    outside.mkdir()
+    (outside / RUN_MARKER).write_text((dead / RUN_MARKER).read_text())
+    (runs / f"{RUN_PREFIX}a8").symlink_to(outside)
+    linked_marker = folder(f"{RUN_PREFIX}a9")
+    (linked_marker / RUN_MARKER).symlink_to(dead / RUN_MARKER)
+    removed = clean_stale_run_dirs(runs)
+    assert sorted(removed) == [dead, reused, rebooted]
+    assert all(f.is_dir() for f in (alive, elsewhere, unmarked, other_prefix, outside, linked_marker))
+    assert (runs / f"{RUN_PREFIX}a8").is_symlink() and (outside / RUN_MARKER).is_file()
+    assert clean_stale_run_dirs(runs, prefix="blackbox-diagnose-") == [other_prefix]
+
+
+def test_a_killed_diagnose_leaves_a_folder_the_next_one_removes(tmp_path, monkeypatch):
+    """``blackbox diagnose`` killed with SIGKILL while its temporary folder exists: the folder
+    stays (nothing can run in a killed process), and the next diagnose removes it."""
+    from blackbox.cli import main
+    from blackbox.commands.diagnose import TEMP_PREFIX
+
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    study = FIXTURES / "undeclared" / "load_scale"
+    env = {**os.environ, "TMPDIR": str(tmp)}
+    child = subprocess.Popen([PY, "-m", "blackbox.cli", "diagnose", str(study), "--out", str(tmp_path / "o1"),
+                              "--no-cache"], cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        def marked():
+            return [p for p in tmp.glob(f"{TEMP_PREFIX}*") if (p / RUN_MARKER).is_file()]
+        assert _wait_for(lambda: marked() or child.poll() is not None, 60), "diagnose never started"
+        assert child.poll() is None, f"diagnose ended before it could be killed: {child.communicate()}"
+        child.send_signal(signal.SIGKILL)
+        child.communicate(timeout=20)
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.communicate()
+    assert child.returncode == -signal.SIGKILL
+    (left,) = marked()
+    assert json.loads((left / RUN_MARKER).read_text())["pid"] == child.pid
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp))
+    with pytest.warns(RuntimeWarning, match=rf"removed 1 stale blackbox folder.*{left.name}"):
+        assert main(["diagnose", str(study), "--out", str(tmp_path / "o2"), "--no-cache",
+                     "--effects", "load_scale"]) == 0
+    assert not left.exists() and list(tmp.iterdir()) == []
 
 
 # --------------------------------------------------------------------------------------------
@@ -516,38 +597,69 @@ def test_nastran_run_deck_names_non_ascii_paths_in_ascii(tmp_path):
 def test_consent_refused_with_instructions(config, tmp_path):
     solver = toy_solver(tmp_path / "solver.py")
     with pytest.raises(ConsentError) as info:
-        check_command_consent([str(solver), "{deck}"], trusted=False)
+        check_command_consent([str(solver), "--fast", "{deck}"], trusted=False)
     msg = str(info.value)
     assert "--trust-command" in msg and str(config / "config.toml") in msg
-    assert f'trusted_commands = ["{solver.resolve()}"]' in msg
+    assert f'trusted_commands = [["{solver.resolve()}", "--fast", "{{deck}}"]]' in msg
+    assert "whole command line" in msg and "interpreter, is not enough" in msg
     assert check_command_consent([str(solver)], trusted=True) == solver.resolve()
 
 
-def test_consent_from_the_users_config_file(config, tmp_path):
+def test_consent_names_the_whole_command_line(config, tmp_path):
+    """An entry is the program (absolute; a link to it or a bare name on PATH is the same
+    program) and every argument as the study gives them: another argument is another command."""
     solver = toy_solver(tmp_path / "solver.py")
     link = tmp_path / "bin" / "toy"
     link.parent.mkdir()
     link.symlink_to(solver)
-    (config / "config.toml").write_text(f'trusted_commands = ["{solver}"]\n')
-    assert check_command_consent([str(solver), "x"], trusted=False) == solver.resolve()
-    assert check_command_consent([str(link)], trusted=False) == solver.resolve()   # same file
-    other = toy_solver(tmp_path / "other.py")
-    with pytest.raises(ConsentError, match="existing trusted_commands list"):
-        check_command_consent([str(other)], trusted=False)
-    # a bare name is looked up on PATH, as the run would
+    (config / "config.toml").write_text(f'trusted_commands = [["{solver}", "--fast", "{{deck}}"]]\n')
+    assert check_command_consent([str(solver), "--fast", "{deck}"], trusted=False) == solver.resolve()
+    assert check_command_consent([str(link), "--fast", "{deck}"], trusted=False) == solver.resolve()
+    for other in ([str(solver), "--slow", "{deck}"], [str(solver), "--fast"], [str(solver), "--fast", "{deck}", "x"]):
+        with pytest.raises(ConsentError, match="existing trusted_commands list"):
+            check_command_consent(other, trusted=False)
     env_path = os.environ["PATH"]
     try:
         os.environ["PATH"] = f"{link.parent}{os.pathsep}{env_path}"
-        assert check_command_consent(["toy"], trusted=False) == solver.resolve()
+        assert check_command_consent(["toy", "--fast", "{deck}"], trusted=False) == solver.resolve()
     finally:
         os.environ["PATH"] = env_path
-    (config / "config.toml").write_text('trusted_commands = ["bin/toy"]\n')
-    with pytest.raises(ValueError, match="not an absolute path"):
+    (config / "config.toml").write_text('trusted_commands = [["bin/toy", "{deck}"]]\n')
+    with pytest.raises(ValueError, match="absolute path"):
         check_command_consent([str(solver)], trusted=False)
-    (config / "config.toml").write_text(f'trusted_commands = ["{solver}"]\n')
+    (config / "config.toml").write_text('trusted_commands = [[]]\n')
+    with pytest.raises(ValueError, match="not a command line"):
+        check_command_consent([str(solver)], trusted=False)
+    (config / "config.toml").write_text(f'trusted_commands = [["{solver}"]]\n')
     (config / "config.toml").chmod(0o666)                          # others could add a program
     with pytest.raises(InsecureFileError, match="chmod go-w"):
         check_command_consent([str(solver)], trusted=False)
+
+
+def test_trusting_an_interpreter_trusts_no_script(config, tmp_path):
+    """The attack: the user trusted ``python`` for one solver script; a study names python with
+    another script. A program alone (the older form of an entry) still covers a non-interpreter
+    given nothing but the deck; an interpreter alone covers nothing, and the message says how
+    to name the whole command line instead."""
+    good, evil = toy_solver(tmp_path / "good.py"), toy_solver(tmp_path / "evil.py")
+    python = Path(PY).resolve()
+    (config / "config.toml").write_text(f'trusted_commands = ["{python}", ["{python}", "{good}", "{{deck}}"]]\n')
+    assert check_command_consent([PY, str(good), "{deck}"], trusted=False) == python
+    for cmd in ([PY, str(evil), "{deck}"], [PY, "-c", "print(1)"], [PY, "{deck}"]):
+        with pytest.raises(ConsentError) as info:
+            check_command_consent(cmd, trusted=False)
+        msg = str(info.value)
+        assert "alone" in msg and "any script a study names for it" in msg and "Consent names the whole" in msg
+        assert f"trusted_commands = [{json.dumps([str(python), *cmd[1:]])}]" in msg
+    (config / "config.toml").write_text(f'trusted_commands = ["{good}"]\n')   # a program alone
+    assert check_command_consent([str(good), "{deck}"], trusted=False) == good.resolve()
+    assert check_command_consent([str(good)], trusted=False) == good.resolve()
+    with pytest.raises(ConsentError, match="with nothing but the deck as its arguments"):
+        check_command_consent([str(good), "--load-plugin=/tmp/x.so", "{deck}"], trusted=False)
+    sh = shutil.which("sh")
+    (config / "config.toml").write_text(f'trusted_commands = ["{sh}"]\n')
+    with pytest.raises(ConsentError, match="interpreter, shell or launcher"):
+        check_command_consent([sh, "{deck}"], trusted=False)
 
 
 def test_command_adapter_asks_for_consent_before_anything_runs(config, deck, tmp_path):

@@ -342,7 +342,10 @@ def test_car_body_every_command_through_mystran(tmp_path):
     study = car_body_study(tmp_path / "car")
     sim = tmp_path / "sim"
     assert main(["simulate", str(study), "--truth", str(truth_deck(study, tmp_path)), "--out", str(sim)]) == 0
-    assert main(["compare", str(sim), "--out", str(tmp_path / "cmp"), "--no-cache"]) == 0
+    # the truth deck lies beside the simulated study: its folder is allowed for the MDSE re-simulation
+    assert main(["compare", str(sim), "--out", str(tmp_path / "cmp"), "--no-cache",
+                 "--allow-outside", str(tmp_path)]) == 0
+    assert json.loads((tmp_path / "cmp" / "comparison.json").read_text())["with_mdse"]["available"]
     assert main(["diagnose", str(sim), "--out", str(tmp_path / "dg"), "--no-cache"]) == 0
     doc = json.loads((tmp_path / "dg" / "diagnosis.json").read_text())
     assert doc["verdict"] == "adequate" and any("(2, 4, 6, 7, 8, 9, 10, 12, 14)" in n for n in doc["notes"])

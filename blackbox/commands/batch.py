@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
+from blackbox.errors import BlackboxError
 from blackbox.parallel import (Executor, SerialExecutor, StudyPackage, TaskFailure, pack_study, read_tree,
                                scratch, unpack_study, write_tree)
 
@@ -259,7 +260,7 @@ def run(studies: Sequence[str | Path], *, command: str = "identify", executor: E
     for i, (folder, name) in enumerate(zip(folders, names)):
         try:
             pkg = pack_study(folder)
-        except (OSError, ValueError, KeyError) as exc:
+        except (OSError, ValueError, KeyError, BlackboxError) as exc:
             outcomes[i] = StudyOutcome(name, str(folder), "bad_input", f"{type(exc).__name__}: {exc}")
             continue
         if cache is True:

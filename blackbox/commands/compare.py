@@ -38,7 +38,7 @@ from blackbox.errors import StudyError
 from blackbox.identification import IdentificationResult
 from blackbox.joints import ComplexJoint, JointModel, complex_param_names, simple_to_complex_params
 from blackbox.simulation import TruthConfig
-from blackbox.study import Study, load_study
+from blackbox.study import Study, load_study, study_file
 from solver_adapters.protocol import SolverAdapter
 
 __all__ = ["CompareResult", "Stage", "run", "truth_toml", "mdse_cases"]
@@ -124,12 +124,28 @@ def truth_toml(cfg: TruthConfig) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _truth_deck_refused(study: Study, rec: dict | None) -> str | None:
+    """Why the truth deck that truth.json names may not be read (it lies outside the study in a
+    folder the user has not allowed: :func:`blackbox.study.study_file`), else None."""
+    deck = (rec or {}).get("deck")
+    if not deck:
+        return None
+    base = Path(rec.get("truth_file") or study.root).parent
+    try:
+        study_file(study.root, base / deck, f"the truth deck {deck!r} of truth.json")
+    except StudyError as exc:
+        return str(exc)
+    return None
+
+
 def _mdse_truth(rec: dict, study: Study, truth: dict, cases: list[str]) -> TruthConfig:
     """The truth of ``truth.json`` measuring only ``cases``, seed + 1."""
     deck = rec.get("deck")
     if deck:
         base = Path(rec.get("truth_file") or study.root).parent
-        deck_path = (base / deck).resolve()
+        # a path truth.json gives: read only inside the study or a folder the user allows
+        deck_path = study_file(study.root, base / deck, f"the truth deck {deck!r} of truth.json",
+                               named_in=study.root / "truth.json")
         if not deck_path.is_file():
             raise StudyError(f"truth deck {deck!r} of truth.json not found at {deck_path}",
                              file=str(study.root / "truth.json"))
@@ -395,11 +411,17 @@ def run(study: Study | str | Path, *, adapter: str | SolverAdapter | None = None
                       for label, sc, rows in cases]},
     }
     second, workdir = None, None
+    refused = _truth_deck_refused(study, rec)
     if rec is not None and not (truth or rec.get("deck")):
         result["with_mdse"] = {"available": False, "recommendation": (
             "truth.json's joint parameters do not fit the declared joints (e.g. springs for a pair "
             "declared rigid), so the MDSE case cannot be simulated from that truth: apply the MDSE "
             "loading of mdse_loads.csv as the next experiment instead")}
+    elif rec is not None and refused:
+        log(f"  the MDSE case is not simulated: {refused}")
+        result["with_mdse"] = {"available": False, "recommendation": (
+            f"the MDSE case was not simulated: {refused}. Run compare again with that folder allowed, or "
+            f"apply the MDSE loading of mdse_loads.csv as the next experiment instead")}
     elif rec is not None:
         workdir = tempfile.TemporaryDirectory(prefix="blackbox-compare-")
         second, info = _stage_with_mdse(study, first, c, simple, complex_, truth, rec,

@@ -43,7 +43,6 @@ import dataclasses
 import functools
 import json
 import math
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -70,9 +69,13 @@ from blackbox.study import Study, preload_matrix, read_load_groups
 from solver_adapters.bdf_write import write_deck
 from solver_adapters.deck import Deck
 from solver_adapters.protocol import DofLabel, SolverAdapter, UnstableStructureError
+from solver_adapters.subprocess import owned_tempdir
 
 __all__ = ["DiagnosisResult", "Prepared", "PrepareTask", "Remote", "run", "prepare", "prepare_study",
            "prepare_run", "check_options", "MAX_JOINT_CANDIDATES", "MAX_MEMBER_CANDIDATES"]
+
+TEMP_PREFIX = "blackbox-diagnose-"
+"""Name prefix of the temporary folder of one diagnose run (the decks it writes)."""
 
 MAX_JOINT_CANDIDATES = 100
 """Undeclared-joint grids considered at most (those nearest the declared fit's residual beyond).
@@ -528,7 +531,8 @@ def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float =
         for e, _ in step.removed:
             say(f"  removed {e.label()[:70]}: the addition made it unnecessary")
 
-    with tempfile.TemporaryDirectory(prefix="blackbox-diagnose-") as tmp:
+    # a marked temporary folder: one a killed diagnose left behind is removed by the next one
+    with owned_tempdir(TEMP_PREFIX) as tmp:
         pr = prepare(study, Path(tmp), adapter=adapter, max_joint_candidates=max_joint_candidates,
                      max_member_candidates=max_member_candidates, effects=effects, say=say, executor=executor)
         xyz = {int(g): tuple(v) for g, v in pr.base.adapter.grid_xyz().items()}
