@@ -360,7 +360,6 @@ class AugmentedModel:
         jp = self.spec.joint_params
         xj = x[:jp]
         phi = self.case_factors(x, z[:nS])
-        groups = None
         for _ in range(self.CASE_ITERATIONS):
             if jp == 1:                     # one joint parameter: a plain (faster) unique
                 _, first, inv = np.unique(np.round(phi[0], 12), return_index=True, return_inverse=True)
@@ -374,15 +373,18 @@ class AugmentedModel:
             ones = np.all(keys == 1.0, axis=1)
             As[ones] = Ainv0
             z = per_case(As, inv, b)
-            order = np.argsort(inv, kind="stable")
-            edges = np.searchsorted(inv[order], np.arange(1, len(keys)))
-            groups = list(zip(np.split(order, edges), dKs, As, keys))
             if not np.all(np.isfinite(z)):
                 raise np.linalg.LinAlgError("singular augmented system")
             new = self.case_factors(x, z[:nS])
             if np.array_equal(np.round(new, 12), np.round(phi, 12)):
                 break
             phi = new
+        # each group's cases, once the factors settled (slices of one sort: np.split into one
+        # piece per case, as an amplitude-dependent joint has, costs more than the solve)
+        order = np.argsort(inv, kind="stable")
+        ends = np.searchsorted(inv[order], np.arange(1, len(keys) + 1))
+        starts = np.concatenate([[0], ends[:-1]])
+        groups = [(order[a:e], dKs[g], As[g], keys[g]) for g, (a, e) in enumerate(zip(starts, ends))]
         return z, groups, (dKs, As, keys, inv)
 
     def _output_mixes(self, om: ObsMap) -> list[tuple[int, np.ndarray, list]]:
