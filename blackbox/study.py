@@ -79,6 +79,14 @@ class MeasurementsConfig(_Strict):
     """What study.toml says about the measurements' noise (blackbox.noise)."""
     translation_accuracy: float | None = Field(None, gt=0)   # +- bound of a translation reading's error
     rotation_accuracy: float | None = Field(None, gt=0)      # +- bound of a rotation reading's error
+    sequential: bool = False        # the cases of loads.csv, in its order, are one test's steps in time order
+
+
+class PreloadConfig(_Strict):
+    """One entry of the permanent load the structure carries throughout the test ([[preloads]])."""
+    grid: int
+    component: int = Field(ge=1, le=6)
+    value: float
 
 
 class StudyConfig(_Strict):
@@ -87,6 +95,7 @@ class StudyConfig(_Strict):
     joints: list[JointConfig] = []
     identification: IdentificationConfig = IdentificationConfig()
     measurements: MeasurementsConfig = MeasurementsConfig()
+    preloads: list[PreloadConfig] = []
 
     @model_validator(mode="after")
     def _distinct_joints(self) -> "StudyConfig":
@@ -401,6 +410,26 @@ def check_joints(config: StudyConfig, deck, toml_path: Path) -> None:
                                  file=str(toml_path))
 
 
+def check_preloads(config: StudyConfig, deck, toml_path: Path) -> None:
+    """Each ``[[preloads]]`` entry acts at a grid of the deck, once per grid and component."""
+    seen: set = set()
+    for i, p in enumerate(config.preloads):
+        if p.grid not in deck.grids:
+            raise StudyError(f"preloads[{i}]: grid {p.grid} is not in the deck", file=str(toml_path))
+        if (p.grid, p.component) in seen:
+            raise StudyError(f"preloads[{i}]: grid {p.grid} component {p.component} is given twice",
+                             file=str(toml_path))
+        seen.add((p.grid, p.component))
+
+
+def preload_matrix(config: StudyConfig) -> LoadMatrix | None:
+    """The declared permanent load as one load case ``"preload"``, or ``None`` without one."""
+    if not config.preloads:
+        return None
+    dofs = [(p.grid, p.component) for p in config.preloads]
+    return LoadMatrix.from_dense(dofs, np.array([[p.value] for p in config.preloads]), ("preload",))
+
+
 def load_study(root: str | Path, *, need_measurements: bool = False) -> Study:
     """Read and check a study folder (no solver run)."""
     from solver_adapters.bdf import read_deck
@@ -420,6 +449,7 @@ def load_study(root: str | Path, *, need_measurements: bool = False) -> Study:
     deck = read_deck(deck_path, unmodelled="keep")
     grids = set(deck.grids)
     check_joints(config, deck, toml_path)
+    check_preloads(config, deck, toml_path)
     study_file(root, "loads.csv")
     loads = read_loads(root / "loads.csv", grids)
     meas_path = root / "measurements.csv"

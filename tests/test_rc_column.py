@@ -26,7 +26,8 @@ ROOT = Path(__file__).resolve().parents[1]
 RC = ROOT / "fixtures" / "measured" / "rc_column"
 L, E, I = 1.6, 30.0e9, 0.4 ** 4 / 12.0
 SIGMA = 1.6e-4 / math.sqrt(3.0)          # study.toml: translation_accuracy = 1.6e-4, rectangular
-README_EFFECTS = "joint_coupling,undeclared_joint,support_flexibility,load_scale,sensor_gain,sensor_offset,member_stiffness"
+README_EFFECTS = ("joint_softening,joint_unloading,p_delta,joint_coupling,support_flexibility,member_stiffness,joint_gap,"
+                  "undeclared_joint")
 
 ESTIMATE_RTOL = 1e-7
 """The fit stops at a relative step of 1e-8 in log k (xtol): the estimate is the closed form's to ~1e-8."""
@@ -105,14 +106,31 @@ def test_identify_cli_on_the_fixture(tmp_path, capsys):
 
 
 def test_diagnose_on_the_whole_record_says_unexplained(tmp_path, capsys):
-    """The README's diagnose: the whole record, the verdict unexplained (exit 4), the hotspots by
-    case, the residual by amplitude before and after, the misfit growing with the amplitude."""
+    """The README's diagnose: the whole record; the base joint softening with the amplitude (at its
+    yield limit: the secant stiffness at 78 mm, which with the column is the record's 2,000-2,300
+    kN/m there, README) and softer while unloading; p_delta offered (the declared 744 kN) but not
+    added; the verdict unexplained (exit 4), the hotspots the 78 mm unloading branches, the misfit
+    after the additions reduced most at the smallest amplitudes; the two response plots."""
     assert main(["diagnose", str(RC), "--out", str(tmp_path / "dg"), "--effects", README_EFFECTS, "--no-cache"]) == 4
     assert "unexplained (exit 4)" in capsys.readouterr().err
     doc = json.loads((tmp_path / "dg" / "diagnosis.json").read_text())
     assert doc["verdict"] == "unexplained" and doc["before"]["reduced_chi2"] > 1e4
+    assert [(a["effect"], a["where"]) for a in doc["added"]] == [("joint_softening", ["base"]),
+                                                                  ("joint_unloading", ["base"])]
+    soft, unload = (a["parameters"][0]["value"] for a in doc["added"])
+    assert soft > 0.9999 and 0.6 < unload < 0.9
+    k = doc["joint_parameters"]["final"]["base"]["parameters"]["ky12"]["value"]
+    lateral = 1.0 / (L ** 2 / k + L ** 3 / (3.0 * E * I))                # N/m at the top, a = 1
+    assert 1.8e6 < lateral < 2.6e6                                        # the 78 mm secant, +-15 %
+    assert doc["settings"]["candidates_by_effect"]["p_delta"] == 1
+    assert doc["after"]["reduced_chi2"] < 0.5 * doc["before"]["reduced_chi2"]
     assert doc["hotspot_cases"] and all("-a78-" in h["case"] for h in doc["hotspot_cases"][:3])
     report = (tmp_path / "dg" / "report.md").read_text()
     rows = report.split("## Residual by amplitude", 1)[1].split("|---|")[-1].strip().splitlines()
     before = [float(r.split("|")[5]) for r in rows]                # chi2/n of the declared model
+    after = [float(r.split("|")[7]) for r in rows]
     assert len(before) == 6 and before == sorted(before) and before[-1] > 5 * before[0]
+    assert all(a < b for a, b in zip(after, before)) and after[0] < 0.1 * before[0]
+    if importlib.util.find_spec("matplotlib") is not None:
+        for name in ("load_displacement.png", "residual_amplitude.png"):
+            assert (tmp_path / "dg" / name).exists() and f"({name})" in report

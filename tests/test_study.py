@@ -83,6 +83,36 @@ def test_bad_study_toml(study, old, new, what):
     assert "study.toml" in str(err.value) and what in str(err.value)
 
 
+@pytest.mark.parametrize("entries,what", [
+    ("grid = 99\ncomponent = 3\nvalue = -1.0", "preloads[0]: grid 99 is not in the deck"),
+    ("grid = 5\ncomponent = 3\nvalue = -1.0\n\n[[preloads]]\ngrid = 5\ncomponent = 3\nvalue = 2.0",
+     "preloads[1]: grid 5 component 3 is given twice"),
+    ("grid = 5\ncomponent = 7\nvalue = -1.0", "component"),
+    ("grid = 5\ncomponent = 3\nvalue = -1.0\nforce = 2", "force"),
+])
+def test_bad_preloads(study, entries, what):
+    """``[[preloads]]`` entries: a grid of the deck, a component 1-6, each grid and component once,
+    no unknown key; the error names the table's entry."""
+    toml = study / "study.toml"
+    toml.write_text(toml.read_text() + "\n[[preloads]]\n" + entries + "\n")
+    with pytest.raises(StudyError) as err:
+        load_study(study)
+    assert "study.toml" in str(err.value) and what in str(err.value)
+
+
+def test_preloads_and_sequential_are_read(study):
+    toml = study / "study.toml"
+    toml.write_text(toml.read_text() + "\n[measurements]\nsequential = true\n\n[[preloads]]\ngrid = 5\n"
+                    "component = 3\nvalue = -2.0e4\n")
+    from blackbox.study import preload_matrix
+
+    s = load_study(study)
+    assert s.config.measurements.sequential is True
+    P = preload_matrix(s.config)
+    assert list(P.dofs) == [(5, 3)]
+    assert P.values.toarray().tolist() == [[-2.0e4]] and list(P.cases) == ["preload"]
+
+
 def test_joint_not_tied_by_rbe2(study):
     deck = study / "model.bdf"
     lines = [ln for ln in deck.read_text().splitlines() if not ln.startswith("RBE2")]

@@ -56,9 +56,10 @@ from blackbox.condensation import CondensedModel
 from blackbox.declared import DeclaredModel, SolverCost, declared_model, deck_with_springs
 from blackbox.diagnosis.decks import SplitDeck, cards_at, element_deck, split_deck, unmodelled_notes
 from blackbox.diagnosis.document import diagnosis_document, verdict_detail
-from blackbox.diagnosis.effects import (CandidateContext, CandidateLimit, Effect, MemberStiffness, RigidEndZone,
-                                       families)
+from blackbox.diagnosis.effects import (CandidateContext, CandidateLimit, Effect, MemberStiffness, PDelta, Preload,
+                                       RigidEndZone, families)
 from blackbox.diagnosis.effects.load_scale import case_scales
+from blackbox.diagnosis.effects.p_delta import axial_forces
 from blackbox.diagnosis.effects.undeclared_joint import UndeclaredJoint, joint_candidate_grids
 from blackbox.diagnosis.runs import RunRecord, element_stiffness
 from blackbox.diagnosis.search import Diagnosis, diagnose
@@ -67,7 +68,7 @@ from blackbox.errors import DiagnosisError, EditedDeckError
 from blackbox.identification import IdentificationResult, Observations, identify
 from blackbox.identification.fit_sigma import predict_rows
 from blackbox.parallel import Executor, StudyPackage, pack_study, use_executor
-from blackbox.study import Study, read_load_groups
+from blackbox.study import Study, preload_matrix, read_load_groups
 from solver_adapters.bdf_write import write_deck
 from solver_adapters.deck import Deck
 from solver_adapters.protocol import DofLabel, SolverAdapter, UnstableStructureError
@@ -273,6 +274,9 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
     # across the joints when they are the structure's only support (DeclaredModel.condense);
     # K_deck counts them, so the diagnosis sees what a deck with those springs written in sees
     held = {"deck": deck}
+    # the declared permanent load (p_delta): its axial forces once the split run is in
+    preload = preload_matrix(study.config) if PDelta in fams else None
+    held["preload"] = Preload(preload) if preload is not None else None
 
     def fit_declared(c) -> tuple[np.ndarray, IdentificationResult, RunRecord]:
         """The declared model's identification on run 1's condensation (here, as serially)."""
@@ -334,7 +338,9 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
                                     case_scales=(case_scales(fit_obs.case_index, fit_obs.values, fit_obs.sigma,
                                                              ident.predicted, fit_obs.case_labels)
                                                  if ident is not None else None),
-                                    max_member_candidates=max_member_candidates)
+                                    max_member_candidates=max_member_candidates, measured=obs,
+                                    loads=study.loads, sequential=study.config.measurements.sequential,
+                                    preload=held["preload"])
         # without the fit yet, the cuts and the rows do not read the residuals (checked above)
         def split_run():
             sctx = context()
@@ -370,6 +376,9 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
             sctx, sd, base, split_text = split_run()
         decks.append(split_text)
         collect_declared()
+        if preload is not None:
+            held["preload"] = axial_forces(base, sd.member_dofs, K_e, held["deck"], preload, dm.boundary, K_deck,
+                                           dm.joints, ident.k if ident is not None else np.zeros(0), log)
 
     # ---- candidates (with the declared fit's residuals, as serially) ----------------------------
     ctx = context()
@@ -420,16 +429,19 @@ class DiagnosisResult:
 
     def write(self, out: Path) -> list[str]:
         from blackbox.reports.diagnose import diagnosis_plots, diagnosis_report
-        from blackbox.reports.response import amplitude_before_after
+        from blackbox.reports.response import amplitude_before_after, before_after_plots
 
         out = Path(out)
         (out / "diagnosis.json").write_text(json.dumps(self.document, indent=2))
         files = ["diagnosis.json"]
+        d, fo = self.diagnosis, self.prepared.fit_obs
+        same_rows = len(d.declared.residuals) == len(fo) == len(d.final.residuals)
         if self.plots:
             files += diagnosis_plots(self.diagnosis, self.prepared.deck, out)
+            if same_rows:       # the fitted rows measured and predicted, before and after
+                files += before_after_plots(self.study.loads, fo, d.declared.predicted, d.final.predicted, out)
         text = diagnosis_report(self.study, self.document, files)
-        d, fo = self.diagnosis, self.prepared.fit_obs
-        if len(d.declared.residuals) == len(fo) == len(d.final.residuals):
+        if same_rows:
             text += amplitude_before_after(fo.values, fo.sigma, d.declared.residuals, d.final.residuals)
         (out / "report.md").write_text(text)
         files.append("report.md")

@@ -49,6 +49,21 @@ __all__ = ["ModelSpec", "ObsMap", "State", "AugmentedModel", "RIGID_RATIO"]
 RIGID_RATIO = 1e8           # a joint spring this many times stiffer than the structure is rigid
 
 
+MANY_GROUPS = 8             # beyond this many groups of cases, derivatives are applied case by case at once
+
+
+def per_case(stack: np.ndarray, index: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """``stack[index[c]] @ R[:, c]`` for every case ``c``: ``(a, L)`` from a stack ``(g, a, b)``
+    of per-group matrices, the group ``index`` of each case and ``R`` ``(b, L)``; in chunks of
+    cases of ~32 MB of gathered matrices."""
+    out = np.empty((stack.shape[1], R.shape[1]))
+    step = max(1, int(4e6 // max(stack.shape[1] * stack.shape[2], 1)))
+    for s in range(0, R.shape[1], step):
+        sl = slice(s, s + step)
+        out[:, sl] = np.einsum("lij,jl->il", stack[index[sl]], R[:, sl])
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class ModelSpec:
     """Joint models (declared or coupled) plus the effects added so far; parameter order:
@@ -172,6 +187,8 @@ class State:
     delta: np.ndarray
     U_O: np.ndarray
     groups: list | None = None
+    stacked: tuple | None = None        # with groups: (dK, Ainv, phi) stacked over the groups,
+                                        # and each case's group -- what many groups are applied by
 
     def each(self):
         """``(cols, dK, Ainv, phi)`` of every group of cases (``cols`` a slice or index array;
@@ -296,19 +313,21 @@ class AugmentedModel:
         z = Ainv @ b
         if not np.all(np.isfinite(z)):
             raise np.linalg.LinAlgError("singular augmented system")
-        groups = None
+        groups = stacked = None
         if self._case:
-            z, groups = self._case_solve(x, dK, D, IDK, b, z, Ainv)
+            z, groups, stacked = self._case_solve(x, dK, D, IDK, b, z, Ainv)
         u_S, f = z[:nS], z[nS:]
         if groups is None:
             dKu = dK @ u_S
+        elif len(groups) > MANY_GROUPS:
+            dKu = per_case(stacked[0], stacked[3], u_S)
         else:
             dKu = np.zeros_like(u_S)
             for cols, dKg, _, _ in groups:
                 dKu[:, cols] = dKg @ u_S[:, cols]
         delta = self.dt0 - self.Zs.T @ dKu - self.St @ f
         U_O = self.uo0 - self.Gos @ dKu - self.Zo @ f
-        return State(dK, D, Ainv, u_S, f, delta, U_O, groups)
+        return State(dK, D, Ainv, u_S, f, delta, U_O, groups, stacked)
 
     def _inverse(self, dK: np.ndarray, D: np.ndarray, IDK: np.ndarray) -> np.ndarray:
         nS, m = self.nS, self.m
@@ -328,14 +347,25 @@ class AugmentedModel:
             c = float(np.linalg.cond(st.Ainv))
         return c if np.isfinite(c) else float("inf")
 
+    def _inverses(self, dKs: np.ndarray, D: np.ndarray, IDK: np.ndarray) -> np.ndarray:
+        """:meth:`_inverse` of each stiffness change of the stack ``dKs`` ``(g, n_S, n_S)``."""
+        nS, m = self.nS, self.m
+        A = np.zeros((len(dKs), nS + m, nS + m))
+        A[:, :nS, :nS] = np.eye(nS) + np.einsum("ij,gjk->gik", self.Gss, dKs)
+        A[:, :nS, nS:] = self.Zs
+        A[:, nS:, :nS] = np.einsum("ij,gjk->gik", IDK @ self.Zs.T, dKs)
+        A[:, nS:, nS:] = D + IDK @ self.St
+        return np.linalg.inv(A)
+
     CASE_ITERATIONS = 20
 
     def case_factors(self, x: np.ndarray, u_S: np.ndarray) -> np.ndarray:
         """``(joint params, cases)``: each joint parameter's stiffness factor in each case, from
-        the case-dependent effects at the joint solution ``u_S`` (1 elsewhere)."""
+        the case-dependent effects at the joint solution ``u_S`` (1 elsewhere; the product of
+        the factors of several effects on one joint)."""
         phi = np.ones((self.spec.joint_params, u_S.shape[1]))
         for e, sl, js, E in self._case:
-            phi[js] = e.case_factors(E @ u_S, x[sl])
+            phi[js] *= e.case_factors(E @ u_S, x[sl], self.base.cases)
         return phi
 
     def _case_solve(self, x, dK, D, IDK, b, z, Ainv0):
@@ -346,28 +376,32 @@ class AugmentedModel:
         jp = self.spec.joint_params
         xj = x[:jp]
         phi = self.case_factors(x, z[:nS])
-        groups = None
         for _ in range(self.CASE_ITERATIONS):
-            keys, inv = np.unique(np.round(phi.T, 12), axis=0, return_inverse=True)
+            if jp == 1:                     # one joint parameter: a plain (faster) unique
+                _, first, inv = np.unique(np.round(phi[0], 12), return_index=True, return_inverse=True)
+            else:
+                _, first, inv = np.unique(np.round(phi.T, 12), axis=0, return_index=True, return_inverse=True)
             inv = np.asarray(inv).reshape(-1)
-            groups = []
-            z = np.empty_like(z)
-            for g, key in enumerate(keys):
-                cols = np.flatnonzero(inv == g)
-                if np.any(key != 1.0):
-                    dKg = dK + np.tensordot((key - 1.0) * xj, self._jD, axes=1)
-                    Ag = self._inverse(dKg, D, IDK)
-                else:
-                    dKg, Ag = dK, Ainv0
-                z[:, cols] = Ag @ b[:, cols]
-                groups.append((cols, dKg, Ag, key))
+            keys = phi.T[first]             # each group's factors as computed, not as rounded to group
+            # every group's joint stiffness and inverse at once (stacked), the unit group's exact
+            dKs = dK[None] + np.einsum("gi,ijk->gjk", (keys - 1.0) * xj, self._jD)
+            As = self._inverses(dKs, D, IDK)
+            ones = np.all(keys == 1.0, axis=1)
+            As[ones] = Ainv0
+            z = per_case(As, inv, b)
             if not np.all(np.isfinite(z)):
                 raise np.linalg.LinAlgError("singular augmented system")
             new = self.case_factors(x, z[:nS])
             if np.array_equal(np.round(new, 12), np.round(phi, 12)):
                 break
             phi = new
-        return z, groups
+        # each group's cases, once the factors settled (slices of one sort: np.split into one
+        # piece per case, as an amplitude-dependent joint has, costs more than the solve)
+        order = np.argsort(inv, kind="stable")
+        ends = np.searchsorted(inv[order], np.arange(1, len(keys) + 1))
+        starts = np.concatenate([[0], ends[:-1]])
+        groups = [(order[a:e], dKs[g], As[g], keys[g]) for g, (a, e) in enumerate(zip(starts, ends))]
+        return z, groups, (dKs, As, keys, inv)
 
     def _output_mixes(self, om: ObsMap) -> list[tuple[int, np.ndarray, list]]:
         if not any(type(e).mix_rows is not Effect.mix_rows for e in self._outputs):
@@ -458,30 +492,53 @@ class AugmentedModel:
         out = np.zeros((len(which), len(self.o_dofs), L))
         if not len(which):
             return out
+
+        def direction(i, u, phi, labels):
+            """``dK/dx_i u`` over the cases of ``u`` (``None`` for a compliance parameter)."""
+            if i < jp:
+                return (self._jD[i] @ u) * (1.0 if phi is None else phi[i])
+            if i in stiff:
+                dKq = np.zeros((nS, nS))
+                for idx, K_q in stiff[i]:
+                    dKq[np.ix_(idx, idx)] += K_q
+                return dKq @ u
+            if i in case_of:
+                e, sl, js, E, q = case_of[i]
+                dphi = e.case_factor_derivatives(E @ u, x[sl], labels)[q]      # (joint params, cases)
+                for e2, sl2, js2, E2 in self._case:     # times the other effects' factors there
+                    if e2 is not e and js2 == js:
+                        dphi = dphi * e2.case_factors(E2 @ u, x[sl2], labels)
+                v = np.zeros_like(u)
+                for k, ij in enumerate(range(js.start, js.stop)):
+                    if np.any(dphi[k]):
+                        v += (self._jD[ij] @ u) * (dphi[k] * x[ij])
+                return v
+            return None
+
+        def rhs_of(i, v, cols):
+            if v is not None:
+                return np.vstack([self.Gss @ v, IDK @ (self.Zs.T @ v)])
+            return np.vstack([np.zeros((nS, force[:, cols].shape[1])), basis[i] @ force[:, cols]])
+
+        if st.groups is not None and len(st.groups) > MANY_GROUPS:
+            # many groups (an amplitude-dependent joint: one per case): every case's inverse
+            # applied at once instead of group by group
+            dKs, As, keys, index = st.stacked
+            phi = keys[index].T
+            u, allc = st.u_S, np.arange(L)
+            for q, i in enumerate(which):
+                v = direction(i, u, phi, self.base.cases)
+                dz = -per_case(As, index, rhs_of(i, v, allc))
+                w = per_case(dKs, index, dz[:nS])
+                if v is not None:
+                    w = w + v
+                out[q] = -self.Gos @ w - self.Zo @ dz[nS:]
+            return out
         for cols, dKg, Ainv, phi in st.each():
             u = st.u_S[:, cols]
-            rhs, vs = [], []
-            for i in which:
-                v = None
-                if i < jp:
-                    v = (self._jD[i] @ u) * (1.0 if phi is None else phi[i])
-                elif i in stiff:
-                    dKq = np.zeros((nS, nS))
-                    for idx, K_q in stiff[i]:
-                        dKq[np.ix_(idx, idx)] += K_q
-                    v = dKq @ u
-                elif i in case_of:
-                    e, sl, js, E, q = case_of[i]
-                    dphi = e.case_factor_derivatives(E @ u, x[sl])[q]          # (joint params, cases)
-                    v = np.zeros_like(u)
-                    for k, ij in enumerate(range(js.start, js.stop)):
-                        if np.any(dphi[k]):
-                            v += (self._jD[ij] @ u) * (dphi[k] * x[ij])
-                if v is not None:
-                    rhs.append(np.vstack([self.Gss @ v, IDK @ (self.Zs.T @ v)]))
-                else:
-                    rhs.append(np.vstack([np.zeros((nS, u.shape[1])), basis[i] @ force[:, cols]]))
-                vs.append(v)
+            labels = [self.base.cases[c] for c in np.arange(L)[cols]]
+            vs = [direction(i, u, phi, labels) for i in which]
+            rhs = [rhs_of(i, v, cols) for i, v in zip(which, vs)]
             n = u.shape[1]
             dz = -(Ainv @ np.hstack(rhs)).reshape(nS + m, len(rhs), n).transpose(1, 0, 2)
             for q, v in enumerate(vs):

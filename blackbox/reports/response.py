@@ -15,8 +15,10 @@ import numpy as np
 
 from blackbox.fitting.statistics import chi2_band
 from blackbox.reports import raster
+from blackbox.reports.plots import pyplot
 
-__all__ = ["measured_data_report", "measured_data_plots", "amplitude_table", "single_load", "amplitude_before_after"]
+__all__ = ["measured_data_report", "measured_data_plots", "amplitude_table", "single_load", "amplitude_before_after",
+           "before_after_plots"]
 
 AMPLITUDE_BINS = 6                  # rows of the residual-by-amplitude table
 
@@ -227,3 +229,62 @@ def amplitude_before_after(values: np.ndarray, sigma: np.ndarray, z_before: np.n
         out.append(f"| {_g(a)} | {_g(b)} | {int(m.sum())} | {_g(rb)} | {_g(float(np.mean(z_before[m] ** 2)))} | "
                    f"{_g(ra)} | {_g(float(np.mean(z_after[m] ** 2)))} |")
     return "\n".join(out) + "\n"
+
+
+def before_after_plots(loads, obs, before: np.ndarray, after: np.ndarray, out_dir: Path,
+                       labels: tuple[str, str] = ("declared model", "after the added effects")) -> list[str]:
+    """``diagnose``'s response plots of the rows ``obs`` (:class:`~blackbox.identification.Observations`)
+    predicted ``before`` and ``after`` (measurement units): ``load_displacement.png`` when every
+    case loads one DOF (the measured path in case order, each model's prediction of every case:
+    a linear model is one straight line, a model whose stiffness depends on the case is not) and
+    ``residual_amplitude.png`` (measured - predicted, signed with the measured value, against its
+    magnitude, before and after side by side). Returns the file names written (none without
+    matplotlib)."""
+    plt = pyplot()
+    if plt is None or not len(obs.values):
+        return []
+    written = []
+    lab = _row_cases(obs)
+    sl = single_load(loads, lab)
+    if sl is not None:
+        (g, c), load = sl
+        channels = list(dict.fromkeys(obs.dofs))[:4]
+        fig, axes = plt.subplots(1, len(channels), figsize=(6.5 * len(channels), 5), squeeze=False)
+        for ax, ch in zip(axes[0], channels):
+            m = np.array([d == ch for d in obs.dofs])
+            order = np.argsort(obs.case_index[m], kind="stable")
+            y = load[m][order]
+            ax.plot(obs.values[m][order], y, "-", color="0.55", lw=0.8, label="measured (in case order)")
+            for pred, style, name in ((before, dict(color="C3", lw=1.2), labels[0]),
+                                      (after, dict(color="C0", lw=0.9, alpha=0.85), labels[1])):
+                ax.plot(pred[m][order], y, "-", label=f"{name} (in case order)", **style)
+            ax.axhline(0.0, color="k", lw=0.5)
+            ax.axvline(0.0, color="k", lw=0.5)
+            ax.set_xlabel(f"displacement at grid {ch[0]}, component {ch[1]}")
+            ax.set_ylabel(f"load at grid {g}, component {c}")
+            ax.legend(fontsize=8)
+            ax.set_title("load - displacement: measured and fitted")
+        fig.tight_layout()
+        fig.savefig(out_dir / "load_displacement.png", dpi=110)
+        plt.close(fig)
+        written.append("load_displacement.png")
+    rot = np.array([cc >= 4 for _, cc in obs.dofs])
+    kinds = [(k, m) for k, m in (("translation", ~rot), ("rotation", rot)) if m.any()]
+    fig, axes = plt.subplots(1, len(kinds), figsize=(7 * len(kinds), 4.5), squeeze=False)
+    sign = np.where(obs.values < 0, -1.0, 1.0)      # > 0: the structure moved more than the model says
+    for ax, (kind, m) in zip(axes[0], kinds):
+        for pred, style, name in ((before, dict(color="C3", ms=3, alpha=0.6), labels[0]),
+                                  (after, dict(color="C0", ms=3, alpha=0.6), labels[1])):
+            ax.plot(np.abs(obs.values[m]), ((obs.values - pred) * sign)[m], "o", label=name, **style)
+        s = float(np.median(obs.sigma[m]))
+        ax.axhspan(-2 * s, 2 * s, color="0.85", label="+-2 sigma (median)")
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.set_xlabel(f"|measured {kind}|")
+        ax.set_ylabel("(measured - predicted) x sign(measured)")
+        ax.legend(fontsize=8)
+        ax.set_title(f"residual against amplitude ({kind}s)")
+    fig.tight_layout()
+    fig.savefig(out_dir / "residual_amplitude.png", dpi=110)
+    plt.close(fig)
+    written.append("residual_amplitude.png")
+    return written

@@ -15,6 +15,9 @@ from blackbox.diagnosis.effects.support_flexibility import SupportFlexibility  #
 from blackbox.diagnosis.effects.joint_coupling import JointCoupling  # noqa: E402
 from blackbox.diagnosis.effects.member_stiffness import MemberStiffness  # noqa: E402
 from blackbox.diagnosis.effects.joint_gap import JointGap  # noqa: E402
+from blackbox.diagnosis.effects.joint_softening import JointSoftening  # noqa: E402
+from blackbox.diagnosis.effects.joint_unloading import JointUnloading  # noqa: E402
+from blackbox.diagnosis.effects.p_delta import PDelta, Preload  # noqa: E402
 from blackbox.diagnosis.effects.load_scale import LoadScale  # noqa: E402
 from blackbox.diagnosis.effects.sensor_gain import SensorGain  # noqa: E402
 from blackbox.diagnosis.effects.sensor_offset import SensorOffset  # noqa: E402
@@ -26,5 +29,5 @@ from blackbox.diagnosis.effects.rigid_end_zone import RigidEndZone  # noqa: E402
 
 __all__ = ["CandidateContext", "CandidateLimit", "Effect", "Connection", "register", "get", "kinds", "families",
            "UndeclaredJoint", "JointTranslation", "SupportFlexibility", "JointCoupling", "MemberStiffness", "JointGap",
-           "LoadScale", "SensorGain", "SensorOffset", "Outlier", "SignFlip", "ChannelSwap", "MisplacedSensor",
-           "RigidEndZone"]
+           "JointSoftening", "JointUnloading", "PDelta", "Preload", "LoadScale", "SensorGain", "SensorOffset", "Outlier",
+           "SignFlip", "ChannelSwap", "MisplacedSensor", "RigidEndZone"]

@@ -45,11 +45,12 @@ from solver_adapters.protocol import DofLabel
 
 if TYPE_CHECKING:
     from blackbox.diagnosis.decks import SplitDeck, SplitEditor
+    from blackbox.diagnosis.effects.p_delta import Preload
     from blackbox.diagnosis.fit import Fit
     from blackbox.diagnosis.model import AugmentedModel, ModelSpec, ObsMap, State
     from blackbox.identification import Observations
     from blackbox.joints import JointModel
-    from solver_adapters.protocol import Deck
+    from solver_adapters.protocol import Deck, LoadMatrix
 
 __all__ = ["CandidateContext", "CandidateLimit", "Effect", "finite_or_none"]
 
@@ -81,7 +82,10 @@ class CandidateContext:
     the cap on undeclared-joint candidates, each case's group from the optional ``group``
     column of ``loads.csv`` (empty without it), from the declared fit each fitted case's
     least-squares scale of its predicted responses (``None`` without a declared fit), and the cap
-    on member candidates. A family that applies a cap records it in ``limits`` (:meth:`note_limit`)."""
+    on member candidates. A family that applies a cap records it in ``limits`` (:meth:`note_limit`).
+    For the families whose joint stiffness depends on the case or on a permanent load: every
+    measured row (fitted and hold-out), the load cases, whether they are one test's steps in
+    time order, and the declared permanent load with the members' axial forces under it."""
     deck: "Deck"
     joints: tuple["JointModel", ...]
     K_e: dict[int, np.ndarray]
@@ -94,6 +98,12 @@ class CandidateContext:
                                                                 # its responses in the declared fit
     max_member_candidates: int = 300
     limits: dict[str, CandidateLimit] = field(default_factory=dict)
+    measured: "Observations | None" = None      # every measured row, fitted and hold-out (what
+                                                # is known of each case beforehand: its amplitude)
+    loads: "LoadMatrix | None" = None           # the study's load cases, in loads.csv's order
+    sequential: bool = False                    # the cases are the steps of one test in time order
+                                                # (study.toml [measurements] sequential)
+    preload: "Preload | None" = None            # the declared permanent load and its axial forces
 
     def note_limit(self, limit: CandidateLimit) -> None:
         self.limits[limit.kind] = limit
@@ -222,16 +232,21 @@ class Effect:
     @property
     def case_joint(self) -> str | None:
         """The declared joint whose stiffness this effect makes depend on the load case (a gap:
-        softer on one side), or ``None``. The joint's parameters ``k_i`` then act as
-        ``phi_ic k_i`` in case ``c``, :meth:`case_factors` giving ``phi``."""
+        softer on one side; a joint softer at larger amplitude), or ``None``. The joint's
+        parameters ``k_i`` then act as ``phi_ic k_i`` in case ``c``, :meth:`case_factors` giving
+        ``phi``; several such effects on one joint multiply their factors."""
         return None
 
-    def case_factors(self, rel: np.ndarray, x_effect: np.ndarray) -> np.ndarray:
+    def case_factors(self, rel: np.ndarray, x_effect: np.ndarray,
+                     cases: Sequence[str] | None = None) -> np.ndarray:
         """``phi`` ``(joint params, cases)`` from each spring's relative rotation ``rel`` (same
-        shape: branch ``i`` minus branch ``j`` about the spring's axis) in each case."""
+        shape: branch ``i`` minus branch ``j`` about the spring's axis) in each case, or from
+        what is known of each case beforehand: ``cases`` are the labels of ``rel``'s columns
+        (``None``: not known)."""
         return np.ones_like(rel)
 
-    def case_factor_derivatives(self, rel: np.ndarray, x_effect: np.ndarray) -> np.ndarray:
+    def case_factor_derivatives(self, rel: np.ndarray, x_effect: np.ndarray,
+                                cases: Sequence[str] | None = None) -> np.ndarray:
         """``d phi / d x_effect``: ``(n_params, joint params, cases)``, the sides held fixed."""
         return np.zeros((self.n_params, *rel.shape))
 

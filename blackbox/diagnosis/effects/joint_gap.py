@@ -48,10 +48,10 @@ class JointGap(Effect):
     def bounds(self):
         return np.full(1, 0.05), np.full(1, 20.0)
 
-    def case_factors(self, rel, x_effect):
+    def case_factors(self, rel, x_effect, cases=None):
         return np.where(np.asarray(rel) < 0.0, float(np.asarray(x_effect)[0]), 1.0)
 
-    def case_factor_derivatives(self, rel, x_effect):
+    def case_factor_derivatives(self, rel, x_effect, cases=None):
         return (np.asarray(rel) < 0.0).astype(float)[None]
 
     def refit_starts(self, x2, step, lo, hi, first):

@@ -25,7 +25,7 @@ from blackbox.diagnosis.effects.base import CandidateLimit, Effect
 from blackbox.diagnosis.effects.registry import register
 from solver_adapters.protocol import DofLabel
 
-__all__ = ["MemberStiffness", "section_parts", "SECTIONS", "SPLIT_RTOL"]
+__all__ = ["MemberStiffness", "section_parts", "stiffness_columns", "SECTIONS", "SPLIT_RTOL"]
 
 SECTIONS = ("EA", "EI1", "EI2", "GJ")
 # the element's tip DOFs (u_x u_y u_z th_x th_y th_z, element axes) of each part: plane 1 is the
@@ -180,38 +180,57 @@ class MemberStiffness(Effect):
     @classmethod
     def batch_columns(cls, model, st, x, om, effects):
         """``d prediction / d alpha_e`` at ``alpha_e = 1`` for members NOT in ``model``, by
-        reciprocity: ``u_E`` and ``G_ES``, ``G_OE`` are rows of the split run at the member's
-        DOFs, so no column of the member's own is needed."""
-        nS, m = model.nS, model.m
-        IDK = np.eye(m) - st.D * model.K0[None, :]
-        cond = model.cond
-        out = np.zeros((len(om.y), len(effects)))
+        reciprocity (:func:`stiffness_columns`): no column of the member's own is needed."""
         if any(e.variant == "sections" for e in effects):
             return None
-        # G_OE by reciprocity needs unit-load columns at the observed DOFs; the DOFs only a mix
-        # may read (a neighbour of a sensor) have none until an effect that reads them is added
-        # (the search loads them then), so until then their rows are not used and stay 0
-        loaded = [i for i, d in enumerate(model.o_dofs) if d in cond.base.col_of]
-        o_loaded = [model.o_dofs[i] for i in loaded]
-        groups = st.each()
-        for q, e in enumerate(effects):
-            E = list(e.dofs)
-            G_ES = cond.G(E, model.S) if nS else np.zeros((len(E), 0))
-            Z_E = cond.Z(E)
-            G_OE = np.zeros((len(model.o_dofs), len(E)))
-            G_OE[loaded] = cond.G(o_loaded, E)
-            u0E = cond.u0(E)
-            dU = np.zeros_like(st.U_O)
-            for cols, dK, Ainv, _ in groups:         # cases with their own joint stiffness (a gap)
-                u_E = u0E[:, cols] - G_ES @ (dK @ st.u_S[:, cols]) - Z_E @ st.f[:, cols]
-                F = e.K_e @ u_E                                           # (12, cases)
-                rhs = np.vstack([G_ES.T @ F, IDK @ (Z_E.T @ F)])
-                dz = -Ainv @ rhs
-                du_S, df = dz[:nS], dz[nS:]
-                dU[:, cols] = -model.Gos @ (dK @ du_S) - G_OE @ F - model.Zo @ df
-            out[:, q] = model.pick(dU, x, om)
-        return out * model.multiplier(x, om)[:, None]
+        return stiffness_columns(model, st, x, om, [(e.dofs, e.K_e) for e in effects])
 
     def marker_points(self, xyz, deck):
         b = deck.cbars[self.eid]
         return [(xyz[b.ga] + xyz[b.gb]) / 2]
+
+
+def stiffness_columns(model, st, x, om, terms) -> np.ndarray:
+    """Unwhitened score columns ``(n_obs, len(terms))`` of stiffness terms NOT in ``model``, one
+    per ``(dofs, K)`` (``dK = t K`` over the split deck's ``dofs``, at ``t = 0``), by reciprocity:
+    ``u_E`` and ``G_ES``, ``G_OE`` are rows of the split run at the DOFs ``E``, so no unit-load
+    column at ``E`` is needed (a member's factor, a permanent load's geometric stiffness)."""
+    nS, m = model.nS, model.m
+    IDK = np.eye(m) - st.D * model.K0[None, :]
+    cond = model.cond
+    out = np.zeros((len(om.y), len(terms)))
+    # G_OE by reciprocity needs unit-load columns at the observed DOFs; the DOFs only a mix
+    # may read (a neighbour of a sensor) have none until an effect that reads them is added
+    # (the search loads them then), so until then their rows are not used and stay 0
+    loaded = [i for i, d in enumerate(model.o_dofs) if d in cond.base.col_of]
+    o_loaded = [model.o_dofs[i] for i in loaded]
+    from blackbox.diagnosis.model import MANY_GROUPS, per_case
+
+    groups = st.each()
+    many = None
+    if len(groups) > MANY_GROUPS:
+        dKs, As, _, index = st.stacked
+        many = (As, dKs, index)
+    for q, (dofs, K) in enumerate(terms):
+        E = list(dofs)
+        G_ES = cond.G(E, model.S) if nS else np.zeros((len(E), 0))
+        Z_E = cond.Z(E)
+        G_OE = np.zeros((len(model.o_dofs), len(E)))
+        G_OE[loaded] = cond.G(o_loaded, E)
+        u0E = cond.u0(E)
+        dU = np.zeros_like(st.U_O)
+        if many is not None:                     # every case with its own joint stiffness at once
+            As, dKs, index = many
+            u_E = u0E - G_ES @ per_case(dKs, index, st.u_S) - Z_E @ st.f
+            F = K @ u_E
+            dz = -per_case(As, index, np.vstack([G_ES.T @ F, IDK @ (Z_E.T @ F)]))
+            dU = -model.Gos @ per_case(dKs, index, dz[:nS]) - G_OE @ F - model.Zo @ dz[nS:]
+        for cols, dK, Ainv, _ in ([] if many is not None else groups):   # cases with their own
+            u_E = u0E[:, cols] - G_ES @ (dK @ st.u_S[:, cols]) - Z_E @ st.f[:, cols]   # joint stiffness
+            F = K @ u_E                                               # (|E|, cases)
+            rhs = np.vstack([G_ES.T @ F, IDK @ (Z_E.T @ F)])
+            dz = -Ainv @ rhs
+            du_S, df = dz[:nS], dz[nS:]
+            dU[:, cols] = -model.Gos @ (dK @ du_S) - G_OE @ F - model.Zo @ df
+        out[:, q] = model.pick(dU, x, om)
+    return out * model.multiplier(x, om)[:, None]
