@@ -128,12 +128,12 @@ def is_match(planted: dict, effect: dict, holdout=()) -> bool:
     return True
 
 
-_DATA_KEYS = ("category", "source", "origin", "defect_of")
+_DATA_KEYS = ("of", "category", "source", "origin", "defect_of")
 
 
 def reported_as_data(effect: dict) -> bool | None:
-    """Whether an added effect is reported as a defect of the data: one of the keys
-    ``category``, ``source``, ``origin`` or ``defect_of`` (beside ``where`` or in its details)
+    """Whether an added effect is reported as a defect of the data: one of the keys ``of``
+    (the diagnosis document's), ``category``, ``source``, ``origin`` or ``defect_of`` (beside ``where`` or in its details)
     says ``"data"``; None when the entry has none of them (the document does not say)."""
     det = details(effect)
     vals = [det[k] for k in _DATA_KEYS if k in det]
@@ -648,6 +648,10 @@ def main(argv: list[str] | None = None) -> int:
         walls.append({"studies": len(todo), "wall_s": run_wall, "workers": args.workers})
         wall_path.write_text(json.dumps(walls))
     results = [done[i] for i in indices if i in done]
+    for r in results:          # scored before the document's key was read: from the stored entries
+        if r.get("reported_as_data") and all(f is None for f in r["reported_as_data"]):
+            found = [a for a in r.get("added") or [] if a.get("effect") in SENSOR_DEFECTS]
+            r["reported_as_data"] = [reported_as_data(a) for a in found][:len(r["reported_as_data"])]
     summary = summarize(results)
     settings = {"n": args.n, "seed": args.seed, "workers": args.workers, "include_held_out": args.include_held_out,
                 "families_run": args.families, "run_wall_s": sum(w["wall_s"] for w in walls) or None,
