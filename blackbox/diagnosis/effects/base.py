@@ -41,6 +41,7 @@ from typing import TYPE_CHECKING, ClassVar, Sequence
 
 import numpy as np
 
+from blackbox.joints import SimpleJoint
 from solver_adapters.protocol import DofLabel
 
 if TYPE_CHECKING:
@@ -52,7 +53,7 @@ if TYPE_CHECKING:
     from blackbox.joints import JointModel
     from solver_adapters.protocol import Deck, LoadMatrix
 
-__all__ = ["CandidateContext", "CandidateLimit", "Effect", "finite_or_none"]
+__all__ = ["CandidateContext", "CandidateLimit", "Effect", "JointCaseEffect", "finite_or_none"]
 
 
 @dataclass(frozen=True)
@@ -384,3 +385,16 @@ class Effect:
     def marker_points(self, xyz: dict[int, np.ndarray], deck: "Deck") -> list[np.ndarray]:
         """Where to mark the effect on a residual map (none by default)."""
         return []
+
+
+class JointCaseEffect(Effect):
+    """An effect that makes a declared simple-model joint's stiffness depend on the load case
+    (``where``: the joint's name; a gap, softening with amplitude, unloading): offered while
+    that joint is in the model, and its :attr:`case_joint`."""
+
+    def applicable(self, spec) -> bool:
+        return any(j.name == self.where[0] and isinstance(j, SimpleJoint) for j in spec.joints)
+
+    @property
+    def case_joint(self) -> str | None:
+        return str(self.where[0])

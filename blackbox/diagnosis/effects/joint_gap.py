@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from blackbox.diagnosis.effects.base import Effect
+from blackbox.diagnosis.effects.base import JointCaseEffect
 from blackbox.diagnosis.effects.registry import register
 from blackbox.joints import SimpleJoint
 
@@ -29,20 +29,13 @@ __all__ = ["JointGap"]
 
 @register
 @dataclass(frozen=True, eq=False)
-class JointGap(Effect):
+class JointGap(JointCaseEffect):
     kind = "joint_gap"
     summary = "a declared joint has play: its springs are softer for one sense of the load (a factor r)"
 
     @classmethod
     def candidates(cls, ctx, split) -> list["JointGap"]:
         return [cls((j.name,), (f"r_{j.name}",)) for j in ctx.joints if isinstance(j, SimpleJoint)]
-
-    def applicable(self, spec) -> bool:
-        return any(j.name == self.where[0] and isinstance(j, SimpleJoint) for j in spec.joints)
-
-    @property
-    def case_joint(self) -> str | None:
-        return str(self.where[0])
 
     @property
     def bounds(self):

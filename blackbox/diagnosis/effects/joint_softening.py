@@ -44,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from blackbox.diagnosis.effects.base import Effect
+from blackbox.diagnosis.effects.base import JointCaseEffect
 from blackbox.diagnosis.effects.registry import register
 from blackbox.joints import SimpleJoint
 
@@ -77,7 +77,7 @@ def case_amplitudes(obs) -> tuple[tuple[tuple[str, float], ...], str, float] | N
 
 @register
 @dataclass(frozen=True, eq=False)
-class JointSoftening(Effect):
+class JointSoftening(JointCaseEffect):
     """``amplitude``: ``(case label, a_c)`` of every measured case; ``a_kind``, ``a_ref``: what
     was measured and its largest magnitude (``a_c = 1`` there)."""
     kind = "joint_softening"
@@ -96,13 +96,6 @@ class JointSoftening(Effect):
         a, kind, ref = amp
         return [cls((j.name,), (f"soft_{j.name}",), amplitude=a, a_kind=kind, a_ref=ref)
                 for j in ctx.joints if isinstance(j, SimpleJoint)]
-
-    def applicable(self, spec) -> bool:
-        return any(j.name == self.where[0] and isinstance(j, SimpleJoint) for j in spec.joints)
-
-    @property
-    def case_joint(self) -> str | None:
-        return str(self.where[0])
 
     @property
     def nominal(self) -> np.ndarray:

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from blackbox.diagnosis.effects.base import Effect
+from blackbox.diagnosis.effects.base import JointCaseEffect
 from blackbox.diagnosis.effects.registry import register
 from blackbox.joints import SimpleJoint
 
@@ -65,7 +65,7 @@ def unloading_steps(loads) -> tuple[str, ...]:
 
 @register
 @dataclass(frozen=True, eq=False)
-class JointUnloading(Effect):
+class JointUnloading(JointCaseEffect):
     """``unloading``: the labels of the unloading steps; ``steps``: how many steps there are."""
     kind = "joint_unloading"
     summary = ("a declared joint is softer or stiffer while the load is being taken off (a sequential "
@@ -83,13 +83,6 @@ class JointUnloading(Effect):
             return []
         return [cls((j.name,), (f"r_unload_{j.name}",), unloading=down, steps=ctx.loads.n_cases)
                 for j in ctx.joints if isinstance(j, SimpleJoint)]
-
-    def applicable(self, spec) -> bool:
-        return any(j.name == self.where[0] and isinstance(j, SimpleJoint) for j in spec.joints)
-
-    @property
-    def case_joint(self) -> str | None:
-        return str(self.where[0])
 
     @property
     def bounds(self):
