@@ -30,8 +30,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from solver_adapters.bdf import parse_int, parse_real
-from solver_adapters.elementloads import MassReader, read_grav, read_pload1
+# the field readers every load card shares (located errors for blank, bad or extra fields)
+from solver_adapters.elementloads import MassReader, _int, _max_fields, _real, read_grav, read_pload1
 from solver_adapters.protocol import DeckFormatError
 
 __all__ = ["LOAD_CARDS", "OTHER_LOAD_CARDS", "PointLoad", "LoadCombination", "LoadCards", "read_load_cards",
@@ -196,39 +196,6 @@ def _basic_vector(p: PointLoad, deck) -> np.ndarray:
         b = _unit(xyz[3] - xyz[2], c, 7, "the vector from G3 to G4")
         d = _unit(np.cross(a, b), c, 5, "(G2 - G1) x (G4 - G3)")
     return p.scale * d
-
-
-def _int(c, i: int, *, minimum: int = 1, default: int | None = None) -> int:
-    text = c.text(i)
-    if not text:
-        if default is None:
-            raise c.error(i, "required integer field is blank")
-        return default
-    try:
-        v = parse_int(text)
-    except DeckFormatError as exc:
-        raise c.error(i, str(exc).split(": ")[-1]) from None
-    if v < minimum:
-        raise c.error(i, f"must be >= {minimum}")
-    return v
-
-
-def _real(c, i: int, default: float | None = None) -> float:
-    text = c.text(i)
-    if not text:
-        if default is None:
-            raise c.error(i, "required real field is blank")
-        return default
-    try:
-        return parse_real(text)
-    except DeckFormatError as exc:
-        raise c.error(i, str(exc).split(": ")[-1]) from None
-
-
-def _max_fields(c, n: int) -> None:
-    for i in range(n + 1, len(c.fields) + 1):
-        if c.text(i):
-            raise c.error(i, f"{c.name} has at most {n} fields")
 
 
 def _point(c) -> PointLoad:
