@@ -240,6 +240,45 @@ def test_hotspots_and_verdict_definitions():
     assert verdict(0.5, band, False) == "adequate"     # below the band: sigma overstated, no misfit
 
 
+@pytest.mark.parametrize("n", [3, 8, 25])
+def test_found_groups_bound_holds_whatever_groups_are_chosen(n):
+    """With no load scaled, the best load-scale group found from the data (the groups
+    ``LoadScale.found_groups`` offers, ordered by the case scales) drops the chi2 by less than
+    ``t`` at least as often as the bound of ``found_group_log_sf`` says, at the levels a search
+    spends (simulated: independent standardized case scales with unequal standard deviations,
+    as cases of different load magnitudes give). The tolerance is the simulation's own: 40,000
+    noise-only data sets put a binomial standard error of 16 % on a 1e-3 tail; the bound must
+    fall below the simulated tail by more than 3 such errors nowhere. Its looseness is bounded
+    too (a looser bound would cost a real test day its detection): measured, the bound is 2.5-3.1x
+    the simulated tail for 3 cases, 3.2-4.3x for 8 and 8-16x for 25 at 1e-2 and 1e-3 (the
+    critical chi2 drop at 1e-3 19 %, 19 % and 30 % above the simulated one); beyond 25x fails the
+    test."""
+    from blackbox.diagnosis.effects.load_scale import found_group_log_sf
+    rng = np.random.default_rng(11)
+    std = rng.uniform(0.3, 3.0, n)                    # each case's scale standard deviation
+    z = rng.standard_normal((40_000, n))
+    labels = [f"L{i + 1}" for i in range(n)]
+    # the groups found_groups offers, checked on one draw against the vectorised order below
+    a0 = z[0] * std
+    groups = {g.cases for g in LoadScale.found_groups(labels, {c: (a0[i], std[i]) for i, c in enumerate(labels)})}
+    o0 = np.argsort(a0, kind="stable")
+    assert groups == {tuple(sorted(o0[:k])) for k in range(2, n)} | {tuple(sorted(o0[n - k:])) for k in range(2, n)}
+    o = np.argsort(z * std, axis=1)
+    w = 1.0 / std
+    zw = np.take_along_axis(z * w, o, 1)
+    ww = np.take_along_axis(np.broadcast_to(w ** 2, z.shape), o, 1)
+    best = np.zeros(len(z))
+    for k in range(2, n):
+        for sl in (slice(0, k), slice(n - k, n)):
+            best = np.maximum(best, zw[:, sl].sum(1) ** 2 / ww[:, sl].sum(1))
+    for q in (1e-2, 1e-3):
+        t = float(np.quantile(best, 1 - q))
+        bound = np.exp(found_group_log_sf(t, n))
+        se = np.sqrt(q * (1 - q) / len(z))
+        assert bound >= q - 3 * se, (n, q, t, bound)
+        assert bound <= 25 * q, (n, q, t, bound)
+
+
 @pytest.mark.parametrize("group_column", [True, False], ids=["group-column", "found-from-data"])
 def test_generated_load_scale_of_one_group(tmp_path, group_column):
     """A 4-branch star frame with 17 load cases in two groups: the 8 cases of group B were run

@@ -66,7 +66,10 @@ kinds the study offers candidates of, ``M_k`` the candidates of the effect's kin
 included: each fitted reading an outlier, each channel a sign flip, each pair of channels of one
 component a swap, each grid-neighbour pair a misplaced sensor in seven ways; see
 ``blackbox.diagnosis.search.multipliers``)
-rejects with probability ``P(ncx2(p, lambda) > chi2_isf(alpha / M, p))``; the **threshold** is
+rejects with probability ``P(ncx2(p, lambda) > chi2_isf(alpha / M, p))`` (a test day with no
+group column, which the diagnosis must find from the data: ``P(ncx2(1, lambda) > t)`` with ``t``
+the critical value of the found groups' bound, ``blackbox.diagnosis.effects.load_scale``, at the
+same level; the found groups count as one hypothesis in ``M``); the **threshold** is
 the noncentrality ``lambda_1`` at which that probability is 0.5, and an effect of threshold
 multiple ``m`` has noncentrality ``m^2 lambda_1``. Continuous effects are planted at the size
 whose noncentrality is that of a multiple drawn log-uniformly within a size bin (the bins
@@ -103,6 +106,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from benchmarks.blind import frames as fr                                 # noqa: E402
+from blackbox.diagnosis.effects.load_scale import found_group_log_sf       # noqa: E402
 from blackbox.joints import complex_params_from_kc, joint_dofs, make_joint  # noqa: E402
 from blackbox.simulation import NoiseConfig, noise_sigma, simulate_rows     # noqa: E402
 from blackbox.structures import TruthDeck                                 # noqa: E402
@@ -507,9 +511,15 @@ def declared_response(declared: Deck, joints: list[dict], lm: LoadMatrix, dofs, 
 
 
 def threshold_noncentrality(p: int, m_candidates: int, alpha: float = ALPHA,
-                            power: float = POWER_AT_THRESHOLD) -> float:
-    """The noncentrality at which a ``p``-parameter chi2 test at level ``alpha / m`` has ``power``."""
+                            power: float = POWER_AT_THRESHOLD, found_among: int = 0) -> float:
+    """The noncentrality at which a ``p``-parameter chi2 test at level ``alpha / m`` has ``power``;
+    ``found_among``: a load-scale group the diagnosis must find from the data among that many
+    fitted cases, whose test is the bound of :func:`found_group_log_sf` (a higher critical value
+    than a group named in advance)."""
     crit = stats.chi2.isf(alpha / m_candidates, p)
+    if found_among:
+        level = math.log(alpha / m_candidates)
+        crit = optimize.brentq(lambda t: found_group_log_sf(t, found_among) - level, 1e-6, 1e4)
     return float(optimize.brentq(lambda lam: stats.ncx2.sf(crit, p, lam) - power, 1e-9, 50 * crit + 200))
 
 
@@ -542,9 +552,10 @@ def test_days(all_labels: list[str], fit_labels: list[str]) -> list[tuple[str, .
 
 
 def found_group_candidates(n_fit: int) -> int:
-    """How many load-scale groups the diagnosis finds from the data for ``n_fit`` fitted cases
-    (``blackbox.diagnosis.effects.load_scale``): 2 (n - 2)."""
-    return max(0, 2 * (n_fit - 2))
+    """How many hypotheses the load-scale groups the diagnosis finds from the data make for
+    ``n_fit`` fitted cases (``blackbox.diagnosis.effects.load_scale``): one, tested with a bound
+    that accounts for the choice among them, when there are at least three fitted cases."""
+    return 1 if n_fit >= 3 else 0
 
 
 def neighbours_of(deck: Deck, g: int) -> list[int]:
@@ -851,7 +862,7 @@ def _try_study(rng: np.random.Generator, index: int, kinds: tuple[str, ...], fam
     effects: list[dict] = []
     for kind in kinds:
         e = plan_effect(rng, kind, places, declared, joints, lm, resp, labels, mult[kind],
-                        forced_multiple, effects, group_column)
+                        forced_multiple, effects, group_column, len(fit_labels))
         if e is None:
             return None
         effects.append(e)
@@ -879,8 +890,9 @@ def _overlaps(e: dict, others: list[dict]) -> bool:
 
 
 def plan_effect(rng, kind, places, declared, joints, lm, resp, labels, multiplier, forced_multiple,
-                others, group_column) -> dict | None:
-    """Place and size one effect of ``kind`` (module docstring); None when no place works."""
+                others, group_column, n_fit: int = 0) -> dict | None:
+    """Place and size one effect of ``kind`` (module docstring); None when no place works.
+    ``n_fit``: the fitted cases, among which a test day with no group column is found."""
     multiple = float(forced_multiple) if forced_multiple is not None else draw_multiple(rng)
     pool = list(places[kind])
     placement = "anywhere"
@@ -925,7 +937,8 @@ def plan_effect(rng, kind, places, declared, joints, lm, resp, labels, multiplie
             e.update({"where": where[0], "component": where[1]})
         if _overlaps(e, others):
             continue
-        lam1 = threshold_noncentrality(p, multiplier)
+        found = kind == "load_scale" and which == "day" and not group_column and found_group_candidates(n_fit)
+        lam1 = threshold_noncentrality(p, multiplier, found_among=n_fit if found else 0)
         lam = lambda_fn(kind, where, extra, declared, joints, lm, resp, labels)
         s0 = {"load_scale": 1e-3, "sensor_gain": 1e-3, "member_stiffness": 1e-3, "joint_coupling": 1e-3,
               "outlier": 1.0, "joint_gap": 1e-2}.get(kind, 1e-4)

@@ -48,7 +48,7 @@ from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
-from scipy import stats
+from scipy import special, stats
 
 from blackbox.diagnosis.effects.base import Effect
 from blackbox.diagnosis.fit import Fit, chi2_band, fit_model
@@ -64,7 +64,7 @@ from blackbox.identification import Observations
 from blackbox.joints import ComplexJoint, JointModel
 from solver_adapters.protocol import DofLabel
 
-__all__ = ["multipliers", "refit_schedule", "eliminate", "without", "Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "holdout_worse", "VERDICTS", "verdict",
+__all__ = ["multipliers", "hypotheses_by_kind", "refit_schedule", "eliminate", "without", "Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "holdout_worse", "VERDICTS", "verdict",
            "refit_candidate", "refine", "round_level", "diagnose", "map_refits", "refits_pay"]
 
 
@@ -324,13 +324,22 @@ class Checks:
         lr = max(fit.chi2 - f2.chi2, 0.0)
         phi = max(1.0, f2.reduced_chi2)             # misfit left after the addition (quasi-likelihood)
         lr_p = float(stats.chi2.sf(lr / phi, dp)) if dp > 0 else 1.0
-        lr_adj = min(1.0, multiplier * lr_p)
         dbic = f2.bic - fit.bic
-        reasons, note = [], ""
-        if phi > 1.0 and dbic < 0 and not -lr / phi + dp * math.log(f2.n_obs) < 0:
-            reasons.append(f"BIC does not improve once the misfit it leaves (reduced chi2 {phi:.3g}) is "
-                           f"counted ({-lr / phi + dp * math.log(f2.n_obs):+.4g})")
         e = f2.spec.effects[effect] if 0 <= effect < len(f2.spec.effects) else None
+        log_sel = e.selection_log_sf(lr / phi) if e is not None and dp == 1 else None
+        if log_sel is not None:
+            # a candidate the data chose (module docstring of its family): its p-value accounts
+            # for the choice, and its chi2 drop counts as what a fixed one-parameter candidate
+            # would need for that p-value, so it competes with fixed candidates on equal terms
+            lr_p = math.exp(log_sel)
+            lr_fixed = phi * float(special.ndtri_exp(log_sel - math.log(2.0))) ** 2 if log_sel < 0 else 0.0
+            dbic += max(lr - lr_fixed, 0.0)
+        lr_eff = lr if log_sel is None else min(lr, lr_fixed)
+        lr_adj = min(1.0, multiplier * lr_p)
+        reasons, note = [], ""
+        if phi > 1.0 and dbic < 0 and not -lr_eff / phi + dp * math.log(f2.n_obs) < 0:
+            reasons.append(f"BIC does not improve once the misfit it leaves (reduced chi2 {phi:.3g}) is "
+                           f"counted ({-lr_eff / phi + dp * math.log(f2.n_obs):+.4g})")
         why = e.rejection(f2.x[f2.spec.effect_slices()[effect]]) if e is not None else None
         if why:
             reasons.append(why)
@@ -434,11 +443,22 @@ def multipliers(pool: Sequence[Effect], round_no: int) -> dict[str, float]:
     thousands of places (one reading an outlier, two channels swapped) thus does not dilute the
     level of a kind with a few (a support, a joint); the family-wise false-addition chance stays
     below ``sum_r alpha / 2^r < alpha``."""
-    per: dict[str, int] = {}
-    for e in pool:
-        per[e.kind] = per.get(e.kind, 0) + 1 + e.variant_tests
+    per = hypotheses_by_kind(pool)
     K = len(per)
     return {k: 2.0 ** round_no * K * m for k, m in per.items()}
+
+
+def hypotheses_by_kind(pool: Sequence[Effect]) -> dict[str, int]:
+    """Kind -> how many hypotheses its candidates in ``pool`` make: one per candidate (per
+    :attr:`Effect.hypothesis`: a family chosen from the data as a whole is one) plus the
+    variant upgrades each could be refined through."""
+    seen: set = set()
+    per: dict[str, int] = {}
+    for e in pool:
+        h = e.hypothesis
+        per[e.kind] = per.get(e.kind, 0) + (h not in seen) + e.variant_tests
+        seen.add(h)
+    return per
 
 
 SCREEN = 1.0
@@ -677,9 +697,7 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
             stop = "no candidate left"
             break
         mults = multipliers(pool, it + 1)
-        by_kind: dict[str, int] = {}
-        for e in pool:
-            by_kind[e.kind] = by_kind.get(e.kind, 0) + 1 + e.variant_tests
+        by_kind = hypotheses_by_kind(pool)
         M = sum(by_kind.values())                       # the round's hypotheses
         raw = score_candidates(model, fit, om, pool, boundary, K_deck, o_dofs)
         n = fit.n_obs

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from blackbox.diagnosis.search import Diagnosis
+from blackbox.diagnosis.search import Diagnosis, hypotheses_by_kind
 from blackbox.reports.plots import pyplot
 from blackbox.study import Study
 from solver_adapters.protocol import Deck
@@ -234,7 +234,7 @@ def diagnosis_plots(diag: Diagnosis, deck: Deck, out_dir: Path) -> list[str]:
         val = [max(-c.log10_p, 1e-3) if math.isfinite(c.log10_p) else 1e6 for c in sc]
         ax.barh(y, val, color=[cmap(kinds.index(c.effect.kind)) for c in sc])
         ax.set_yticks(y, [f"{c.effect.kind} @ {', '.join(map(str, c.effect.where))[:24]}" for c in sc], fontsize=7)
-        n_hyp = len(steps[0].scores) + sum(c.effect.variant_tests for c in steps[0].scores)
+        n_hyp = sum(hypotheses_by_kind([c.effect for c in steps[0].scores]).values())
         thr = -math.log10(diag.alpha / (2.0 * max(n_hyp, 1)))
         ax.axvline(thr, color="k", ls="--", lw=1, label=f"round-1 level ({n_hyp} hypotheses, alpha / 2)")
         for yi, v, c in zip(y, val, sc):

@@ -351,6 +351,20 @@ class Effect:
         return None
 
     @property
+    def hypothesis(self) -> object:
+        """What this candidate is one hypothesis of, in the search's multiplicity count: itself
+        (its key) by default; candidates chosen from the data as one family (load-scale groups
+        found from the case scales) share one, and their test accounts for the choice
+        (:meth:`selection_log_sf`)."""
+        return self.key
+
+    def selection_log_sf(self, t: float) -> float | None:
+        """The natural log of the p-value of a likelihood ratio ``t`` (already divided by the
+        misfit factor) for a candidate that the data chose among others of its family, or
+        ``None`` for a candidate fixed before the data were seen (the plain chi2 test)."""
+        return None
+
+    @property
     def variant_tests(self) -> int:
         """How many variant-against-variant LR tests refining this candidate can make (counted
         in the search's multiplicity control)."""

@@ -14,10 +14,21 @@ candidate ``s_found_<first>_<k>`` -- the cases of a test day whose load cell rea
 factor and sit together at one end. The groups are found again from each round's fit
 (:meth:`LoadScale.refresh`): with a support spring still missing, the declared fit's case scales
 mix both effects, and the day stands out only once the support is in the model. The order is read from the same data the candidates are
-then tested on, so every such group is a hypothesis of its own round and counted in its
-Bonferroni correction (2 (n - 2) of them for n fitted cases); one case's own factor stays a
-candidate beside them. Hold-out cases are never in a found group (their residuals are not
-looked at).
+then tested on, so a found group's likelihood ratio is not a chi2_1 variable: the best of the
+groups a noise-only data set offers has a chi2 drop near 0.3 n, not 1. Its test accounts for
+the choice (:func:`found_group_log_sf`): with ``z_i`` the fitted cases' standardized scales
+(independent N(0, 1) with no load scaled, when the cases outnumber the joint parameters), any
+group's drop is at most the sum of the squares of its members of one sign (Cauchy-Schwarz),
+hence at most ``A = sum z_i^2 [z_i > 0]`` or ``B`` (the same for ``z_i < 0``); ``A`` is a
+mixture of chi2_j with binomial(n, 1/2) weights, so ``P(best drop > t) <= 2 sum_j C(n, j)
+2^-n P(chi2_j > t)`` whichever groups are offered. That bound is each found group's p-value,
+and the found groups together count as one hypothesis of their round
+(:attr:`LoadScale.hypothesis`); where they compete with a group fixed in advance (all cases,
+a ``loads.csv`` group, one case) their chi2 drop counts as the drop a fixed group would need
+for the same p-value (:meth:`blackbox.diagnosis.search.Checks.judge`), so a group that fits
+the noise of a few cases better does not displace the one that explains them all. One case's
+own factor stays a candidate beside them. Hold-out cases are never in a found group (their
+residuals are not looked at).
 """
 
 from __future__ import annotations
@@ -25,11 +36,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import special, stats
 
 from blackbox.diagnosis.effects.base import Effect
 from blackbox.diagnosis.effects.registry import register
 
-__all__ = ["LoadScale", "case_scales"]
+__all__ = ["LoadScale", "case_scales", "found_group_log_sf"]
 
 
 def case_scales(case: np.ndarray, y: np.ndarray, sigma: np.ndarray, predicted: np.ndarray,
@@ -50,6 +62,18 @@ def case_scales(case: np.ndarray, y: np.ndarray, sigma: np.ndarray, predicted: n
     return out
 
 
+def found_group_log_sf(t: float, n: int) -> float:
+    """The natural log of the bound of the module docstring on the chance that, with no load
+    scaled, the best group found among ``n`` fitted cases drops the chi2 by ``t`` or more:
+    ``log min(1, 2 sum_{j=1..n} C(n, j) 2^-n P(chi2_j > t))``."""
+    if t <= 0:
+        return 0.0
+    j = np.arange(1, n + 1)
+    terms = special.gammaln(n + 1) - special.gammaln(j + 1) - special.gammaln(n - j + 1) - n * np.log(2.0) \
+        + stats.chi2.logsf(t, j)
+    return float(min(0.0, np.log(2.0) + special.logsumexp(terms)))
+
+
 @register
 @dataclass(frozen=True, eq=False)
 class LoadScale(Effect):
@@ -61,6 +85,14 @@ class LoadScale(Effect):
 
     cases: tuple[int, ...] = ()
     group: str | None = None
+    among: int = 0          # a found group: how many fitted cases it was chosen among
+
+    @property
+    def hypothesis(self) -> object:
+        return (self.kind, "found from the data") if self.found else self.key
+
+    def selection_log_sf(self, t: float) -> float | None:
+        return found_group_log_sf(t, self.among) if self.found else None
 
     def details_json(self) -> dict:
         return {} if self.group is None else {"group": self.group}
@@ -115,7 +147,7 @@ class LoadScale(Effect):
                 seen.add(idx)
                 first = cases[idx[0]]
                 out.append(cls(tuple(cases[i] for i in idx), (f"s_found_{first}_{k}",), cases=idx,
-                               group=f"found from the data ({k} cases)"))
+                               group=f"found from the data ({k} cases)", among=n))
         return out
 
     @property
