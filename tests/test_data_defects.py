@@ -127,6 +127,84 @@ def test_outlier(tmp_module):
     _within(a["parameters"][0], b)
 
 
+# Defects no one-parameter kind describes: the channel (or case) is set aside as a whole and
+# the report says what its readings look like. Grid 5, component 2 (the channel of
+# test_sign_flip, read clearly in every case); the cube has 10 cases in loads.csv order
+# L1..L10. A drift and a jump are in the channel's largest sigma ``m`` (a zero moves by a
+# length, whatever the reading; the cube's sigma is 5 % of each reading), noise in each
+# reading's own sigma ``s``.
+_CHANNEL_DEFECTS = {
+    "drift": lambda i, v, s, m, rng: v + 1.5 * m * i,                  # 0 .. 13.5 sigma over the test
+    "step": lambda i, v, s, m, rng: v + 10.0 * m * (i >= 5),           # a jump at case L6
+    "scatter": lambda i, v, s, m, rng: v + float(rng.normal(0.0, 6.0 * s)),
+    "dead": lambda i, v, s, m, rng: float(rng.normal(0.0, s)),
+}
+
+
+@pytest.mark.parametrize("pattern", list(_CHANNEL_DEFECTS))
+def test_bad_channel(tmp_module, pattern):
+    """A drifting zero, a jump, noise 6x the declared sigma, a dead transducer on one channel:
+    one ``bad_channel`` at that channel (not an offset and a string of outliers), reported as the
+    data, with the pattern that the module's tests name (``channel_pattern``)."""
+    study = _copy(tmp_module, f"bad_channel_{pattern}")
+    rows = _rows(study)
+    rng = np.random.default_rng(5)
+    chan = _channel(rows, 5, 2)
+    m = float(max(float(r["sigma"]) for r in chan.values()))
+    for r in chan.values():
+        i = int(r["case"][1:]) - 1
+        r["value"] = repr(_CHANNEL_DEFECTS[pattern](i, float(r["value"]), float(r["sigma"]), m, rng))
+    _write(study, rows)
+    doc = _diagnose(study)
+    a = _only(doc, "bad_channel")
+    assert len(doc["added"]) == 1
+    assert a["where"] == [5] and a["component"] == 2 and a["of"] == "data"
+    assert a["pattern"] == pattern, a["pattern_detail"]
+    if pattern == "step":
+        assert "from case L6" in a["pattern_detail"]
+
+
+def test_bad_case(tmp_module):
+    """Case L9's file in millimetres (every reading and its sigma x 1000): beyond any load-cell
+    factor (0.2..5), so the case is set aside, and the report finds the factor 1000 and names
+    the likely cause."""
+    study = _copy(tmp_module, "bad_case")
+    rows = _rows(study)
+    for r in rows:
+        if r["case"] == "L9":
+            r["value"] = repr(1000.0 * float(r["value"]))
+    _write(study, rows)
+    doc = _diagnose(study)
+    a = _only(doc, "bad_case")
+    assert len(doc["added"]) == 1 and a["where"] == ["L9"] and a["of"] == "data"
+    assert a["pattern"] == "scale" and "millimetres read as metres" in a["pattern_detail"], a["pattern_detail"]
+
+
+def test_patterns_of_set_aside_readings():
+    """``channel_pattern`` and ``case_pattern`` on exact data (noise 1, 12 cases): each pattern
+    is recognised, and the simplest one that leaves a chi2 within its 99 % band is named (a
+    drift is not called a step)."""
+    from blackbox.diagnosis.effects.bad_case import case_pattern
+    from blackbox.diagnosis.effects.bad_channel import channel_pattern
+    rng = np.random.default_rng(2)
+    n = 12
+    u = rng.uniform(5.0, 40.0, n) * rng.choice([-1.0, 1.0], n)
+    s = np.ones(n)
+    e = rng.normal(0.0, 1.0, n)
+    cases = [f"L{i + 1}" for i in range(n)]
+    t = np.arange(n)
+    assert channel_pattern(e, u, s, cases)["pattern"] == "dead"
+    assert channel_pattern(u + 7.0 + e, u, s, cases)["pattern"] == "offset"
+    assert channel_pattern(u + 2.0 * t + e, u, s, cases)["pattern"] == "drift"
+    assert channel_pattern(u + 20.0 * (t >= 5) + e, u, s, cases)["pattern"] == "step"
+    assert "from case L6" in channel_pattern(u + 20.0 * (t >= 5) + e, u, s, cases)["pattern_detail"]
+    assert channel_pattern(1000.0 * (u + e), u, s, cases)["pattern"] == "gain"
+    assert channel_pattern(u + 8.0 * rng.normal(0.0, 1.0, n), u, s, cases)["pattern"] == "scatter"
+    assert case_pattern(e, u, s)["pattern"] == "zero"
+    assert case_pattern(-(u + e), u, s)["pattern_detail"].endswith("(the load applied in the opposite direction?)")
+    assert case_pattern(u[::-1] + e, u, s)["pattern"] == "other"
+
+
 @pytest.fixture(scope="module")
 def cube_prepared(tmp_module):
     (tmp_module / "decks").mkdir()

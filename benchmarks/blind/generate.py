@@ -855,6 +855,12 @@ def _try_study(rng: np.random.Generator, index: int, kinds: tuple[str, ...], fam
     # to plant), but two groups from a group column, or the groups it finds from the data
     m_k = {k: len(v) for k, v in places.items() if k != "load_scale" and v}
     m_k["load_scale"] = 1 + len(fit_labels) + (2 if group_column else found_group_candidates(len(fit_labels)))
+    # every channel read in two fitted cases or more may be set aside, and every fitted case when
+    # three or more are (blackbox.diagnosis.effects.bad_channel, bad_case): kinds the diagnosis
+    # offers, though nothing is planted as them
+    m_k["bad_channel"] = len(dofs) if len(fit_labels) >= 2 else 0
+    m_k["bad_case"] = len(fit_labels) if len(fit_labels) >= 3 else 0
+    m_k = {k: v for k, v in m_k.items() if v}
     # the diagnosis's first-round multiplier of one hypothesis of a kind (search.multipliers): 2 K M_k
     mult = {k: 2 * len(m_k) * m for k, m in m_k.items()}
     n_candidates = sum(m_k.values())

@@ -108,7 +108,7 @@ def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: li
         if s.added is None or s.added.effect.key not in final:
             continue
         e = final[s.added.effect.key]
-        added.append({"effect": e.kind, "where": e.where_json(), **e.details_json(),
+        added.append({"effect": e.kind, "where": e.where_json(), **e.details_json(), **e.findings(diag.final),
                       "of": "data" if e.of_data else "structure",
                       "parameters": e.parameters(diag.final), "step": i + 1,
                       "delta_bic": _num(s.added.delta_bic), "lr_p_value": _num(s.added.lr_p_value),

@@ -94,9 +94,14 @@ def score_test(proj: Projector, Jc: np.ndarray, one_sided: np.ndarray):
     (eigenvalues above ``SCORE_RTOL`` of the columns' own scale); ``step``: the maximiser (one
     Gauss-Newton step from the nested point)."""
     M, h = proj.reduced(Jc)
-    pc = Jc.shape[1]
+    return _score_of(M, h, np.sqrt(np.maximum(np.sum(Jc ** 2, axis=0), 1e-300)), one_sided)
+
+
+def _score_of(M: np.ndarray, h: np.ndarray, scale: np.ndarray, one_sided: np.ndarray):
+    """:func:`score_test` from the projected Gram matrix ``M`` and right-hand side ``h`` of
+    columns of norms ``scale``."""
+    pc = len(h)
     step = np.zeros(pc)
-    scale = np.sqrt(np.maximum(np.sum(Jc ** 2, axis=0), 1e-300))
     Ms, hs = M / np.outer(scale, scale), h / scale
     w, V = np.linalg.eigh(Ms)
     keep = w > SCORE_RTOL
@@ -119,9 +124,19 @@ def score_test(proj: Projector, Jc: np.ndarray, one_sided: np.ndarray):
 def sparse_score(proj: Projector, rows: np.ndarray, col: np.ndarray, one_sided: np.ndarray):
     """:func:`score_test` of one whitened column that is zero outside ``rows`` (values ``col``
     there), without forming it: ``M = c.c - C^T N^+ C`` and ``h = c.r - C^T N^+ b0`` with
-    ``C = J0[rows]^T c`` (column-scaled)."""
+    ``C = J0[rows]^T c`` (column-scaled). ``col`` of shape ``(len(rows), q)``: ``q`` columns
+    that are all zero outside ``rows`` (one channel's per-case offsets)."""
     rows = np.asarray(rows, int)
     c = np.asarray(col, float)
+    if c.ndim == 2:
+        M = c.T @ c
+        h = c.T @ proj.r[rows]
+        if proj.p:
+            C = (proj.J0[rows].T @ c) / proj.s[:, None]
+            M = M - C.T @ proj.Ninv @ C
+            h = h - C.T @ proj.Ninv @ proj.b0
+        return _score_of(0.5 * (M + M.T), h, np.sqrt(np.maximum(np.sum(c ** 2, axis=0), 1e-300)),
+                         np.asarray(one_sided, bool))
     scale = float(np.sqrt(max(float(c @ c), 1e-300)))
     M = float(c @ c)
     h = float(c @ proj.r[rows])
@@ -158,7 +173,8 @@ def score_candidates(model: AugmentedModel, fit: Fit, om: ObsMap, candidates: Se
         sparse = family.sparse_columns(model, st, fit.x, om, group)
         if sparse is not None:
             for e, (rows, vals) in zip(group, sparse):
-                S, df, step = sparse_score(proj, rows, vals / om.sigma[rows], e.one_sided)
+                w = om.sigma[rows] if np.ndim(vals) == 1 else om.sigma[rows][:, None]
+                S, df, step = sparse_score(proj, rows, vals / w, e.one_sided)
                 out.append((e, S, df, step))
                 batched.add(id(e))
             continue

@@ -65,7 +65,7 @@ from blackbox.joints import ComplexJoint, JointModel
 from solver_adapters.protocol import DofLabel
 
 __all__ = ["multipliers", "hypotheses_by_kind", "refit_schedule", "eliminate", "without", "Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "holdout_worse", "VERDICTS", "verdict",
-           "refit_candidate", "refine", "round_level", "diagnose", "map_refits", "refits_pay"]
+           "refit_candidate", "subsumed_removed", "refine", "round_level", "diagnose", "map_refits", "refits_pay"]
 
 
 AMBIGUOUS = 10.0            # evidence (delta BIC + hold-out chi2, ~ -2 ln Bayes factor) within which
@@ -164,8 +164,10 @@ def refit_candidate(base: SplitBase, fit: Fit, e: Effect, om: ObsMap, hold: ObsM
                     K_deck, o_dofs, step: np.ndarray) -> tuple[Fit, Effect]:
     """Refit the current model plus ``e`` from the starts the effect offers (the nested point,
     the score step...); parameters that end at their nested bound are dropped
-    (``Effect.trimmed``: a connection stays rigid there) and the rest refitted."""
-    spec2, x2 = fit.spec.add(e, fit.x)
+    (``Effect.trimmed``: a connection stays rigid there) and the rest refitted. Effects of the
+    current model that ``e`` subsumes (:meth:`Effect.subsumes`) leave it in the refit."""
+    spec0, x0 = subsumed_removed(fit.spec, fit.x, e)
+    spec2, x2 = spec0.add(e, x0)
     m2 = AugmentedModel(base, spec2, boundary, K_deck, o_dofs)
     first = spec2.n_params - e.n_params          # the effect's own parameters: x[first:]
     _, lo, hi = spec2.transforms()
@@ -179,6 +181,17 @@ def refit_candidate(base: SplitBase, fit: Fit, e: Effect, om: ObsMap, hold: ObsM
         best = fit_model(m3, om, hold, x3)
         e = e2
     return best, e
+
+
+def subsumed_removed(spec: ModelSpec, x: np.ndarray, e: Effect) -> tuple[ModelSpec, np.ndarray]:
+    """``spec`` and ``x`` without the effects ``e`` subsumes (effects of the data only, which
+    leave the joints' parameters as they are)."""
+    keep = [i for i, o in enumerate(spec.effects) if not e.subsumes(o)]
+    if len(keep) == len(spec.effects):
+        return spec, x
+    sl = spec.effect_slices()
+    x2 = np.concatenate([x[:spec.joint_params]] + [x[sl[i]] for i in keep])
+    return ModelSpec(spec.joints, tuple(spec.effects[i] for i in keep)), x2
 
 
 def _refit_task(item: tuple[Effect, np.ndarray], shared: tuple) -> tuple[Fit, Effect] | IdentificationError:
@@ -269,7 +282,7 @@ HOLDOUT_Z = 3.0
 addition counts as predicting the hold-out cases worse (:func:`holdout_worse`)."""
 
 
-def holdout_worse(fit: Fit, f2: Fit, hold: ObsMap | None) -> str | None:
+def holdout_worse(fit: Fit, f2: Fit, hold: ObsMap | None, keep: np.ndarray | None = None) -> str | None:
     """Why ``f2`` predicts the hold-out cases worse than ``fit`` beyond chance, or ``None``.
 
     With ``d`` the whitened change of the hold-out predictions, an addition that is right
@@ -278,17 +291,27 @@ def holdout_worse(fit: Fit, f2: Fit, hold: ObsMap | None) -> str | None:
     0.2 % under that hypothesis: the hold-out cases contradict the addition, which is then never
     kept, however much it improves the fit (a load scale or sensor offset that absorbs the
     misfit of an effect no candidate describes). An addition the hold-out cases hardly see
-    (``|d|`` ~ 0) cannot be vetoed by their noise."""
+    (``|d|`` ~ 0) cannot be vetoed by their noise. ``keep``: the hold-out rows compared (default
+    all; an addition that sets readings aside is judged on the others)."""
     if hold is None or fit.holdout_predicted is None or f2.holdout_predicted is None:
         return None
     d = (f2.holdout_predicted - fit.holdout_predicted) / hold.sigma
+    if keep is None:
+        dh = f2.holdout_chi2 - fit.holdout_chi2
+    else:
+        d = d[keep]
+        dh = holdout_chi2(f2, hold, keep) - holdout_chi2(fit, hold, keep)
     dn = float(np.linalg.norm(d))
-    dh = f2.holdout_chi2 - fit.holdout_chi2
     limit = max(-dn * dn + HOLDOUT_Z * 2.0 * dn, 1e-9 * max(1.0, fit.holdout_chi2))
     if dh > limit:
         return (f"it predicts the hold-out cases worse (hold-out chi2 {dh:+.4g}, beyond the {limit:+.3g} "
                 f"that chance allows for an addition that changes their prediction by {dn:.3g} sigma)")
     return None
+
+
+def holdout_chi2(fit: Fit, hold: ObsMap, keep: np.ndarray) -> float:
+    """The hold-out chi2 of ``fit`` over the rows ``keep``."""
+    return float(np.sum(((hold.y - fit.holdout_predicted) / hold.sigma)[keep] ** 2))
 
 
 def evidence(delta_bic: float, holdout_delta_chi2: float | None) -> float:
@@ -349,11 +372,16 @@ class Checks:
             reasons.append(f"BIC does not improve ({dbic:+.4g})")
         dh = dcv = None
         if self.val.kind == "holdout" and fit.holdout_chi2 is not None and f2.holdout_chi2 is not None:
-            dh = f2.holdout_chi2 - fit.holdout_chi2
+            # readings the addition sets aside (a bad channel's hold-out readings) are compared
+            # for neither fit: what it claims is that they follow no model
+            aside = e.set_aside_rows(self.hold) if e is not None else None
+            keep = None if aside is None or not aside.any() else ~aside
+            dh = f2.holdout_chi2 - fit.holdout_chi2 if keep is None else \
+                holdout_chi2(f2, self.hold, keep) - holdout_chi2(fit, self.hold, keep)
             if dbic < 0 and not evidence(dbic, dh) < 0:
                 reasons.append(f"the hold-out prediction gets worse by more than the fit improves "
                                f"(delta BIC {dbic:+.4g}, hold-out chi2 {dh:+.4g})")
-            elif (worse := holdout_worse(fit, f2, self.hold)) is not None:
+            elif (worse := holdout_worse(fit, f2, self.hold, keep)) is not None:
                 reasons.append(worse)
         elif self.val.kind == "kfold":
             cv0, _ = self.cv(fit)
@@ -775,10 +803,16 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
                     and c.evidence - best.evidence < AMBIGUOUS and len(seps) < 2:
                 seps[c.effect.key] = separating_measurements(base, best.refit, c.refit, boundary, K_deck, om,
                                                              load_magnitudes)
+        subsumed = [(o, Judgement(0.0, 1.0, 1.0, 0.0, None, None,
+                                  (f"subsumed by {best.effect.label()}: its readings are set aside",)))
+                    for o in fit.spec.effects if not best.refit.spec.has(o)]
+        for o, _ in subsumed:
+            kept_mult.pop(o.key, None)
         kept_mult[best.effect.key] = mults[best.effect.kind]
         if best.effect.source_dofs:         # later member scores read the mixed rows by reciprocity
             base.ensure_columns(best.effect.source_dofs, f"columns at the DOFs {best.effect.label()} reads")
         new, removed = eliminate(ctx, best.refit, kept_mult, alpha, checks)
+        removed = subsumed + removed
         for e, _ in removed:
             kept_mult.pop(e.key, None)
         steps.append(Step(fit, tuple(ranked), best, new, sb, residual_structure(obs_fit, new.residuals, xyz),

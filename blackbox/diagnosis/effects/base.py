@@ -302,9 +302,10 @@ class Effect:
     @classmethod
     def sparse_columns(cls, model: "AugmentedModel", st: "State", x: np.ndarray, om: "ObsMap",
                        effects: Sequence["Effect"]) -> list[tuple[np.ndarray, np.ndarray]] | None:
-        """Unwhitened score columns of one-parameter candidates NOT in ``model``, each as
-        ``(rows, values)`` over the few rows it touches (a reading, a channel), or ``None``: for
-        families with thousands of candidates, whose dense columns would not fit."""
+        """Unwhitened score columns of candidates NOT in ``model``, each as ``(rows, values)``
+        over the few rows it touches (a reading, a channel; ``values`` of shape ``(len(rows),
+        n_params)`` for several parameters), or ``None``: for families with thousands of
+        candidates, whose dense columns would not fit."""
         return None
 
     @classmethod
@@ -384,6 +385,22 @@ class Effect:
         """Keys beside ``where`` that locate the effect further (a sensor's component) or name
         its parameterisation (``variant``)."""
         return {"variant": self.variant} if self.variant else {}
+
+    def findings(self, fit: "Fit") -> dict:
+        """What the fitted values say beyond the parameters (a channel's readings drift over
+        the test), for the report; empty by default."""
+        return {}
+
+    def set_aside_rows(self, om: "ObsMap") -> np.ndarray | None:
+        """Rows of ``om`` whose readings this effect declares unusable in every case (a bad
+        channel's), which a hold-out check then leaves out; ``None`` (default): none."""
+        return None
+
+    def subsumes(self, other: "Effect") -> bool:
+        """Whether ``other``, already in the model, describes nothing this effect does not (an
+        offset of a channel whose every reading this effect sets aside): it leaves the model
+        when this effect enters, so no two parameters describe one thing."""
+        return False
 
     def label(self) -> str:
         v = f" ({self.variant})" if self.variant else ""

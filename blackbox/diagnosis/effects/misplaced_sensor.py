@@ -8,8 +8,9 @@ sensor measures a physical direction; ``h`` may have another displacement system
 the declared placement (nested, one-sided), ``t = 1`` the neighbour. Linear in ``t``, exact, no
 solver run beyond reporting ``h``'s motion in the split run (:meth:`split_rows`). A refit that
 ends below ``t = 1/2`` or above 3/2 is no misplacement: rejected, with the reason. Candidates: every fitted
-grid with each of its neighbours, once for its block of channels and once per channel when it has
-several, scored in one sparse batch.
+grid with each of its neighbours that moves (not one held in all six components: a channel read
+there reads nothing, a dead channel), once for its block of channels and once per channel when
+it has several, scored in one sparse batch.
 
 ``where`` is the grid; ``read_at`` (the neighbour) and ``components`` in the details. A data defect.
 """
@@ -20,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from blackbox.diagnosis.decks import constrained_grids
 from blackbox.diagnosis.effects.base import Effect
 from blackbox.diagnosis.effects.registry import register
 
@@ -59,8 +61,11 @@ class MisplacedSensor(Effect):
         for g, c in dict.fromkeys(ctx.fit_obs.dofs):
             measured.setdefault(int(g), []).append(int(c))
         nb = neighbours(ctx.deck)
+        # a neighbour held in every component never moves: a channel reading it reads nothing,
+        # which is a dead channel (bad_channel), not a placement the data could confirm
+        held = {g for g, c in constrained_grids(ctx.deck).items() if c == "123456"}
         return [(g, h, tuple(sorted(cs))) for g, cs in sorted(measured.items()) for h in nb.get(g, ())
-                if h in ctx.deck.grids]
+                if h in ctx.deck.grids and h not in held]
 
     @classmethod
     def split_rows(cls, ctx, split):

@@ -73,6 +73,9 @@ class SignFlip(Effect):
         g = float(np.asarray(x_effect)[0])
         if g >= 0.0:
             return f"the channel's best factor is {g:+.3g}: a gain, not a sign flip"
+        if g > -0.5:
+            return (f"the channel's best factor is {g:+.3g}: nearer a channel that reads nothing than one "
+                    "that reads with the wrong sign")
         return super().rejection(x_effect)
 
     def details_json(self) -> dict:

@@ -1,0 +1,137 @@
+"""``bad_case``: the readings of one load case follow no model; they are set aside.
+
+A case can go wrong as a whole in ways a load-cell factor does not describe: its file written in
+millimetres where the others are in metres, the readings of two cases exchanged, the load
+applied at another point or not at all. This effect gives every channel read in the case a free
+offset (``c_<case>_G_C``), which is what setting the case's readings aside means; its LR
+statistic is the part of the case's misfit the model cannot absorb. Exact, no run. Candidates:
+every fitted case when at least three are fitted (one set aside leaves two).
+
+It costs one parameter per channel, so a load scale of the case (one parameter) wins where it
+explains, and any effect that explains several cases wins as well. Once added it takes the place
+of what it subsumes in its case (its outliers, its own load scale: :meth:`subsumes`). The report
+says what the readings look like (:meth:`BadCase.findings`): ``zero`` (noise about zero: no load
+reached the structure), ``scale`` (the model's response times a factor beyond a load cell's
+error: other units, a factor 1000 is millimetres for metres) or ``other`` (neither: a load
+applied elsewhere, or another case's readings).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from blackbox.diagnosis.effects.bad_channel import _fits
+from blackbox.diagnosis.effects.base import Effect
+from blackbox.diagnosis.effects.registry import register
+
+__all__ = ["BadCase", "case_pattern"]
+
+
+def case_pattern(y: np.ndarray, u: np.ndarray, s: np.ndarray) -> dict:
+    """What a case's readings ``y`` (standard deviations ``s``) show against the model's
+    predictions ``u`` (module docstring): ``{"pattern": name, "pattern_detail": sentence}``."""
+    y, u, s = (np.asarray(a, float) for a in (y, u, s))
+    n = len(y)
+    w = 1.0 / s ** 2
+    if _fits(float(np.sum(w * y ** 2)), n) and not _fits(float(np.sum(w * u ** 2)), n):
+        return {"pattern": "zero", "pattern_detail": "the readings are noise about zero where the model predicts a "
+                                                     "response: no load reached the structure"}
+    uu = float(np.sum(w * u ** 2))
+    if uu > 0:
+        g = float(np.sum(w * u * y) / uu)
+        # readings in other units carry their noise in those units too
+        if _fits(float(np.sum(w * (y - g * u) ** 2)) / max(g * g, 1.0), n - 1):
+            hint = ""
+            for k, why in ((1000.0, "millimetres read as metres"), (1e-3, "metres read as millimetres"),
+                           (25.4, "millimetres read as inches"), (1 / 25.4, "inches read as millimetres"),
+                           (-1.0, "the load applied in the opposite direction")):
+                if abs(g / k - 1.0) < 0.02:
+                    hint = f" ({why}?)"
+            return {"pattern": "scale", "pattern_detail": f"the readings are {g:.4g} times the model's response to "
+                                                          f"the case's load{hint}"}
+    return {"pattern": "other", "pattern_detail": "the readings are no multiple of the model's response to the "
+                                                  "case's load: a load applied elsewhere, or another case's readings"}
+
+
+@register
+@dataclass(frozen=True, eq=False)
+class BadCase(Effect):
+    """``case``: the load case set aside; ``channels``: the ``(grid, component)`` read in it
+    (one parameter each); ``readings`` and ``sigmas``: each channel's reading (the mean of
+    repeats) and that mean's standard deviation."""
+    kind = "bad_case"
+    of_data = True
+    summary = "the readings of one load case follow no model (other units, exchanged files, a load elsewhere): set aside"
+
+    case: str = ""
+    channels: tuple[tuple[int, int], ...] = ()
+    readings: tuple[float, ...] = ()
+    sigmas: tuple[float, ...] = ()
+
+    @classmethod
+    def candidates(cls, ctx, split) -> list["BadCase"]:
+        obs = ctx.fit_obs
+        labels = obs.case_labels
+        per: dict = {}
+        for (g, c), ci, v, sg in zip(obs.dofs, obs.case_index, obs.values, obs.sigma):
+            per.setdefault(labels[int(ci)], {}).setdefault((int(g), int(c)), []).append((float(v), float(sg)))
+        if len(per) < 3:
+            return []
+        out = []
+        for case in (c for c in ctx.cases if c in per):
+            chans = list(per[case])
+            ys, ss = [], []
+            for ch in chans:
+                v = np.array(per[case][ch])
+                w = 1.0 / v[:, 1] ** 2
+                ys.append(float(np.sum(w * v[:, 0]) / np.sum(w)))
+                ss.append(float(1.0 / np.sqrt(np.sum(w))))
+            out.append(cls((case,), tuple(f"c_{case}_{g}_{c}" for g, c in chans), case=case, channels=tuple(chans),
+                           readings=tuple(ys), sigmas=tuple(ss)))
+        return out
+
+    @property
+    def nominal(self) -> np.ndarray:
+        return np.zeros(self.n_params)
+
+    @property
+    def bounds(self):
+        return np.full(self.n_params, -np.inf), np.full(self.n_params, np.inf)
+
+    @property
+    def acts_on_output(self) -> bool:
+        return True
+
+    def offset_rows(self, om):
+        return [(q, om.rows_of(g, c, self.case)) for q, (g, c) in enumerate(self.channels)]
+
+    @classmethod
+    def sparse_columns(cls, model, st, x, om, effects):
+        out = []
+        for e in effects:
+            idx = [i for i, lab in enumerate(om.labels) if lab == e.case]
+            rows = np.flatnonzero(np.isin(om.case, idx))
+            col = {ch: q for q, ch in enumerate(e.channels)}
+            cols = np.zeros((rows.size, e.n_params))
+            for i, r in enumerate(rows):
+                q = col.get((int(om.grid[r]), int(om.comp[r])))
+                if q is not None:
+                    cols[i, q] = 1.0
+            out.append((rows, cols))
+        return out
+
+    def subsumes(self, other: Effect) -> bool:
+        if other.kind == "outlier":
+            return getattr(other, "case", None) == self.case
+        return other.kind == "load_scale" and tuple(other.where) == (self.case,)
+
+    def findings(self, fit) -> dict:
+        i = next(i for i, e in enumerate(fit.spec.effects) if e.key == self.key)
+        o = fit.x[fit.spec.effect_slices()[i]]
+        y = np.array(self.readings)
+        return case_pattern(y, y - o, np.array(self.sigmas))
+
+    def label(self) -> str:
+        return f"{self.kind} @ case {self.case}"
