@@ -17,8 +17,10 @@ cross members), ``truss`` (a space-truss girder: bar chords and cross frames, CR
 body of tubes, ``blackbox.structures.tube_body``), ``imported`` (the 216-member transmission
 tower of a public deck, ``decks/``: legs and horizontals as bars, diagonals as rods), ``hall``
 (an industrial hall: portal frames with haunched rafters, purlins, wind-bracing rods, column
-bases pinned in a rotated coordinate system) and the small frames of the first benchmark
-(``portal``, ``box``, ``star``).
+bases pinned in a rotated coordinate system), the small frames of the first benchmark
+(``portal``, ``box``, ``star``) and ``bus`` (a bus body: floor ladder, side walls of pillars,
+waist and cant rails, roof bows, end frames; on its suspension mounts, loaded as on a body test
+rig), the family held out of all tuning (:data:`HELD_OUT`).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -108,6 +111,9 @@ class Frame:
     groups: dict[str, list[int]] = field(default_factory=dict)   # named member groups (for reports)
     force: float = 1000.0         # load magnitudes of the random cases (N, N m)
     moment: float = 500.0
+    # a test rig's load cases instead of random ones: ``rig_case(rng, avoid)`` draws one case as
+    # {grid: force vector in basic (N)} on grids not in ``avoid`` (the joints' and the supports')
+    rig_case: Callable[[np.random.Generator, set[int]], dict[int, np.ndarray]] | None = None
 
     # ---- building ------------------------------------------------------------------------
     def grid(self, xyz, gid: int | None = None) -> int:
@@ -677,7 +683,7 @@ def imported(rng: np.random.Generator) -> Frame:
 
 
 def hall(rng: np.random.Generator) -> Frame:
-    """An industrial hall (the held-out family): 5-8 portal frames at 5-6.5 m, span 12-20 m,
+    """An industrial hall: 5-8 portal frames at 5-6.5 m, span 12-20 m,
     eaves 5-7 m; columns of a wide I section in two segments, rafters of a narrow I in four
     segments each side, the segment at the eaves a deeper haunch section; purlins (channels)
     at the rafter nodes, eave and ridge beams; X-bracing rods in both end bays of the roof and
@@ -745,6 +751,139 @@ def hall(rng: np.random.Generator) -> Frame:
     for g in f.spcs:
         f.cd[g] = 50
     f.force, f.moment = 10000.0, 5000.0
+    return f
+
+
+def bus(rng: np.random.Generator) -> Frame:
+    """A bus or coach body frame (the held-out family), x forward, y across, z up: 7-12 panels
+    of 1.0-1.4 m (body 9-13 m long, 2.40-2.55 m wide). The floor is a ladder: two longitudinal
+    rails (channels or rectangular tubes) and a cross member at every station running from the
+    side sill through both rails and a centre grid to the other sill, plus a heavy cross beam
+    between the rails at each axle. Each side wall: the sill, a pillar at every station in two
+    segments (below and above the waist), the waist rail and the cant rail, a diagonal in about
+    half of the panels below the waist; on the door side (y = 0) the front panel and in half of
+    the bodies a middle panel are door openings (no waist rail, no diagonal). A roof bow (four
+    segments of a shallow arch) joins the cant rails at every station, with a crown stringer and
+    in half of the bodies two more stringers. The front and rear end frames (windscreen, rear
+    wall): a cross beam at waist height and a centre post from the floor to the roof crown.
+    Sections are thin rectangular tubes and channels. The body stands on its suspension mounts
+    under the rails at two axles (three on a long coach with a tag axle): front left 123, front
+    right 3, rear left 23, rear right 3, tag axle 3 and 3. Its load cases are a test rig's
+    (:attr:`Frame.rig_case`): vertical floor loads over a few seat rows, a torsion pair at one end,
+    lateral loads along one side's waist or cant rail, longitudinal loads at the rail ends, a
+    roof load."""
+    f = Frame("bus")
+    n = int(np.clip(round(rng.uniform(9.0, 13.0) / rng.uniform(1.0, 1.4)), 7, 12))
+    length = _r3(rng.uniform(1.0, 1.1) * n)
+    width = _r3(rng.uniform(2.40, 2.55))
+    track = _r3(rng.uniform(0.40, 0.55))            # the rails' distance from the centre line
+    zw = _r3(rng.uniform(0.9, 1.2))                 # waist rail above the floor
+    zc = _r3(zw + rng.uniform(0.9, 1.2))            # cant rail
+    rise = _r3(rng.uniform(0.10, 0.25))             # roof crown above the cant rails
+    rail = f.section(channel(rng, (0.12, 0.2)) if rng.random() < 0.5 else box(rng, (0.1, 0.16), (0.4, 0.6), (0.03, 0.06)))
+    cross = f.section(box(rng, (0.06, 0.1), (0.5, 1.0), (0.03, 0.06)) if rng.random() < 0.5 else channel(rng, (0.08, 0.12)))
+    axle = f.section(box(rng, (0.12, 0.18), (0.6, 0.9), (0.04, 0.07)))
+    sill = f.section(box(rng, (0.06, 0.1), (0.5, 1.0), (0.03, 0.05)))
+    pillar = f.section(box(rng, (0.05, 0.08), (0.5, 1.0), (0.03, 0.06)))
+    longi = f.section(box(rng, (0.04, 0.07), (0.5, 1.0), (0.03, 0.06)))
+    bow = f.section(box(rng, (0.04, 0.06), (0.5, 1.0), (0.04, 0.06)) if rng.random() < 0.5 else channel(rng, (0.05, 0.08)))
+    stringer = f.section(box(rng, (0.03, 0.05), (0.6, 1.0), (0.05, 0.08)))
+    diagonal = f.section(box(rng, (0.04, 0.06), (0.5, 1.0), (0.04, 0.06)))
+    xs = [round(length * i / n, 3) for i in range(n + 1)]
+    ys, yr = (0.0, width), (_r3(width / 2 - track), _r3(width / 2 + track))
+    # axles: the front one at 18-25 % of the length, the rear at 72-80 %, a tag axle 1.35 m behind
+    # it on a long coach; an axle within 0.15 m of a station is at the station
+    axles = [length * rng.uniform(0.18, 0.25), length * rng.uniform(0.72, 0.80)]
+    if length > 11.0 and rng.random() < 0.5 and axles[1] + 1.35 < length - 0.5:
+        axles.append(axles[1] + 1.35)
+    axles = [min(xs, key=lambda x: abs(x - a)) if min(abs(x - a) for x in xs) < 0.15 else round(a, 3) for a in axles]
+    sills, rails, waist, cant = ([{}, {}] for _ in range(4))
+    centre, crown, bows = {}, {}, {}
+    for i, x in enumerate(xs):
+        for s in (0, 1):
+            sills[s][i] = f.grid((x, ys[s], 0.0))
+            rails[s][x] = f.grid((x, yr[s], 0.0))
+            waist[s][i] = f.grid((x, ys[s], zw))
+            cant[s][i] = f.grid((x, ys[s], zc))
+        centre[i] = f.grid((x, width / 2, 0.0))
+        pts = [cant[0][i]]
+        for k in (1, 2, 3):
+            y = width * k / 4
+            pts.append(f.grid((x, y, zc + rise * (1.0 - (2 * y / width - 1.0) ** 2))))
+        pts.append(cant[1][i])
+        bows[i], crown[i] = pts, pts[2]
+        for a, b in zip(*[[sills[0][i], rails[0][x], centre[i], rails[1][x], sills[1][i]][k:] for k in (0, 1)]):
+            f.bar(a, b, cross, v=(0.0, 0.0, 1.0), group="cross member")
+        for s in (0, 1):
+            f.bar(sills[s][i], waist[s][i], pillar, v=(1.0, 0.0, 0.0), group="pillar")
+            f.bar(waist[s][i], cant[s][i], pillar, v=(1.0, 0.0, 0.0), group="pillar")
+        for a, b in zip(pts, pts[1:]):
+            f.bar(a, b, bow, v=(1.0, 0.0, 0.0), group="roof bow")
+    for a in axles:
+        if a not in rails[0]:
+            for s in (0, 1):
+                rails[s][a] = f.grid((a, yr[s], 0.0))
+        f.bar(rails[0][a], rails[1][a], axle, v=(0.0, 0.0, 1.0), group="axle beam")
+    for s in (0, 1):
+        stations = sorted(rails[s])
+        for a, b in zip(stations, stations[1:]):
+            f.bar(rails[s][a], rails[s][b], rail, v=(0.0, 0.0, 1.0), group="rail")
+    doors = {0} | ({n // 2} if rng.random() < 0.5 else set())     # panels open on side 0
+    lines = [1, 2, 3] if rng.random() < 0.5 else [2]
+    for i in range(n):
+        for s in (0, 1):
+            f.bar(sills[s][i], sills[s][i + 1], sill, group="sill")
+            f.bar(cant[s][i], cant[s][i + 1], longi, group="cant rail")
+            if s == 0 and i in doors:
+                continue
+            f.bar(waist[s][i], waist[s][i + 1], longi, group="waist rail")
+            if rng.random() < 0.5:
+                a, b = (sills[s][i], waist[s][i + 1]) if i % 2 == 0 else (sills[s][i + 1], waist[s][i])
+                f.bar(a, b, diagonal, v=(0.0, 1.0, 0.0), group="wall diagonal")
+        for k in lines:
+            f.bar(bows[i][k], bows[i + 1][k], stringer, group="roof stringer")
+    for i in (0, n):                                 # the end frames
+        mid = f.grid((xs[i], width / 2, zw))
+        f.bar(waist[0][i], mid, pillar, v=(1.0, 0.0, 0.0), group="end frame")
+        f.bar(mid, waist[1][i], pillar, v=(1.0, 0.0, 0.0), group="end frame")
+        f.bar(centre[i], mid, pillar, v=(1.0, 0.0, 0.0), group="end frame")
+        f.bar(mid, crown[i], pillar, v=(1.0, 0.0, 0.0), group="end frame")
+    for a, comps in zip(axles, [("123", "3"), ("23", "3"), ("3", "3")]):
+        for s in (0, 1):
+            f.fix(rails[s][a], comps[s], 2)
+    f.force, f.moment = 5000.0, 1000.0
+
+    def rig_case(rng: np.random.Generator, avoid: set[int]) -> dict[int, np.ndarray]:
+        """One load case of a body test rig (forces only, as actuators apply them)."""
+        for _ in range(100):
+            kind = str(rng.choice(["floor", "torsion", "lateral", "longitudinal", "roof"],
+                                  p=[0.3, 0.2, 0.25, 0.1, 0.15]))
+            out: dict[int, np.ndarray] = {}
+            first = int(rng.integers(0, n))
+            rows = range(first, min(n + 1, first + int(rng.integers(2, 5))))
+            sign = float(rng.choice([-1.0, 1.0]))
+            same = kind in ("torsion", "longitudinal")      # one actuator force on both sides
+            u = rng.uniform(0.3, 1.0)
+            if kind == "floor":                      # passengers over a few seat rows
+                pts = [(g, (0.0, 0.0, -1.0)) for i in rows for g in (rails[0][xs[i]], centre[i], rails[1][xs[i]])]
+            elif kind == "torsion":                  # one end's floor corners pushed up and down
+                i = int(rng.choice([0, n]))
+                pts = [(sills[0][i], (0.0, 0.0, sign)), (sills[1][i], (0.0, 0.0, -sign))]
+            elif kind == "lateral":                  # cornering or wind along one side
+                line = waist if rng.random() < 0.5 else cant
+                pts = [(line[int(rng.integers(0, 2))][i], (0.0, sign, 0.0)) for i in rows]
+            elif kind == "longitudinal":             # braking or towing at the rail ends
+                i = int(rng.choice([0, n]))
+                pts = [(rails[s][xs[i]], (sign, 0.0, 0.0)) for s in (0, 1)]
+            else:                                    # a roof load over a few bows
+                pts = [(crown[i], (0.0, 0.0, -1.0)) for i in rows]
+            for g, d in pts:
+                if g not in avoid:
+                    out[g] = f.force * (u if same else rng.uniform(0.3, 1.0)) * np.asarray(d)
+            if out:
+                return out
+        raise RuntimeError("bus: no rig load case on the grids left free")
+    f.rig_case = rig_case
     return f
 
 
@@ -827,7 +966,8 @@ def star(rng: np.random.Generator) -> Frame:
 
 
 FAMILIES = {"ladder": ladder, "truss": truss, "storey": storey, "tube": tube_family, "imported": imported,
-            "portal": portal, "box": box_frame, "star": star, "hall": hall}
-HELD_OUT = ("hall",)
-"""Families kept out of all tuning: reported apart, run only with ``--include-held-out``."""
+            "portal": portal, "box": box_frame, "star": star, "hall": hall, "bus": bus}
+HELD_OUT = ("bus",)
+"""Families kept out of all tuning: reported apart, run only with ``--include-held-out``. (``hall``
+was held out until its misses were looked at; it is tuned on since.)"""
 TUNED = tuple(f for f in FAMILIES if f not in HELD_OUT)

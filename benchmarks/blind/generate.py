@@ -8,8 +8,8 @@ is written beside the study (``hidden/``), never into it.
 One study (:func:`generate_study`):
 
 * a frame of one of the families of :mod:`benchmarks.blind.frames` (ladder, truss, storey, tube,
-  imported, portal, box, star; ``hall`` is held out of all tuning: :func:`study_family` draws it
-  too, and ``run.py`` runs its studies only with ``--include-held-out``);
+  imported, portal, box, star, hall; ``bus`` is held out of all tuning: :func:`study_family` draws
+  it too, and ``run.py`` runs its studies only with ``--include-held-out``);
 * written in one of three styles: ``plain`` (the project's own writing, two studies of three),
   ``user`` (a user's bulk data: CORD2R/CORD1R chains, grids in CP and CD systems, GRDSET,
   PBARL, CBAR vectors and offsets in the grids' systems, CONM2, SPC1 sets combined by an
@@ -20,7 +20,8 @@ One study (:func:`generate_study`):
   many bars meet (coincident branch grids tied by an RBE2 CM=123, in the grid's CD); two joints
   never share or touch a member; the truth of each is the simple model, every spring a random
   factor of the branch members' bending stiffness 4EI/L;
-* 8-20 load cases on free grids, components in the grids' CD systems; in two studies of three a
+* 8-20 load cases on free grids, components in the grids' CD systems (random forces and moments,
+  or on a frame that has them a test rig's cases: the bus's); in two studies of three a
   fifth of them are hold-out cases, in the third none (the diagnosis then checks additions by
   K-fold cross-validation over the load cases);
 * sensors: every joint DOF and all six components of 4-10 random grids;
@@ -153,11 +154,20 @@ def size_bin(multiple: float | None) -> str | None:
 # --------------------------------------------------------------------------------------------
 # the study's draws that do not depend on its structure
 # --------------------------------------------------------------------------------------------
+FIRST_FAMILIES = 9
+"""The families of the first benchmarks (the first nine of ``FAMILIES``), drawn from one stream."""
+
+
 def study_family(seed: int, index: int) -> str:
     """The family of study ``index`` (its own random stream: the same whichever families a run
-    includes)."""
+    includes). Every family is drawn equally often; a family added after the first nine takes
+    its share from a stream of its own (the latest first), so that adding one leaves the other
+    studies of a seed with their family."""
     names = list(fr.FAMILIES)
-    return str(np.random.default_rng([seed, index, 1]).choice(names))
+    for k in range(len(names) - 1, FIRST_FAMILIES - 1, -1):
+        if np.random.default_rng([seed, index, 3, k]).random() < 1.0 / (k + 1):
+            return names[k]
+    return str(np.random.default_rng([seed, index, 1]).choice(names[:FIRST_FAMILIES]))
 
 
 def study_style(seed: int, index: int) -> tuple[str, str]:
@@ -244,7 +254,10 @@ def add_offsets(f: fr.Frame, rng: np.random.Generator) -> None:
 def random_loads(f: fr.Frame, n_cases: int, rng: np.random.Generator, per_case: int,
                  labels: list[str]) -> list[tuple[str, int, int, float]]:
     """Load cases on unsupported grids away from the joints: forces and moments mixed, in the
-    grids' CD components."""
+    grids' CD components (a frame with a test rig's cases, :attr:`~frames.Frame.rig_case`: those,
+    :func:`rig_loads`)."""
+    if f.rig_case is not None:
+        return rig_loads(f, n_cases, rng, labels)
     joint_grids = {g for _, gs in f.joints for g in gs}
     free = [g for g in sorted(f.grids) if g not in f.spcs and g not in joint_grids]
     rows = []
@@ -253,6 +266,22 @@ def random_loads(f: fr.Frame, n_cases: int, rng: np.random.Generator, per_case: 
             comp = int(rng.integers(1, 7))
             mag = f.force if comp <= 3 else f.moment
             rows.append((labels[c], int(g), comp, float(np.round(mag * rng.uniform(-1, 1), 3))))
+    return rows
+
+
+def rig_loads(f: fr.Frame, n_cases: int, rng: np.random.Generator,
+              labels: list[str]) -> list[tuple[str, int, int, float]]:
+    """The frame's test-rig cases (``f.rig_case``: forces in basic on grids that are neither
+    supported nor a joint's), each force written in its grid's CD components."""
+    avoid = set(f.spcs) | {g for _, gs in f.joints for g in gs}
+    rows = []
+    for c in range(n_cases):
+        for g, vec in sorted(f.rig_case(rng, avoid).items()):
+            cd = f.cd.get(g, 0)
+            local = np.asarray(f.coords[cd].coord.axes) @ vec if cd else np.asarray(vec, float)
+            for k, v in enumerate(np.round(local, 3)):
+                if v != 0.0:
+                    rows.append((labels[c], int(g), k + 1, float(v)))
     return rows
 
 
