@@ -756,7 +756,7 @@ def hall(rng: np.random.Generator) -> Frame:
 
 def bus(rng: np.random.Generator) -> Frame:
     """A bus or coach body frame (the held-out family), x forward, y across, z up: 7-12 panels
-    of 1.0-1.4 m (body 9-13 m long, 2.40-2.55 m wide). The floor is a ladder: two longitudinal
+    of 1.0-1.1 m (a body 7-13 m long, 2.40-2.55 m wide; 175-315 members). The floor is a ladder: two longitudinal
     rails (channels or rectangular tubes) and a cross member at every station running from the
     side sill through both rails and a centre grid to the other sill, plus a heavy cross beam
     between the rails at each axle. Each side wall: the sill, a pillar at every station in two
@@ -768,7 +768,8 @@ def bus(rng: np.random.Generator) -> Frame:
     wall): a cross beam at waist height and a centre post from the floor to the roof crown.
     Sections are thin rectangular tubes and channels. The body stands on its suspension mounts
     under the rails at two axles (three on a long coach with a tag axle): front left 123, front
-    right 3, rear left 23, rear right 3, tag axle 3 and 3. Its load cases are a test rig's
+    right 3, rear left 23, rear right 3, tag axle 3 and 3 (a body longer than 11 m has one in
+    half of the draws). Its load cases are a test rig's
     (:attr:`Frame.rig_case`): vertical floor loads over a few seat rows, a torsion pair at one end,
     lateral loads along one side's waist or cant rail, longitudinal loads at the rail ends, a
     roof load."""
