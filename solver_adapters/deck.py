@@ -163,17 +163,20 @@ class SpcAdd:
 
 @dataclass(frozen=True)
 class Prod:
-    """PROD: PID, MID, A, J (torsion constant; C and NSM are not stiffness)."""
+    """PROD: PID, MID, A, J (torsion constant; C and NSM are not stiffness); or a PTUBE
+    (``card``), its A and J those of its tube section."""
     pid: int
     mid: int
     a: float
     j: float
     src: str = ""
+    card: str = "PROD"
 
 
 @dataclass(frozen=True)
 class Rod:
-    """CROD (``pid`` set) or CONROD (``mid``, ``a``, ``j`` on the element): axial + torsion."""
+    """CROD or CTUBE (``pid`` set: its PROD or PTUBE) or CONROD (``mid``, ``a``, ``j`` on the
+    element): axial + torsion."""
     eid: int
     ga: int
     gb: int
@@ -187,12 +190,15 @@ class Rod:
 
 @dataclass(frozen=True)
 class Rbe2:
-    """RBE2: EID, GN (independent grid), CM (dependent component digits), GM... (dependent grids)."""
+    """RBE2: EID, GN (independent grid), CM (dependent component digits), GM... (dependent grids).
+    ``card``: the card it was read from, RBE2 or an RBAR with all six independent components at
+    one grid (GN), which is this RBE2 with the other grid as its one dependent grid."""
     eid: int
     gn: int
     cm: str
     gm: tuple[int, ...]
     src: str = ""
+    card: str = "RBE2"
 
 
 @dataclass(frozen=True)

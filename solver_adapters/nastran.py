@@ -214,12 +214,15 @@ class RawCard:
 
 
 WRITTEN = frozenset({"GRID", "GRDSET", "CBAR", "CBEAM", "BAROR", "PBAR", "PBARL", "PBEAM", "PBEAML",
-                     "CROD", "PROD", "CONROD", "MAT1", "SPC1", "SPC", "SPCADD", "RBE2", "PELAS",
-                     "CELAS1", "CELAS2", "CORD1R", "CORD1C", "CORD1S", "CORD2R", "CORD2C", "CORD2S"})
+                     "CROD", "PROD", "CONROD", "CTUBE", "PTUBE", "MAT1", "SPC1", "SPC", "SPCADD",
+                     "RBE2", "RBAR", "PELAS", "CELAS1", "CELAS2", "CORD1R", "CORD1C", "CORD1S",
+                     "CORD2R", "CORD2C", "CORD2S"})
 """Cards :func:`model_cards` writes back from the parsed model: GRDSET and BAROR through the
-GRIDs and CBARs they complete, SPC as SPC1, every coordinate system as a CORD2x in basic, and a
-CBEAM with its PBEAM/PBEAML, or a PBARL, as the CBAR/PBAR the reference solver makes of them
-(MYSTRAN 18 has no CBEAM: "CODE NOT WRITTEN"; its own PBARL section constants may differ)."""
+GRIDs and CBARs they complete, SPC as SPC1, RBAR as the RBE2 it is (all six independent
+components at one grid), CTUBE/PTUBE as the CROD/PROD of the tube's A and J (MYSTRAN 18 has no
+CTUBE), every coordinate system as a CORD2x in basic, and a CBEAM with its PBEAM/PBEAML, or a
+PBARL, as the CBAR/PBAR the reference solver makes of them (MYSTRAN 18 has no CBEAM: "CODE NOT
+WRITTEN"; its own PBARL section constants may differ)."""
 
 RAW_MODELLED = frozenset({"RBE3", "CBUSH", "PBUSH"})
 """Cards the reader models that reach MYSTRAN field by field (:func:`raw_card_text`): each is a
@@ -594,7 +597,7 @@ def _warn_lost_loads(res: "F06Result", loads: LoadMatrix) -> None:
 MYSTRAN_CARDS = frozenset({
     "CHEXA", "CPENTA", "CTETRA", "CQUAD4", "CTRIA3", "CSHEAR", "CELAS3", "CELAS4", "CUSER1",
     "CUSERIN", "PSHELL", "PCOMP", "PCOMP1", "PSHEAR", "PSOLID", "PUSER1", "PUSERIN", "MAT2",
-    "MAT8", "MAT9", "RBAR", "RBE1", "RSPLINE", "SPOINT", "ASET", "ASET1", "OMIT", "OMIT1",
+    "MAT8", "MAT9", "RBE1", "RSPLINE", "SPOINT", "ASET", "ASET1", "OMIT", "OMIT1",
     "SEQGP", "USET", "USET1", "BEAMOR",
 })
 """The cards the reader keeps for an external solver (``unmodelled="pass"``) that MYSTRAN 18

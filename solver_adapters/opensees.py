@@ -252,7 +252,7 @@ class Translation:
                           0.0, 0.0, t)
 
     def _rbe2(self, r) -> None:
-        card = f"RBE2 {r.eid}"
+        card = f"{r.card} {r.eid}"
         cm = "".join(sorted(set(r.cm)))
         for gm in r.gm:
             if cm == "123456":

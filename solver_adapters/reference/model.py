@@ -484,8 +484,8 @@ def constraint_map(deck: Deck, grid_ids: np.ndarray, pos: dict[int, int] | None 
     rbe2s = sorted(deck.rbe2s.values(), key=lambda r: r.eid)
     d_idx, d_gn, d_rbe = [], [], []
     for k, r in enumerate(rbe2s):
-        gm = _grid_pos(grid_ids, list(r.gm), f"{r.src}: RBE2 {r.eid}")
-        gn = _grid_pos(grid_ids, [r.gn], f"{r.src}: RBE2 {r.eid}")[0]
+        gm = _grid_pos(grid_ids, list(r.gm), f"{r.src}: {r.card} {r.eid}")
+        gn = _grid_pos(grid_ids, [r.gn], f"{r.src}: {r.card} {r.eid}")[0]
         comps = np.array([int(c) - 1 for c in r.cm], dtype=np.int64)
         i = (6 * gm[:, None] + comps).ravel()              # grid-major, component order of CM
         d_idx.append(i)

@@ -1,0 +1,268 @@
+"""Elements of the long tail of real decks (issue 20): RBAR (a rigid bar) and CTUBE/PTUBE (a rod
+of tube section).
+
+References:
+
+* closed forms. Cantilever of length L, tip force P and moment M (Timoshenko & Gere, *Mechanics
+  of Materials*): deflection P L^3 / (3 E I) + M L^2 / (2 E I), rotation P L^2 / (2 E I) + M L / (E I);
+  a rigid arm of length a from the tip carries the load P there as P and M = P a at the tip and
+  moves as u + theta x a. Rod: axial P L / (E A), torsion T L / (G J), with the tube's
+  A = pi (OD^2 - D^2) / 4 and J = pi (OD^4 - D^4) / 32, D = OD - 2 T (MSC QRG PTUBE). A spring
+  k between two points rigidly attached to two grids (MSC QRG CBUSH): the grid forces are
+  C^T k C u, C the rigid-body map of each grid to the spring point.
+* MYSTRAN 18 run as a subprocess: on the original deck where it reads every card (RBAR, CBUSH
+  with OCID and S1-S3), else (CTUBE, which MYSTRAN does not have) on the study written by the
+  mystran adapter (CROD/PROD of the same A and J, computed here by hand in the closed form).
+
+Tolerances: closed forms to CLOSED = 1e-9 relative (a direct solve of a few DOFs in double
+precision; any wrong term is of order 1e-2 or more); MYSTRAN, which prints 7 significant digits,
+to RTOL = 1e-6 of each subcase's largest translation (rotation), as in tests/test_deck_tail.py.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from solver_adapters.bdf import read_deck_text
+from solver_adapters.protocol import DeckFormatError, LoadMatrix, ModelError
+from solver_adapters.reference import ReferenceAdapter
+
+from conftest import needs_mystran
+from test_deck_tail import CLOSED, RTOL, _agree, _import, _mystran, _solve
+
+pytestmark = pytest.mark.usefixtures("runs_under_tmp_path")
+
+E, NU = 2.0e11, 0.3
+G = E / (2.0 * (1.0 + NU))
+A, I, J = 1.0e-3, 2.0e-6, 3.0e-6
+
+
+def _static(bulk: str, loads: str, cases: int = 1) -> str:
+    """A SOL 101 input file: ``cases`` subcases, subcase i with LOAD = i, every grid printed."""
+    cc = "".join(f"SUBCASE {i}\n  LOAD = {i}\n" for i in range(1, cases + 1))
+    return (f"SOL 101\nCEND\nDISPLACEMENT = ALL\nSPC = 1\n{cc}BEGIN BULK\n{bulk}{loads}"
+            "ENDDATA\n")
+
+
+def _by_grid(report, u, j: int, grids) -> np.ndarray:
+    return np.array([[u[report.index((g, c)), j] if (g, c) in report else 0.0 for c in range(1, 7)]
+                     for g in grids])
+
+
+def _against_mystran(tmp_path: Path, text: str, n_cases: int) -> float:
+    """The input file imported and solved by the reference solver against MYSTRAN running the
+    file itself: the worst relative difference over every subcase and printed grid."""
+    cases, report, u = _solve(_import(tmp_path, text))
+    tables = _mystran(tmp_path / "mystran", text)
+    assert len(cases) == n_cases and sorted(tables) == list(range(1, n_cases + 1))
+    worst = 0.0
+    for j, case in enumerate(cases):
+        grids = sorted(tables[int(case)])
+        ref = np.array([tables[int(case)][g] for g in grids])
+        worst = max(worst, _agree(_by_grid(report, u, j, grids), ref, f"subcase {case}"))
+    return worst
+
+
+def _study_against_mystran(tmp_path: Path, text: str, n_cases: int) -> float:
+    """The input file imported, its study solved by the reference solver and by the mystran
+    adapter (which writes the run deck from the parsed model): the worst relative difference
+    over every subcase and grid."""
+    from blackbox.commands.output import write_output
+    from blackbox.study import load_study
+    from solver_adapters.nastran import MystranAdapter
+    result = _import(tmp_path, text)
+    cases, report, u = _solve(result)
+    out = tmp_path / "study"
+    write_output(out, "import", result.write)
+    study = load_study(out)
+    assert list(study.loads.cases) == cases and len(cases) == n_cases
+    mys = MystranAdapter(out / "model.bdf").solve(study.loads, report).values
+    grids = sorted({g for g, _ in report})
+    return max(_agree(_by_grid(report, u, j, grids), _by_grid(report, mys, j, grids), f"case {c}")
+               for j, c in enumerate(cases))
+
+
+# --------------------------------------------------------------------------------------------
+# RBAR
+# --------------------------------------------------------------------------------------------
+L, ARM = 2.0, 0.5
+CANTILEVER = (f"GRID,1,,0.,0.,0.\nGRID,2,,{L},0.,0.\nGRID,3,,{L + ARM},0.,0.\n"
+              f"CBAR,1,1,1,2,0.,1.,0.\nPBAR,1,1,{A},{I},{I},{J}\nMAT1,1,{E},,{NU}\nSPC1,1,123456,1\n")
+
+
+def _tip_of_arm(p: float) -> tuple[float, float]:
+    """Deflection and rotation at the end of a rigid arm ARM long on the cantilever's tip,
+    force p there across the arm: the tip carries p and the moment p ARM."""
+    m = p * ARM
+    w2 = p * L ** 3 / (3 * E * I) + m * L ** 2 / (2 * E * I)
+    t2 = p * L ** 2 / (2 * E * I) + m * L / (E * I)
+    return w2 + t2 * ARM, t2
+
+
+@pytest.mark.parametrize("rbar", ["RBAR,5,2,3,123456", "RBAR,5,3,2,,123456",
+                                  "RBAR,5,2,3,123456,,,123456", "RBAR,5,2,3,123456,,,3"])
+def test_rbar_rigid_arm_closed_form(rbar, tmp_path):
+    """A rigid arm at the cantilever's tip, as RBAR with CNA = 123456 (CMA, CMB blank: every
+    component of GB dependent), the same with GA and GB swapped (CNB = 123456), with CMB given,
+    and with CMB = 3 (only the deflection tied; grid 3's other components have no stiffness and
+    AUTOSPC takes them)."""
+    p = -1500.0
+    text = _static(CANTILEVER + rbar + "\n", "FORCE,1,3,,1.,0.,0.,1.\n".replace("1.\n", f"{p}\n"))
+    result = _import(tmp_path, text)
+    assert 'adapter = "reference"' in result.study_toml
+    cases, report, u = _solve(result)
+    w3, t3 = _tip_of_arm(p)
+    assert u[report.index((3, 3)), 0] == pytest.approx(w3, rel=CLOSED)
+    assert u[report.index((2, 5)), 0] == pytest.approx(-t3, rel=CLOSED)   # +z force: -theta_y
+    if rbar.endswith(",3"):
+        assert (3, 5) not in report or abs(u[report.index((3, 5)), 0]) == 0.0
+    else:
+        assert u[report.index((3, 5)), 0] == pytest.approx(-t3, rel=CLOSED)
+
+
+def test_rbar_held_as_the_rbe2_it_is():
+    deck = read_deck_text(CANTILEVER + "RBAR,5,3,2,,123456,12,,1.2-5\n", name="m.bdf")
+    e = deck.rbe2s[5]
+    assert (e.card, e.gn, e.cm, e.gm) == ("RBAR", 2, "12", (3,))
+
+
+@pytest.mark.parametrize("card, field, why", [
+    ("RBAR,5,2,3,1236,45", 6, "independent components at both grids"),
+    ("RBAR,5,2,3,123", 5, "six independent components in all"),
+    ("RBAR,5,2,3,123456,,1", 7, "CMA component(s) 1 are also independent"),
+    ("RBAR,5,2,3,123456,,,17", 8, "digits 1-6"),
+    ("RBAR,5,2,2,123456", 2, "GA and GB are the same grid 2"),
+])
+def test_rbar_errors_are_located(card, field, why):
+    with pytest.raises((DeckFormatError, ModelError), match=re.escape(why)) as info:
+        read_deck_text(CANTILEVER + card + "\n", name="m.bdf")
+    if isinstance(info.value, DeckFormatError):
+        assert (info.value.file, info.value.line, info.value.card, info.value.field) == \
+            ("m.bdf", 8, "RBAR", field)
+    else:
+        assert "m.bdf:8" in str(info.value) and "RBAR 5" in str(info.value)
+
+
+RBAR_FRAME = """GRID,1,,0.,0.,0.
+GRID,2,,0.,0.,3.
+GRID,3,,0.6,0.2,3.4
+GRID,4,,2.5,0.4,3.4
+GRID,5,,3.1,0.4,3.
+GRID,6,,3.1,0.4,0.
+GRID,7,,1.2,-0.8,3.2,9
+CORD2R,9,,0.,0.,0.,0.,0.,1.,
+,1.,1.,0.
+CBAR,1,1,1,2,1.,0.,0.
+CBAR,2,1,3,4,0.,0.,1.
+CBAR,3,1,5,6,1.,0.,0.
+PBAR,1,1,2.E-3,3.E-6,2.E-6,4.E-6
+MAT1,1,2.1E11,,.3
+RBAR,11,2,3,123456
+RBAR,12,5,4,,123456
+RBAR,13,3,7,123456,,,1346
+SPC1,1,123456,1,6
+"""
+"""A portal whose beam is tied to its columns by rigid bars (one each way round: CNA, CNB) and
+a grid 7 in a rotated CD system on a partial RBAR (CMB = 1346, its CD components)."""
+
+
+@needs_mystran
+@pytest.mark.filterwarnings("ignore:load on 2 component")   # round-off of CID 9 -> basic -> CD 9
+def test_rbar_frame_agrees_with_mystran(tmp_path):
+    """MYSTRAN 18 reads RBAR but does not solve it ("Code for RBAR processing not written yet"):
+    the mystran adapter writes each RBAR as the RBE2 it is, and solves the imported study."""
+    loads = ("FORCE,1,4,,1000.,0.3,-0.2,-1.\nMOMENT,1,3,,200.,1.,0.,0.\n"
+             "FORCE,2,7,9,800.,1.,0.,0.5\nMOMENT,2,7,9,300.,1.,0.,0.\n")
+    assert _study_against_mystran(tmp_path, _static(RBAR_FRAME, loads, 2), 2) <= RTOL
+
+
+# --------------------------------------------------------------------------------------------
+# CTUBE / PTUBE
+# --------------------------------------------------------------------------------------------
+def _tube(od: float, t: float | None) -> tuple[float, float]:
+    d = 0.0 if t is None else od - 2 * t
+    return math.pi * (od ** 2 - d ** 2) / 4, math.pi * (od ** 4 - d ** 4) / 32
+
+
+@pytest.mark.parametrize("t", [0.004, None])
+def test_ctube_axial_and_torsion_closed_form(t, tmp_path):
+    """A tube (and, T blank, a solid round bar) pulled and twisted: u = P L / (E A),
+    theta = T L / (G J), A and J of the tube section."""
+    od, length, p, torque = 0.05, 1.5, 2.0e4, 300.0
+    a, j = _tube(od, t)
+    bulk = (f"GRID,1,,0.,0.,0.\nGRID,2,,0.,{length},0.\nCTUBE,7,3,1,2\n"
+            f"PTUBE,3,1,{od},{'' if t is None else t}\nMAT1,1,{E},{G}\nSPC1,1,123456,1\n")
+    text = _static(bulk, f"FORCE,1,2,,{p},0.,1.,0.\nMOMENT,1,2,,{torque},0.,1.,0.\n")
+    cases, report, u = _solve(_import(tmp_path, text))
+    assert u[report.index((2, 2)), 0] == pytest.approx(p * length / (E * a), rel=CLOSED)
+    assert u[report.index((2, 5)), 0] == pytest.approx(torque * length / (G * j), rel=CLOSED)
+
+
+@pytest.mark.parametrize("card, field, why", [
+    ("PTUBE,3,1,0.05,0.03", 5, "wall thickness T must be in"),
+    ("PTUBE,3,1,-0.05", 4, "outer diameter OD must be > 0"),
+    ("PTUBE,3,1,0.05,0.004,,0.06", 7, "tapered tube"),
+])
+def test_ptube_errors_are_located(card, field, why):
+    base = "GRID,1,,0.,0.,0.\nGRID,2,,1.,0.,0.\nCTUBE,7,3,1,2\nMAT1,1,2.E11,,.3\n"
+    with pytest.raises(DeckFormatError, match=why) as info:
+        read_deck_text(base + card + "\n", name="t.bdf")
+    assert (info.value.card, info.value.field, info.value.line) == ("PTUBE", field, 5)
+
+
+def test_ctube_needs_a_ptube_and_crod_a_prod():
+    base = "GRID,1,,0.,0.,0.\nGRID,2,,1.,0.,0.\nMAT1,1,2.E11,,.3\n"
+    with pytest.raises(ModelError, match="property PID 3 is a PROD; a CTUBE needs a PTUBE"):
+        read_deck_text(base + "CTUBE,7,3,1,2\nPROD,3,1,1.E-4\n", name="t.bdf")
+    with pytest.raises(ModelError, match="property PID 3 is a PTUBE; a CROD needs a PROD"):
+        read_deck_text(base + "CROD,7,3,1,2\nPTUBE,3,1,.05\n", name="t.bdf")
+
+
+TUBE_TRUSS = """GRID,1,,0.,0.,0.
+GRID,2,,2.,0.,0.
+GRID,3,,0.,2.,0.
+GRID,4,,0.7,0.6,1.5
+CTUBE,11,5,1,4
+CTUBE,12,5,2,4
+CTUBE,13,6,3,4
+CROD,14,7,1,2
+PTUBE,5,1,.06,.005
+PTUBE,6,1,.04
+PROD,7,1,2.E-4,1.E-8
+MAT1,1,2.1E11,,.3
+SPC1,1,123456,1,2,3
+"""
+"""A tripod of tubes (one solid) over a rod: grid 4 is held by the three tubes alone."""
+
+
+def test_ctube_tripod_closed_form(tmp_path):
+    """Grid 4 of the tripod: its translations against K = sum EA/L n n^T, its rotations
+    against sum GJ/L n n^T (direct stiffness method)."""
+    xyz = {1: (0.0, 0.0, 0.0), 2: (2.0, 0.0, 0.0), 3: (0.0, 2.0, 0.0), 4: (0.7, 0.6, 1.5)}
+    kt, kr = np.zeros((3, 3)), np.zeros((3, 3))
+    for g, (od, t) in ((1, (0.06, 0.005)), (2, (0.06, 0.005)), (3, (0.04, None))):
+        d = np.subtract(xyz[4], xyz[g])
+        n, length = d / np.linalg.norm(d), np.linalg.norm(d)
+        a, j = _tube(od, t)
+        kt += 2.1e11 * a / length * np.outer(n, n)
+        kr += 2.1e11 / 2.6 * j / length * np.outer(n, n)
+    f, m = np.array([300.0, -500.0, -800.0]), np.array([20.0, 10.0, -15.0])
+    text = _static(TUBE_TRUSS, "FORCE,1,4,,1.,300.,-500.,-800.\nMOMENT,1,4,,1.,20.,10.,-15.\n")
+    cases, report, u = _solve(_import(tmp_path, text))
+    ours = _by_grid(report, u, 0, [4])[0]
+    np.testing.assert_allclose(ours[:3], np.linalg.solve(kt, f), rtol=CLOSED)
+    np.testing.assert_allclose(ours[3:], np.linalg.solve(kr, m), rtol=CLOSED)
+
+
+@needs_mystran
+def test_ctube_study_agrees_with_mystran(tmp_path):
+    """MYSTRAN 18 has no CTUBE: the mystran adapter writes each as the CROD/PROD of its A and J,
+    and solves the imported study; its displacements against the reference solver's."""
+    text = _static(TUBE_TRUSS, "FORCE,1,4,,1.,300.,-500.,-800.\nMOMENT,1,4,,1.,20.,10.,-15.\n")
+    assert _study_against_mystran(tmp_path, text, 1) <= RTOL
+
