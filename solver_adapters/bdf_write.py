@@ -296,12 +296,15 @@ def write_rbe3(e: Rbe3, fmt: str = "small") -> str:
 
 def write_cbush(b: Bush, fmt: str = "small") -> str:
     """CBUSH: EID, PID, GA, GB (blank: grounded), GO or X1 X2 X3 (as given, in GA's CD), CID,
-    S (written only when not the default 0.5)."""
+    S (written only when not the default 0.5), OCID and S1-S3 (only when an offset is given)."""
     orient: list[Field] = ([b.g0, None, None] if b.g0 is not None
                            else list(b.x) if b.x is not None else [None, None, None])
     fields: list[Field] = [b.eid, b.pid, b.ga, b.gb or None, *orient, b.cid]
-    if b.s != 0.5:
-        fields.append(float(b.s))
+    offset = getattr(b, "offset", None)
+    if b.s != 0.5 or offset is not None:
+        fields.append(float(b.s) if b.s != 0.5 else None)
+    if offset is not None:
+        fields += [b.ocid, *(float(v) for v in offset)]
     return format_card("CBUSH", fields, fmt)
 
 

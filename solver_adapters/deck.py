@@ -218,7 +218,8 @@ class Rbe3:
 class Bush:
     """CBUSH: EID, PID, GA, GB (0: grounded), the element axes from CID (``cid`` >= 0: that
     system's axes) or else from the axis GA -> GB with the orientation vector ``x`` (as given,
-    in GA's CD system) or grid ``g0``, and the spring location ``s`` (fraction of GA -> GB)."""
+    in GA's CD system) or grid ``g0``, and the spring location: ``s`` (fraction of GA -> GB)
+    or, ``offset`` given, GA plus ``offset`` in system ``ocid`` (its axes at GA; 0: basic)."""
     eid: int
     pid: int
     ga: int
@@ -228,6 +229,8 @@ class Bush:
     cid: int | None = None
     s: float = 0.5
     src: str = ""
+    ocid: int = -1
+    offset: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)

@@ -316,6 +316,10 @@ class Translation:
 
     def _bush(self, b) -> None:
         card = f"CBUSH {b.eid}"
+        if getattr(b, "offset", None) is not None and any(b.offset):
+            self.refuse(card, b.src, "spring point offset from GA (OCID, S1-S3): OpenSees's zeroLength "
+                                     "has no spring point reached by rigid arms")
+            return
         if b.gb and not self.coincident(b.ga, b.gb):
             self.refuse(card, b.src, f"GA {b.ga} and GB {b.gb} apart: OpenSees's zeroLength has no spring "
                                      f"point reached by rigid arms")

@@ -999,8 +999,8 @@ def test_cbush_mystran(tmp_path, grid):
 
 
 @pytest.mark.parametrize("text, field, why", [
-    ("CBUSH,9,11,1,2,,,,0\n,.5,3\n", 11, "OCID"),
-    ("CBUSH,9,11,1,2,,,,0\n,.5,,.1\n", 12, "offset S1-S3"),
+    ("CBUSH,9,11,1,2,,,,0\n,.5,78,.1\n", 11, "OCID 78: coordinate system 78 is not defined"),
+    ("CBUSH,9,11,1,2,,,,0\n,.5,-2,.1\n", 11, "must be >= -1"),
     ("CBUSH,9,11,1,2,,,,0\n,1.5\n", 10, "must be in [0, 1]"),
     ("CBUSH,9,11,1\n", 9, "grounded CBUSH needs CID"),
     ("CBUSH,9,11,1,2,,,,77\n", 9, "CID 77: coordinate system 77 is not defined"),

@@ -1,5 +1,5 @@
-"""Elements of the long tail of real decks (issue 20): RBAR (a rigid bar) and CTUBE/PTUBE (a rod
-of tube section).
+"""Elements of the long tail of real decks (issue 20): RBAR (a rigid bar), CTUBE/PTUBE (a rod
+of tube section) and CBUSH with its spring off the line GA-GB (OCID, S1-S3).
 
 References:
 
@@ -266,3 +266,83 @@ def test_ctube_study_agrees_with_mystran(tmp_path):
     text = _static(TUBE_TRUSS, "FORCE,1,4,,1.,300.,-500.,-800.\nMOMENT,1,4,,1.,20.,10.,-15.\n")
     assert _study_against_mystran(tmp_path, text, 1) <= RTOL
 
+
+# --------------------------------------------------------------------------------------------
+# CBUSH with its spring point off the line GA-GB (OCID, S1-S3)
+# --------------------------------------------------------------------------------------------
+K_BUSH = (2.0e6, 3.0e6, 4.0e6, 5.0e4, 6.0e4, 7.0e4)
+
+
+def _skew(r) -> np.ndarray:
+    return np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+
+
+@pytest.mark.parametrize("ocid, offset, basic", [
+    ("0", (0.0, 0.5, 0.2), (0.0, 0.5, 0.2)),
+    ("8", (0.3, -0.4, 0.1), (0.4, 0.3, 0.1)),         # CORD2R 8: x8 = y, y8 = -x, z8 = z
+])
+def test_cbush_offset_closed_form(ocid, offset, basic, tmp_path):
+    """A CBUSH from the clamped grid 1 to grid 2, element axes basic (CID 0), its springs at
+    grid 1 plus the offset (in basic, or in a rotated system OCID): grid 2 is held by the six
+    springs alone through the rigid arm r = p - x_2, so its stiffness is T^T diag(K) T with
+    T = [[I, -S(r)], [0, I]] (u_p = u_2 + theta_2 x r; MSC QRG CBUSH, Figure 2: the offset is
+    measured from GA)."""
+    bulk = ("GRID,1,,0.,0.,0.\nGRID,2,,1.,0.,0.\nCORD2R,8,,0.,0.,0.,0.,0.,1.,\n,0.,1.,0.\n"
+            f"CBUSH,5,6,1,2,,,,0\n,,{ocid},{offset[0]},{offset[1]},{offset[2]}\n"
+            f"PBUSH,6,K,{','.join(map(str, K_BUSH))}\nSPC1,1,123456,1\n")
+    f = np.array([100.0, -200.0, 300.0, 40.0, -50.0, 60.0])
+    loads = f"FORCE,1,2,,1.,{f[0]},{f[1]},{f[2]}\nMOMENT,1,2,,1.,{f[3]},{f[4]},{f[5]}\n"
+    cases, report, u = _solve(_import(tmp_path, _static(bulk, loads)))
+    T = np.eye(6)
+    T[:3, 3:] = -_skew(np.array(basic) - np.array([1.0, 0.0, 0.0]))
+    expect = np.linalg.solve(T.T @ np.diag(K_BUSH) @ T, f)
+    np.testing.assert_allclose(_by_grid(report, u, 0, [2])[0], expect, rtol=CLOSED,
+                               atol=CLOSED * np.abs(expect).max())
+
+
+def test_cbush_s1_s3_without_ocid_are_ignored_with_a_note():
+    base = "GRID,1,,0.,0.,0.\nGRID,2,,1.,0.,0.\nPBUSH,6,K,1.,1.,1.,1.,1.,1.\n"
+    deck = read_deck_text(base + "CBUSH,5,6,1,2,,,,0\n,.3,-1,.1,.2,.3\n", name="b.bdf")
+    assert deck.bushes[5].offset is None and deck.bushes[5].s == 0.3
+    assert any("S1-S3 with OCID blank or -1 are ignored" in n and "CBUSH 5 at b.bdf:4" in n
+               for n in deck.notes)
+
+
+BUSH_OFFSETS = """GRID,1,,0.,0.,0.
+GRID,2,,1.,0.,0.
+GRID,3,,1.,1.,0.5
+GRID,4,,2.,1.,0.5
+GRID,5,,2.,1.,0.5
+GRID,6,,1.,1.,-0.5
+CORD2R,8,,0.,0.,0.,0.,0.,1.,
+,0.,1.,0.
+CORD2C,9,,0.,0.,0.,0.,0.,1.,
+,1.,0.,0.
+CBAR,1,1,1,2,0.,1.,0.
+CBAR,2,1,3,4,0.,0.,1.
+PBAR,1,1,2.E-3,3.E-6,2.E-6,4.E-6
+MAT1,1,2.1E11,,.3
+CBUSH,11,6,2,3,,,,0
+,,0,0.2,0.3,0.1
+CBUSH,12,6,4,5,,,,8
+,,8,0.1,-0.2,0.3
+CBUSH,13,7,3,6,,,,8
+,,9,0.4,10.,-0.2
+PBUSH,6,K,2.E6,3.E6,4.E6,5.E4,6.E4,7.E4
+PBUSH,7,K,1.E5,2.E5,3.E5,4.E3,5.E3,6.E3
+SPC1,1,123456,1,6
+"""
+"""A bar, two CBUSHes with their springs offset in basic and in a rotated system, a second bar,
+a CBUSH between coincident grids 4, 5 (CID 8) offset in system 8, and a CBUSH to the clamped
+grid 6 offset in a cylindrical system (its axes at GA). MYSTRAN 18 stops without a message on a
+grounded CBUSH with an offset (GB blank), and takes a cylindrical CID (element axes) as its
+defining axes rather than its axes at GA (MSC QRG CBUSH remark 3): neither is in this deck."""
+
+
+@needs_mystran
+def test_cbush_offsets_agree_with_mystran(tmp_path):
+    """MYSTRAN 18 runs the deck itself (it reads CBUSH OCID and S1-S3: the offset from GA, in
+    OCID's axes at GA)."""
+    loads = ("FORCE,1,5,,1000.,0.3,-0.2,-1.\nMOMENT,1,5,,200.,1.,0.5,0.\n"
+             "FORCE,2,3,,800.,1.,0.5,0.2\nMOMENT,2,4,,300.,0.,1.,0.\n")
+    assert _against_mystran(tmp_path, _static(BUSH_OFFSETS, loads, 2), 2) <= RTOL

@@ -378,7 +378,8 @@ def _skew(r: np.ndarray) -> np.ndarray:
 
 def bush_stiffness(deck: Deck, grid_ids: np.ndarray, xyz: np.ndarray) -> sp.csr_matrix:
     """Sum of the CBUSH stiffnesses in basic (MSC QRG CBUSH/PBUSH): six uncoupled springs
-    K1..K6 along the element axes at the spring point p = x_A + S (x_B - x_A), reached from
+    K1..K6 along the element axes at the spring point p = x_A + S (x_B - x_A) (with OCID >= 0:
+    x_A plus the offset S1-S3 in OCID's axes at GA), reached from
     each grid by a rigid link (u_p = u_g + theta_g x (p - x_g)), so that a bush of non-zero
     length carries moments consistently: K = C^T diag(K) C, C = [-E T_A, E T_B] with E the
     element axes (twice: translations and rotations) and T_g the rigid links. GB = 0: the
@@ -417,7 +418,11 @@ def bush_stiffness(deck: Deck, grid_ids: np.ndarray, xyz: np.ndarray) -> sp.csr_
             ex = ex / np.linalg.norm(ex)
             ez = ez / np.linalg.norm(ez)
             E = np.array([ex, np.cross(ez, ex), ez])
-        p = xa + b.s * (xb - xa)
+        if b.offset is None:
+            p = xa + b.s * (xb - xa)
+        else:                         # GA plus the offset in OCID's axes at GA
+            F = np.eye(3) if b.ocid == 0 else deck.coords[b.ocid].frames_at(xa[None, :])[0]
+            p = xa + F.T @ np.asarray(b.offset, float)
         R = np.kron(np.eye(2), E)
         ends = [(ia, xa, -1.0)] + ([(ib, xb, 1.0)] if ib is not None else [])
         C = np.zeros((6, 6 * len(ends)))
