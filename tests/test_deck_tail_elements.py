@@ -104,11 +104,12 @@ def _tip_of_arm(p: float) -> tuple[float, float]:
     return w2 + t2 * ARM, t2
 
 
-@pytest.mark.parametrize("rbar", ["RBAR,5,2,3,123456", "RBAR,5,3,2,,123456",
+@pytest.mark.parametrize("rbar", ["RBAR,5,2,3,123456", "RBAR,5,3,2,0,123456,0,0",
                                   "RBAR,5,2,3,123456,,,123456", "RBAR,5,2,3,123456,,,3"])
 def test_rbar_rigid_arm_closed_form(rbar, tmp_path):
     """A rigid arm at the cantilever's tip, as RBAR with CNA = 123456 (CMA, CMB blank: every
-    component of GB dependent), the same with GA and GB swapped (CNB = 123456), with CMB given,
+    component of GB dependent), the same with GA and GB swapped (CNB = 123456; 0 for blank, as
+    NASTRAN allows), with CMB given,
     and with CMB = 3 (only the deflection tied; grid 3's other components have no stiffness and
     AUTOSPC takes them)."""
     p = -1500.0

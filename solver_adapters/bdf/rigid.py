@@ -101,8 +101,8 @@ def _rbar(r, c) -> None:
     expansion) are read and have no effect."""
     _max_fields(c, 10)
     eid, ga, gb = _int(c, 2), _int(c, 3), _int(c, 4)
-    cna, cnb = _components(c, 5, required=False), _components(c, 6, required=False)
-    cma, cmb = _components(c, 7, required=False), _components(c, 8, required=False)
+    cna, cnb, cma, cmb = ("" if c.text(i) == "0" else _components(c, i, required=False)
+                          for i in (5, 6, 7, 8))      # 0: blank, as NASTRAN allows
     _ignored_reals(c, (9, 10))
     if len(cna) + len(cnb) != 6:
         raise c.error(5, f"CNA ({cna or 'blank'}) and CNB ({cnb or 'blank'}) must hold six "
