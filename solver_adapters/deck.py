@@ -162,6 +162,20 @@ class SpcAdd:
 
 
 @dataclass(frozen=True)
+class Mpc:
+    """MPC: SID and its equation's terms ``(grid, component, A)``, sum A u = 0; the first term's
+    component is the dependent one."""
+    sid: int
+    terms: tuple[tuple[int, int, float], ...]
+    src: str = ""
+    card: str = "MPC"
+
+    @property
+    def eid(self) -> int:       # the ID errors name, as for the rigid elements
+        return self.sid
+
+
+@dataclass(frozen=True)
 class Prod:
     """PROD: PID, MID, A, J (torsion constant; C and NSM are not stiffness); or a PTUBE
     (``card``), its A and J those of its tube section."""
@@ -296,6 +310,8 @@ class Deck:
     pelas: dict[int, Pelas] = field(default_factory=dict)
     springs: dict[int, Spring] = field(default_factory=dict)
     spcadds: dict[int, SpcAdd] = field(default_factory=dict)
+    mpcs: list[Mpc] = field(default_factory=list)
+    mpcadds: dict[int, SpcAdd] = field(default_factory=dict)   # MPCADD: SID and its MPC sets
     prods: dict[int, Prod] = field(default_factory=dict)
     rods: dict[int, Rod] = field(default_factory=dict)
     coords: dict[int, Coord] = field(default_factory=dict)
@@ -357,6 +373,7 @@ class Deck:
         counts = {"GRID": len(self.grids), "CBAR": len(self.cbars), "PBAR": len(self.pbars),
                   "CROD/CONROD": len(self.rods), "PROD": len(self.prods), "MAT1": len(self.mat1s),
                   "SPC/SPC1 entries": len(self.spc1s), "SPCADD": len(self.spcadds),
+                  "MPC": len(self.mpcs), "MPCADD": len(self.mpcadds),
                   "RBE2": len(self.rbe2s), "RBE3": len(self.rbe3s), "CBUSH": len(self.bushes),
                   "PBUSH": len(self.pbushes), "PELAS": len(self.pelas), "CELAS1/2": len(self.springs),
                   "CORD1/2": len(self.coords)}

@@ -166,6 +166,9 @@ class Translation:
             self._rbe2(r)
         for r in sorted(m.rbe3s.values(), key=lambda r: r.eid):
             self.refuse(f"{r.card} {r.eid}", r.src, "OpenSees has no weighted-average (interpolation) constraint")
+        for c in getattr(m, "mpcs", ()):
+            self.refuse(f"MPC {c.sid}", c.src, "the OpenSees deck ties rigid links only, not a general "
+                                               "linear equation")
         for s in sorted(m.springs.values(), key=lambda s: s.eid):
             self.spring((s.g1, s.c1), (s.g2, s.c2) if s.g2 else None, m.spring_stiffness(s),
                         f"{s.card} {s.eid}", s.src)

@@ -347,3 +347,95 @@ def test_cbush_offsets_agree_with_mystran(tmp_path):
     loads = ("FORCE,1,5,,1000.,0.3,-0.2,-1.\nMOMENT,1,5,,200.,1.,0.5,0.\n"
              "FORCE,2,3,,800.,1.,0.5,0.2\nMOMENT,2,4,,300.,0.,1.,0.\n")
     assert _against_mystran(tmp_path, _static(BUSH_OFFSETS, loads, 2), 2) <= RTOL
+
+
+# --------------------------------------------------------------------------------------------
+# MPC: linear multipoint constraints selected by MPC = in the case control
+# --------------------------------------------------------------------------------------------
+K1, K2 = 2.0e5, 3.0e5          # EA/L of the two rods (E = 2e11, L = 1, A below)
+LEVER = ("GRID,1,,0.,0.,0.\nGRID,2,,1.,0.,0.\nGRID,3,,1.,1.,0.\nGRID,4,,2.,1.,0.\n"
+         f"CONROD,1,1,2,1,{K1 / 2e11},1.E-9\nCONROD,2,4,3,1,{K2 / 2e11},1.E-9\n"
+         "MAT1,1,2.E11,,.3\nSPC1,1,123456,1,4\n")
+
+
+def _mpc_deck(mpc_cards: str, select: str, load: float = 1000.0) -> str:
+    return (f"SOL 101\nCEND\nDISPLACEMENT = ALL\nSPC = 1\n{select}LOAD = 1\nBEGIN BULK\n{LEVER}"
+            f"{mpc_cards}FORCE,1,3,,{load},1.,0.,0.\nENDDATA\n")
+
+
+def test_mpc_lever_closed_form(tmp_path):
+    """u2 = 2 u3 (MPC: 1.0 u2x - 2.0 u3x = 0, u2x dependent) between two axial rods of
+    stiffness K1 (grid 2) and K2 (grid 3), force P on grid 3: the energy
+    K1 (2 u3)^2 / 2 + K2 u3^2 / 2 - P u3 is least at u3 = P / (4 K1 + K2), u2 = 2 u3. The set
+    is selected through an MPCADD; set 8, not selected, is dropped (NASTRAN would not apply it)."""
+    cards = "MPC,7,2,1,1.,3,1,-2.\nMPCADD,9,7\nMPC,8,2,1,1.,3,1,-5.\n"
+    result = _import(tmp_path, _mpc_deck(cards, "MPC = 9\n"))
+    assert any("MPC = 9 selected: kept MPC set(s) 7, 9; dropped set(s) 8" in n for n in result.notes)
+    assert "MPC,8" not in result.model_bdf and "MPC,7" in result.model_bdf
+    cases, report, u = _solve(result)
+    u3 = 1000.0 / (4 * K1 + K2)
+    assert u[report.index((3, 1)), 0] == pytest.approx(u3, rel=CLOSED)
+    assert u[report.index((2, 1)), 0] == pytest.approx(2 * u3, rel=CLOSED)
+
+
+def test_mpc_not_selected_is_dropped(tmp_path):
+    """MPC cards but no MPC = : NASTRAN applies none, and the import drops them with a note."""
+    result = _import(tmp_path, _mpc_deck("MPC,7,2,1,1.,3,1,-2.\n", ""))
+    assert any("no subcase selects an MPC set" in n for n in result.notes)
+    cases, report, u = _solve(result)
+    assert u[report.index((3, 1)), 0] == pytest.approx(1000.0 / K2, rel=CLOSED)
+    assert u[report.index((2, 1)), 0] == 0.0
+
+
+@pytest.mark.parametrize("cards, select, field, line, why", [
+    ("MPC,7,2,0,1.,3,1,-2.\n", "MPC = 7\n", 4, 16, "scalar points are not supported"),
+    ("MPC,7,2,1,0.,3,1,-2.\n", "MPC = 7\n", 5, 16, "A1, the coefficient of the dependent"),
+    ("MPC,7,2,1,1.,3,1,-2.\n", "MPC = 5\n", None, 5, "MPC = 5 selects a set the bulk data"),
+    ("MPC,7,2,1,1.,9,1,-2.\n", "MPC = 7\n", None, None, "grid(s) 9 does not exist"),
+])
+def test_mpc_errors_are_located(cards, select, field, line, why, tmp_path):
+    with pytest.raises((DeckFormatError, ModelError), match=re.escape(why)) as info:
+        _solve(_import(tmp_path, _mpc_deck(cards, select)))
+    if field is not None:
+        assert (info.value.card, info.value.field, info.value.line) == ("MPC", field, line)
+    elif line is not None:
+        assert info.value.line == line
+
+
+def test_mpc_subcases_must_agree(tmp_path):
+    text = _mpc_deck("MPC,7,2,1,1.,3,1,-2.\nMPC,8,2,1,1.,3,1,-3.\n", "").replace(
+        "LOAD = 1\n", "SUBCASE 1\n  MPC = 7\n  LOAD = 1\nSUBCASE 2\n  MPC = 8\n  LOAD = 1\n")
+    with pytest.raises(DeckFormatError, match="the subcases select different MPC sets"):
+        _import(tmp_path, text)
+
+
+MPC_FRAME = RBAR_FRAME.replace("RBAR,11,2,3,123456\n", "").replace("RBAR,12,5,4,,123456\n", "") \
+    .replace("RBAR,13,3,7,123456,,,1346\n", "CBAR,4,1,3,7,0.,0.,1.\n") + (
+    # grid 3 rigidly on grid 2 (r = x3 - x2 = (0.6, 0.2, 0.4)): u3 = u2 + theta2 x r
+    "MPC,21,3,1,1.,2,1,-1.,\n,,2,5,-0.4,2,6,0.2\n"
+    "MPC,21,3,2,1.,2,2,-1.,\n,,2,6,-0.6,2,4,0.4\n"
+    "MPC,21,3,3,2.,2,3,-2.,\n,,2,4,-0.4,2,5,1.2\n"              # the same equation times 2
+    "MPC,21,3,4,1.,2,4,-1.\nMPC,21,3,5,1.,2,5,-1.\nMPC,21,3,6,1.,2,6,-1.\n"
+    # grid 4 pinned on grid 5 (r = x4 - x5 = (-0.6, 0, 0.4)): translations only
+    "MPC,22,4,1,1.,5,1,-1.,\n,,5,5,-0.4\n"
+    "MPC,22,4,2,1.,5,2,-1.,\n,,5,6,0.6,5,4,0.4\n"
+    "MPC,22,4,3,1.,5,3,-1.,\n,,5,5,-0.6\n"
+    "MPC,22,7,6,-1.5,3,6,0.75\n"                   # grid 7's R3 in its CD 9 = theta3z / 2
+    "MPCADD,30,21,22\n")
+"""The portal of RBAR_FRAME with its beam tied to its columns by MPC equations instead: rigidly
+at grid 3 (one equation given times 2), pinned at grid 4 (translations only), and a rotation of
+grid 7 (in the rotated CD 9) tied to grid 3's; selected through an MPCADD."""
+
+
+@needs_mystran
+@pytest.mark.filterwarnings("ignore:load on")
+def test_mpc_frame_agrees_with_mystran(tmp_path):
+    """MYSTRAN 18 runs the deck itself (MPC, MPCADD and MPC = are MYSTRAN input); and the
+    imported study through the mystran adapter, whose run deck selects the model's MPC sets."""
+    loads = ("FORCE,1,4,,1000.,0.3,-0.2,-1.\nMOMENT,1,3,,200.,1.,0.,0.\n"
+             "FORCE,2,7,,800.,1.,0.5,0.2\nMOMENT,2,6,,300.,0.,1.,0.\n")
+    text = _static(MPC_FRAME, loads, 2).replace("SPC = 1\n", "SPC = 1\nMPC = 30\n")
+    for sub in ("deck", "study"):
+        (tmp_path / sub).mkdir()
+    assert _against_mystran(tmp_path / "deck", text, 2) <= RTOL
+    assert _study_against_mystran(tmp_path / "study", text, 2) <= RTOL

@@ -38,8 +38,6 @@ NOT_PASSABLE = {
         "PLOAD1", "PLOAD2", "PLOAD4", "TEMP", "TEMPD", "SPCD", "DEFORM", "RFORCE", "RFORCE1",
         "ACCEL", "ACCEL1", "PLOADX1", "PLOADB3", "SLOAD", "TEMPP1", "TEMPRB", "QBDY1", "QVOL",
         "DAREA", "LSEQ", "CLOAD", "PRESAX", "FORCEAX", "MOMAX")},
-    **{k: "MPC sets apply only when the case control selects them, which a run deck does not: "
-          "the constraint would be dropped silently" for k in ("MPC", "MPCADD")},
     **{k: "superelements are not supported" for k in ("SEBULK", "SECONCT", "SESET")},
 }
 """Unmodelled cards that stay errors even when a deck is read for an external solver

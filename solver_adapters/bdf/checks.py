@@ -236,6 +236,16 @@ def _problems(deck: Deck, bulk_checked: bool) -> list[str]:
         if missing:
             bad(a, "SPCADD", a.sid, f"set(s) {', '.join(map(str, missing[:10]))} not found "
                                     f"(no SPC or SPC1 with that SID)")
+    for m in deck.mpcs:
+        need_grids(m, "MPC", m.sid, [g for g, _, _ in m.terms], "grid(s)")
+    mpc_sets = {m.sid for m in deck.mpcs}
+    for a in deck.mpcadds.values():
+        if a.sid in mpc_sets:
+            bad(a, "MPCADD", a.sid, f"SID {a.sid} is also the ID of an MPC set")
+        missing = [k for k in a.sets if k not in mpc_sets]
+        if missing:
+            bad(a, "MPCADD", a.sid, f"set(s) {', '.join(map(str, missing[:10]))} not found "
+                                    f"(no MPC with that SID)")
     for u in deck.unmodelled:
         if u.grids:
             need_grids(u, u.name, u.fields[0], u.grids, "grid(s)")

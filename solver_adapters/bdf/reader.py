@@ -43,7 +43,7 @@ class _Reader:
         # ID -> "CARD at file:line"; elements (CBAR, RBE2, CELASi) share one ID space, as do
         # properties (PBAR, PELAS)
         self.ids: dict[str, dict[int, str]] = {"GRID": {}, "element": {}, "property": {}, "MAT1": {},
-                                               "SPCADD": {}, "CORD": {}}
+                                               "SPCADD": {}, "MPCADD": {}, "CORD": {}}
         self.spc1_pending: list[tuple[int, str, list[int | tuple[int, int]], str]] = []
         # card name -> [count, first card] of every card that is neither modelled nor NO_EFFECT
         self.unsupported: dict[str, list] = {}
