@@ -1,5 +1,6 @@
 """Elements of the long tail of real decks (issue 20): RBAR (a rigid bar), CTUBE/PTUBE (a rod
-of tube section) and CBUSH with its spring off the line GA-GB (OCID, S1-S3).
+of tube section), CBUSH with its spring off the line GA-GB (OCID, S1-S3) and MPC/MPCADD (linear
+multipoint constraints selected by MPC = in the case control).
 
 References:
 
@@ -9,10 +10,12 @@ References:
   moves as u + theta x a. Rod: axial P L / (E A), torsion T L / (G J), with the tube's
   A = pi (OD^2 - D^2) / 4 and J = pi (OD^4 - D^4) / 32, D = OD - 2 T (MSC QRG PTUBE). A spring
   k between two points rigidly attached to two grids (MSC QRG CBUSH): the grid forces are
-  C^T k C u, C the rigid-body map of each grid to the spring point.
-* MYSTRAN 18 run as a subprocess: on the original deck where it reads every card (RBAR, CBUSH
-  with OCID and S1-S3), else (CTUBE, which MYSTRAN does not have) on the study written by the
-  mystran adapter (CROD/PROD of the same A and J, computed here by hand in the closed form).
+  C^T k C u, C the rigid-body map of each grid to the spring point. A constraint u_a = 2 u_b
+  between two axial springs: the minimum of the energy K1 (2 u_b)^2 / 2 + K2 u_b^2 / 2 - P u_b.
+* MYSTRAN 18 run as a subprocess: on the original deck where it solves every card (CBUSH with
+  OCID and S1-S3, MPC), else on the study written by the mystran adapter (CTUBE, which MYSTRAN
+  does not have, as the CROD/PROD of the same A and J; RBAR, which it reads but does not solve,
+  as its RBE2).
 
 Tolerances: closed forms to CLOSED = 1e-9 relative (a direct solve of a few DOFs in double
 precision; any wrong term is of order 1e-2 or more); MYSTRAN, which prints 7 significant digits,
