@@ -193,7 +193,7 @@ def read_model(path: str | os.PathLike, unmodelled: str = "error"):
 
 def needs_passthrough(model) -> bool:
     """Whether the deck of ``model`` may have cards that are not written from the model, so the
-    run deck must scan the deck for them: cards accepted with no effect, RBE3/CBUSH/PBUSH,
+    run deck must scan the deck for them: cards accepted with no effect, RBE3/CBUSH/PBUSH/MPC,
     unmodelled cards that :func:`read_model` let pass, or any card the reader models that this
     writer does not know (the scan then names it: :func:`passthrough_cards`)."""
     from solver_adapters import bdf
