@@ -19,7 +19,7 @@ from solver_adapters.deck import (Bush, CBar, Deck, Grid, Mat1, PBar, PBush, Pel
 
 __all__ = ["print_int", "print_float_8", "print_float_16", "print_float_free", "print_field",
            "format_card", "write_grid", "write_cbar", "write_pbar", "write_mat1", "write_spc1",
-           "write_rbe2", "write_rbe3", "write_pelas", "write_celas1", "write_celas2", "write_spring",
+           "write_mpc", "write_rbe2", "write_rbe3", "write_pelas", "write_celas1", "write_celas2", "write_spring",
            "write_spcadd", "write_prod", "write_rod", "write_coord", "write_cbush", "write_pbush",
            "write_unmodelled", "cbar_in_cd", "write_deck"]
 
@@ -221,9 +221,19 @@ def write_spc1(s: Spc1, fmt: str = "small") -> str:
     return format_card("SPC1", [s.sid, s.components, *s.grids], fmt)
 
 
-def write_spcadd(a: SpcAdd, fmt: str = "small") -> str:
-    """SPCADD: SID, S1, S2, ..."""
-    return format_card("SPCADD", [a.sid, *a.sets], fmt)
+def write_spcadd(a: SpcAdd, fmt: str = "small", name: str = "SPCADD") -> str:
+    """SPCADD (or, ``name="MPCADD"``, MPCADD): SID, S1, S2, ..."""
+    return format_card(name, [a.sid, *a.sets], fmt)
+
+
+def write_mpc(m, fmt: str = "small") -> str:
+    """MPC: SID, then two G C A triples a line (field 9 and a continuation's field 2 blank)."""
+    fields: list[Field] = [m.sid]
+    for k, (g, c, a) in enumerate(m.terms):
+        if k and k % 2 == 0:
+            fields += [None, None]
+        fields += [g, c, float(a)]
+    return format_card("MPC", fields, fmt)
 
 
 def write_prod(p: Prod, fmt: str = "small") -> str:
@@ -296,12 +306,15 @@ def write_rbe3(e: Rbe3, fmt: str = "small") -> str:
 
 def write_cbush(b: Bush, fmt: str = "small") -> str:
     """CBUSH: EID, PID, GA, GB (blank: grounded), GO or X1 X2 X3 (as given, in GA's CD), CID,
-    S (written only when not the default 0.5)."""
+    S (written only when not the default 0.5), OCID and S1-S3 (only when an offset is given)."""
     orient: list[Field] = ([b.g0, None, None] if b.g0 is not None
                            else list(b.x) if b.x is not None else [None, None, None])
     fields: list[Field] = [b.eid, b.pid, b.ga, b.gb or None, *orient, b.cid]
-    if b.s != 0.5:
-        fields.append(float(b.s))
+    offset = getattr(b, "offset", None)
+    if b.s != 0.5 or offset is not None:
+        fields.append(float(b.s) if b.s != 0.5 else None)
+    if offset is not None:
+        fields += [b.ocid, *(float(v) for v in offset)]
     return format_card("CBUSH", fields, fmt)
 
 
@@ -351,6 +364,9 @@ def write_deck(deck: Deck, fmt: str = "small") -> str:
     out += [write_mat1(deck.mat1s[i], fmt) for i in sorted(deck.mat1s)]
     out += [write_spc1(s, fmt) for s in deck.spc1s]
     out += [write_spcadd(deck.spcadds[i], fmt) for i in sorted(deck.spcadds)]
+    out += [write_mpc(m, fmt) for m in getattr(deck, "mpcs", ())]
+    mpcadds = getattr(deck, "mpcadds", {})
+    out += [write_spcadd(mpcadds[i], fmt, "MPCADD") for i in sorted(mpcadds)]
     out += [write_rbe2(deck.rbe2s[i], fmt) for i in sorted(deck.rbe2s)]
     out += [write_rbe3(deck.rbe3s[i], fmt) for i in sorted(deck.rbe3s)]
     out += [write_cbush(deck.bushes[i], fmt) for i in sorted(deck.bushes)]

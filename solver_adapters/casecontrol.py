@@ -6,7 +6,8 @@ data:
 
 * ``SUBCASE n`` starts a subcase; commands above the first SUBCASE are the defaults every subcase
   inherits (a deck without SUBCASE has one case, numbered 1);
-* ``LOAD = n`` and ``SPC = n`` select the load set and the constraint set of a subcase;
+* ``LOAD = n``, ``SPC = n`` and ``MPC = n`` select the load set, the constraint set and the
+  multipoint-constraint set of a subcase;
 * ``TITLE``, ``SUBTITLE``, ``LABEL`` are kept as text;
 * output requests (``DISP``, ``STRESS``, ``FORCE`` ...), output controls (``ECHO``, ``SET``,
   ``LINE`` ...), selections of other solutions (``METHOD``, ``FREQ``, ``DESOBJ``, ``TSTEPNL``,
@@ -15,8 +16,8 @@ data:
   it skipped; a subcase's selections of other solutions are kept in :attr:`Subcase.others`
   (to say what a deck without a static load selects instead);
 * ``AUTOSPC = YES/NO`` is kept in :attr:`CaseControl.autospc`;
-* commands that change the static solution and that an import cannot carry over (``MPC``,
-  ``TEMPERATURE``, ``DEFORM``, ``K2GG``, ``P2G``, ``LOADSET``, ``SYMCOM`` ...) are errors naming the
+* commands that change the static solution and that an import cannot carry over
+  (``TEMPERATURE``, ``DEFORM``, ``K2GG``, ``P2G``, ``LOADSET``, ``SYMCOM`` ...) are errors naming the
   line; an unknown command is an error naming the line and the known commands closest to it;
 * ``SUBCOM`` (a combination of subcases) is skipped with its ``SUBSEQ``: the subcases it
   combines are imported themselves.
@@ -71,7 +72,7 @@ _NOT_STATIC = {  # selections of other solutions: no effect on the static soluti
     "AECO": "AECONFIG",
 }
 _UNSUPPORTED = {  # change the static solution; an imported study cannot carry them
-    "MPC": "MPC (multipoint constraints)", "TEMP": "TEMPERATURE (thermal loads)",
+    "TEMP": "TEMPERATURE (thermal loads)",
     "DEFO": "DEFORM (enforced element deformation)", "SUPO": "SUPORT1 (inertia relief)",
     "K2GG": "K2GG (direct matrix input)", "P2G": "P2G (direct load input)",
     "K2PP": "K2PP (direct matrix input)", "K42G": "K42GG (direct matrix input)",
@@ -82,7 +83,7 @@ _UNSUPPORTED = {  # change the static solution; an imported study cannot carry t
     "CLOA": "CLOAD", "INCL": "INCLUDE (in the case control)", "ADAP": "ADAPT",
 }
 _PLOT_PACKETS = {"PLOT", "XYPLOT", "XYOUT", "XYPUNCH", "POST", "CARDS"}
-_OTHER = ("SUBCASE", "SUBCOM", "SUBSEQ", "LOAD", "SPC", "OUTPUT", "PARAM", "BEGIN", "AUTOSPC",
+_OTHER = ("SUBCASE", "SUBCOM", "SUBSEQ", "LOAD", "SPC", "MPC", "OUTPUT", "PARAM", "BEGIN", "AUTOSPC",
           "SEALL", "SUPER")
 
 
@@ -117,6 +118,8 @@ class Subcase:
     subtitle: str = ""
     label: str = ""
     others: tuple[str, ...] = ()
+    mpc: int | None = None          # the MPC set selected (MPC = n), and the line that did
+    mpc_line: int = 0
 
 
 @dataclass(frozen=True)
@@ -250,6 +253,8 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
             current["LOAD"] = (_integer(file, line, "LOAD", value.strip()), line)
         elif word == "SPC":
             current["SPC"] = (_integer(file, line, "SPC", value.strip()), line)
+        elif word == "MPC":
+            current["MPC"] = (_integer(file, line, "MPC", value.strip()), line)
         elif key in _TITLES and _is(word, _TITLES[key]):
             current[_TITLES[key]] = (value, line)
         elif word == "OUTPUT":
@@ -306,10 +311,11 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
         others = {**defaults.get("OTHERS", ({}, 0))[0], **own.get("OTHERS", ({}, 0))[0]}
         load, load_line = merged.get("LOAD", (None, 0))
         spc, spc_line = merged.get("SPC", (None, 0))
+        mpc, mpc_line = merged.get("MPC", (None, 0))
         return Subcase(sid, load, spc, line, load_line, spc_line,
                        str(merged.get("TITLE", ("", 0))[0]), str(merged.get("SUBTITLE", ("", 0))[0]),
                        str(merged.get("LABEL", ("", 0))[0]),
-                       tuple(f"{k} = {v}" if v else k for k, v in others.items()))
+                       tuple(f"{k} = {v}" if v else k for k, v in others.items()), mpc, mpc_line)
 
     if subcases:
         cases = tuple(make(sid, line, own) for sid, line, own in subcases)

@@ -162,18 +162,35 @@ class SpcAdd:
 
 
 @dataclass(frozen=True)
+class Mpc:
+    """MPC: SID and its equation's terms ``(grid, component, A)``, sum A u = 0; the first term's
+    component is the dependent one."""
+    sid: int
+    terms: tuple[tuple[int, int, float], ...]
+    src: str = ""
+    card: str = "MPC"
+
+    @property
+    def eid(self) -> int:       # the ID errors name, as for the rigid elements
+        return self.sid
+
+
+@dataclass(frozen=True)
 class Prod:
-    """PROD: PID, MID, A, J (torsion constant; C and NSM are not stiffness)."""
+    """PROD: PID, MID, A, J (torsion constant; C and NSM are not stiffness); or a PTUBE
+    (``card``), its A and J those of its tube section."""
     pid: int
     mid: int
     a: float
     j: float
     src: str = ""
+    card: str = "PROD"
 
 
 @dataclass(frozen=True)
 class Rod:
-    """CROD (``pid`` set) or CONROD (``mid``, ``a``, ``j`` on the element): axial + torsion."""
+    """CROD or CTUBE (``pid`` set: its PROD or PTUBE) or CONROD (``mid``, ``a``, ``j`` on the
+    element): axial + torsion."""
     eid: int
     ga: int
     gb: int
@@ -187,12 +204,15 @@ class Rod:
 
 @dataclass(frozen=True)
 class Rbe2:
-    """RBE2: EID, GN (independent grid), CM (dependent component digits), GM... (dependent grids)."""
+    """RBE2: EID, GN (independent grid), CM (dependent component digits), GM... (dependent grids).
+    ``card``: the card it was read from, RBE2 or an RBAR with all six independent components at
+    one grid (GN), which is this RBE2 with the other grid as its one dependent grid."""
     eid: int
     gn: int
     cm: str
     gm: tuple[int, ...]
     src: str = ""
+    card: str = "RBE2"
 
 
 @dataclass(frozen=True)
@@ -212,7 +232,8 @@ class Rbe3:
 class Bush:
     """CBUSH: EID, PID, GA, GB (0: grounded), the element axes from CID (``cid`` >= 0: that
     system's axes) or else from the axis GA -> GB with the orientation vector ``x`` (as given,
-    in GA's CD system) or grid ``g0``, and the spring location ``s`` (fraction of GA -> GB)."""
+    in GA's CD system) or grid ``g0``, and the spring location: ``s`` (fraction of GA -> GB)
+    or, ``offset`` given, GA plus ``offset`` in system ``ocid`` (its axes at GA; 0: basic)."""
     eid: int
     pid: int
     ga: int
@@ -222,6 +243,8 @@ class Bush:
     cid: int | None = None
     s: float = 0.5
     src: str = ""
+    ocid: int = -1
+    offset: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -287,6 +310,8 @@ class Deck:
     pelas: dict[int, Pelas] = field(default_factory=dict)
     springs: dict[int, Spring] = field(default_factory=dict)
     spcadds: dict[int, SpcAdd] = field(default_factory=dict)
+    mpcs: list[Mpc] = field(default_factory=list)
+    mpcadds: dict[int, SpcAdd] = field(default_factory=dict)   # MPCADD: SID and its MPC sets
     prods: dict[int, Prod] = field(default_factory=dict)
     rods: dict[int, Rod] = field(default_factory=dict)
     coords: dict[int, Coord] = field(default_factory=dict)
@@ -348,6 +373,7 @@ class Deck:
         counts = {"GRID": len(self.grids), "CBAR": len(self.cbars), "PBAR": len(self.pbars),
                   "CROD/CONROD": len(self.rods), "PROD": len(self.prods), "MAT1": len(self.mat1s),
                   "SPC/SPC1 entries": len(self.spc1s), "SPCADD": len(self.spcadds),
+                  "MPC": len(self.mpcs), "MPCADD": len(self.mpcadds),
                   "RBE2": len(self.rbe2s), "RBE3": len(self.rbe3s), "CBUSH": len(self.bushes),
                   "PBUSH": len(self.pbushes), "PELAS": len(self.pelas), "CELAS1/2": len(self.springs),
                   "CORD1/2": len(self.coords)}

@@ -125,6 +125,8 @@ def unsupported_features(m) -> list[tuple[str, str, str]]:
         out.append((f"{r.card} {r.eid}", r.src, "interpolation constraints (FRAMESOLVE ties rigidly only)"))
     for b in sorted(m.bushes.values(), key=lambda b: b.eid):
         out.append((f"CBUSH {b.eid}", b.src, "bushes (FRAMESOLVE has scalar springs only)"))
+    for c in getattr(m, "mpcs", ()):
+        out.append((f"MPC {c.sid}", c.src, "multipoint constraints (FRAMESOLVE ties rigidly only)"))
     return out
 
 

@@ -193,13 +193,14 @@ def read_model(path: str | os.PathLike, unmodelled: str = "error"):
 
 def needs_passthrough(model) -> bool:
     """Whether the deck of ``model`` may have cards that are not written from the model, so the
-    run deck must scan the deck for them: cards accepted with no effect, RBE3/CBUSH/PBUSH,
+    run deck must scan the deck for them: cards accepted with no effect, RBE3/CBUSH/PBUSH/MPC,
     unmodelled cards that :func:`read_model` let pass, or any card the reader models that this
     writer does not know (the scan then names it: :func:`passthrough_cards`)."""
     from solver_adapters import bdf
     if set(bdf.SUPPORTED) - WRITTEN - RAW_MODELLED:
         return True
-    if getattr(model, "no_effect", None) or any(getattr(model, f, None) for f in ("rbe3s", "bushes", "pbushes")):
+    if getattr(model, "no_effect", None) or any(getattr(model, f, None)
+                                                for f in ("rbe3s", "bushes", "pbushes", "mpcs", "mpcadds")):
         return True
     return bool(getattr(model, "unmodelled", None))
 
@@ -214,18 +215,22 @@ class RawCard:
 
 
 WRITTEN = frozenset({"GRID", "GRDSET", "CBAR", "CBEAM", "BAROR", "PBAR", "PBARL", "PBEAM", "PBEAML",
-                     "CROD", "PROD", "CONROD", "MAT1", "SPC1", "SPC", "SPCADD", "RBE2", "PELAS",
-                     "CELAS1", "CELAS2", "CORD1R", "CORD1C", "CORD1S", "CORD2R", "CORD2C", "CORD2S"})
+                     "CROD", "PROD", "CONROD", "CTUBE", "PTUBE", "MAT1", "SPC1", "SPC", "SPCADD",
+                     "RBE2", "RBAR", "PELAS", "CELAS1", "CELAS2", "CORD1R", "CORD1C", "CORD1S",
+                     "CORD2R", "CORD2C", "CORD2S"})
 """Cards :func:`model_cards` writes back from the parsed model: GRDSET and BAROR through the
-GRIDs and CBARs they complete, SPC as SPC1, every coordinate system as a CORD2x in basic, and a
-CBEAM with its PBEAM/PBEAML, or a PBARL, as the CBAR/PBAR the reference solver makes of them
-(MYSTRAN 18 has no CBEAM: "CODE NOT WRITTEN"; its own PBARL section constants may differ)."""
+GRIDs and CBARs they complete, SPC as SPC1, RBAR as the RBE2 it is (all six independent
+components at one grid), CTUBE/PTUBE as the CROD/PROD of the tube's A and J (MYSTRAN 18 has no
+CTUBE), every coordinate system as a CORD2x in basic, and a CBEAM with its PBEAM/PBEAML, or a
+PBARL, as the CBAR/PBAR the reference solver makes of them (MYSTRAN 18 has no CBEAM: "CODE NOT
+WRITTEN"; its own PBARL section constants may differ)."""
 
-RAW_MODELLED = frozenset({"RBE3", "CBUSH", "PBUSH"})
+RAW_MODELLED = frozenset({"RBE3", "CBUSH", "PBUSH", "MPC", "MPCADD"})
 """Cards the reader models that reach MYSTRAN field by field (:func:`raw_card_text`): each is a
 card of its own in the model, and MYSTRAN reads it with the same meaning."""
 
 _KNOWN_FIELDS = frozenset({"grids", "cbars", "pbars", "mat1s", "spc1s", "rbe2s", "rbe3s", "bushes",
+                           "mpcs", "mpcadds",
                            "pbushes", "pelas", "springs", "spcadds", "prods", "rods", "coords", "files",
                            "no_effect", "unmodelled", "notes"})
 """The parsed deck's collections of cards the run deck accounts for; a model with another non-empty
@@ -411,11 +416,15 @@ def spring_cards(springs: Sequence[ScalarSpring], first_eid: int, ground_grid: i
     return cards
 
 
-def case_control(n_cases: int, report_grids: Sequence[int], spc_sid: int | None) -> list[str]:
-    """Executive and case control: SOL 101, one SUBCASE ``j`` with ``LOAD = j`` per column."""
+def case_control(n_cases: int, report_grids: Sequence[int], spc_sid: int | None,
+                 mpc_sid: int | None = None) -> list[str]:
+    """Executive and case control: SOL 101, one SUBCASE ``j`` with ``LOAD = j`` per column;
+    ``SPC =`` and ``MPC =`` the sets that hold every constraint of the model."""
     lines = ["SOL 101", "CEND", "TITLE = blackbox", "ECHO = NONE"]
     if spc_sid is not None:
         lines.append(f"SPC = {spc_sid}")
+    if mpc_sid is not None:
+        lines.append(f"MPC = {mpc_sid}")
     lines += grid_set_lines(1, report_grids)
     lines.append("DISP(PRINT) = 1")
     for j in range(1, n_cases + 1):
@@ -594,12 +603,12 @@ def _warn_lost_loads(res: "F06Result", loads: LoadMatrix) -> None:
 MYSTRAN_CARDS = frozenset({
     "CHEXA", "CPENTA", "CTETRA", "CQUAD4", "CTRIA3", "CSHEAR", "CELAS3", "CELAS4", "CUSER1",
     "CUSERIN", "PSHELL", "PCOMP", "PCOMP1", "PSHEAR", "PSOLID", "PUSER1", "PUSERIN", "MAT2",
-    "MAT8", "MAT9", "RBAR", "RBE1", "RSPLINE", "SPOINT", "ASET", "ASET1", "OMIT", "OMIT1",
+    "MAT8", "MAT9", "RBE1", "RSPLINE", "SPOINT", "ASET", "ASET1", "OMIT", "OMIT1",
     "SEQGP", "USET", "USET1", "BEAMOR",
 })
 """The cards the reader keeps for an external solver (``unmodelled="pass"``) that MYSTRAN 18
 runs: the entries its bulk-data reader (LOADB) processes, less those a run deck must not carry
-(loads, MPC, SUPORT). MYSTRAN matches entry names on a prefix, so it would read a CBARAO as a
+(loads, SUPORT; MPC and MPCADD are modelled, and reach it as written with the run deck's MPC =). MYSTRAN matches entry names on a prefix, so it would read a CBARAO as a
 CBAR, a CBEAM3 as a CBEAM, a CQUAD8 not at all (a warning only): every kept card outside this
 set is refused by the mystran adapter before it runs (:attr:`NastranDialect.runs_cards`)."""
 
@@ -671,8 +680,13 @@ class NastranDialect:
         model = base.model
         sids = sorted({s.sid for s in model.spc1s})
         spc_sid = sids[0] if len(sids) == 1 else (max(sids + list(model.spcadds)) + 1 if sids else None)
+        # every MPC set of the model applies (the reader's rule): one set selected as it is,
+        # several through an MPCADD of them all
+        msids = sorted({m.sid for m in getattr(model, "mpcs", ())})
+        mpc_sid = msids[0] if len(msids) == 1 else (
+            max(msids + list(model.mpcadds)) + 1 if msids else None)
         lines = ["$ run deck written by blackbox (solver_adapters.nastran)"]
-        lines += case_control(loads.n_cases, sorted({g for g, _ in report}), spc_sid)
+        lines += case_control(loads.n_cases, sorted({g for g, _ in report}), spc_sid, mpc_sid)
         lines.append("BEGIN BULK")
         body, _ = self.bulk_lines(base, springs)
         lines += body
@@ -682,6 +696,9 @@ class NastranDialect:
         if len(sids) > 1:
             from solver_adapters.bdf_write import format_card
             lines.append(format_card("SPCADD", [spc_sid, *sids], RUN_FORMAT).rstrip("\n"))
+        if len(msids) > 1:
+            from solver_adapters.bdf_write import format_card
+            lines.append(format_card("MPCADD", [mpc_sid, *msids], RUN_FORMAT).rstrip("\n"))
         lines += [f"PARAM,AUTOSPC,{'Y' if self.autospc_for(model) else 'N'}", "ENDDATA"]
         deck = Path(workdir) / RUN_DECK
         deck.write_text("\n".join(lines) + "\n", encoding="latin-1", errors="replace")

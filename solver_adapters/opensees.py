@@ -166,6 +166,9 @@ class Translation:
             self._rbe2(r)
         for r in sorted(m.rbe3s.values(), key=lambda r: r.eid):
             self.refuse(f"{r.card} {r.eid}", r.src, "OpenSees has no weighted-average (interpolation) constraint")
+        for c in getattr(m, "mpcs", ()):
+            self.refuse(f"MPC {c.sid}", c.src, "the OpenSees deck ties rigid links only, not a general "
+                                               "linear equation")
         for s in sorted(m.springs.values(), key=lambda s: s.eid):
             self.spring((s.g1, s.c1), (s.g2, s.c2) if s.g2 else None, m.spring_stiffness(s),
                         f"{s.card} {s.eid}", s.src)
@@ -252,7 +255,7 @@ class Translation:
                           0.0, 0.0, t)
 
     def _rbe2(self, r) -> None:
-        card = f"RBE2 {r.eid}"
+        card = f"{r.card} {r.eid}"
         cm = "".join(sorted(set(r.cm)))
         for gm in r.gm:
             if cm == "123456":
@@ -316,6 +319,10 @@ class Translation:
 
     def _bush(self, b) -> None:
         card = f"CBUSH {b.eid}"
+        if getattr(b, "offset", None) is not None and any(b.offset):
+            self.refuse(card, b.src, "spring point offset from GA (OCID, S1-S3): OpenSees's zeroLength "
+                                     "has no spring point reached by rigid arms")
+            return
         if b.gb and not self.coincident(b.ga, b.gb):
             self.refuse(card, b.src, f"GA {b.ga} and GB {b.gb} apart: OpenSees's zeroLength has no spring "
                                      f"point reached by rigid arms")

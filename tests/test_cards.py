@@ -71,7 +71,7 @@ def assert_close_to_mystran(ref: np.ndarray, mys: np.ndarray) -> None:
 # unsupported cards: one message with every name, its count and first location
 # --------------------------------------------------------------------------------------------
 def test_every_unsupported_card_named_in_one_message(tmp_path):
-    (tmp_path / "part.bdf").write_text("CQUAD4,7,1,1,2,3,4\nRBAR,8,1,2,123456\n")
+    (tmp_path / "part.bdf").write_text("CQUAD4,7,1,1,2,3,4\nRBAR1,8,1,2,123456\n")
     (tmp_path / "model.bdf").write_text(
         "SOL 101\nCEND\nLOAD = 1\nBEGIN BULK\n"          # case control: skipped, not reported
         "GRID,1,,0.,0.,0.\nGRID,2,,1.,0.,0.\nGRID,3,,1.,1.,0.\nGRID,4,,0.,1.,0.\n"
@@ -89,7 +89,7 @@ def test_every_unsupported_card_named_in_one_message(tmp_path):
     assert (exc.file, exc.line, exc.card, exc.field) == (main, 9, "FORCE", 1)   # the first one
     assert "8 card(s) of 5 type(s)" in msg
     for name, count, where in (("FORCE", 2, f"{main}:9"), ("CQUAD4", 3, f"{main}:10"),
-                               ("RBAR", 1, f"{part}:2"), ("MOMENT", 1, f"{main}:14"),
+                               ("RBAR1", 1, f"{part}:2"), ("MOMENT", 1, f"{main}:14"),
                                ("CTRIA3", 1, f"{main}:15")):
         assert f"{name} x{count} (first at {where})" in msg, name
     assert re.search(r"FORCE x2 \(first at [^)]*\): loads are not part of the model", msg)
@@ -999,8 +999,8 @@ def test_cbush_mystran(tmp_path, grid):
 
 
 @pytest.mark.parametrize("text, field, why", [
-    ("CBUSH,9,11,1,2,,,,0\n,.5,3\n", 11, "OCID"),
-    ("CBUSH,9,11,1,2,,,,0\n,.5,,.1\n", 12, "offset S1-S3"),
+    ("CBUSH,9,11,1,2,,,,0\n,.5,78,.1\n", 11, "OCID 78: coordinate system 78 is not defined"),
+    ("CBUSH,9,11,1,2,,,,0\n,.5,-2,.1\n", 11, "must be >= -1"),
     ("CBUSH,9,11,1,2,,,,0\n,1.5\n", 10, "must be in [0, 1]"),
     ("CBUSH,9,11,1\n", 9, "grounded CBUSH needs CID"),
     ("CBUSH,9,11,1,2,,,,77\n", 9, "CID 77: coordinate system 77 is not defined"),

@@ -333,7 +333,7 @@ def test_no_spc_selection_drops_every_constraint_set(tmp_path):
     ("SPC = 1\nLOAD = 5\n", "FORCE   5       3               1.      1.      0.      0.      7.\n",
      ("card FORCE", "field 9", "at most 8 fields")),
     ("SPC = 1\nMPC = 3\nLOAD = 5\n", "FORCE   5       3               1.      1.      0.      0.\n",
-     ("deck.bdf:4", "card MPC", "cannot be imported")),
+     ("deck.bdf:4", "card MPC", "selects a set the bulk data does not have")),
     ("SPC = 1\nLOAD = 5\nFROBNICATE = 2\n", "FORCE   5       3               1.      1.      0.      0.\n",
      ("deck.bdf:5", "unknown case-control command", "FROBNICATE")),
     ("SUBCASE 1\n LOAD = 5\nSUBCASE 1\n LOAD = 5\n", "FORCE   5       3               1.      1.      0.      0.\n",
@@ -466,8 +466,13 @@ def test_shells_are_kept_for_mystran(tmp_path):
         make_adapter_for(study, "reference")
 
 
-def test_mpc_is_refused_also_with_shells(tmp_path):
-    p = _deck(tmp_path, "SPC = 1\nLOAD = 5\n", "FORCE   5       3               10.     0.      0.      1.\n"
-              + SHELL + "MPC     9       3       1       1.      2       1       -1.\n")
-    with pytest.raises(DeckFormatError, match="MPC x1 .*case control selects"):
-        import_deck.run(p)
+def test_mpc_is_kept_with_shells_when_selected(tmp_path):
+    """An MPC set the case control selects is kept in model.bdf (for the mystran adapter here:
+    the deck has a shell); one it does not select is dropped with a note."""
+    card = "MPC     9       3       1       1.      2       1       -1.\n"
+    force = "FORCE   5       3               10.     0.      0.      1.\n"
+    result = import_deck.run(_deck(tmp_path, "SPC = 1\nMPC = 9\nLOAD = 5\n", force + SHELL + card))
+    assert card.strip() in result.model_bdf and any("MPC = 9 selected" in n for n in result.notes)
+    result = import_deck.run(_deck(tmp_path, "SPC = 1\nLOAD = 5\n", force + SHELL + card, "b.bdf"))
+    assert card.strip() not in result.model_bdf and any("no subcase selects an MPC set" in n
+                                                         for n in result.notes)

@@ -114,7 +114,7 @@ def test_no_effect_commands_are_one_note(tmp_path):
     ("K2GG = KDMIG", "K2GG (direct matrix input)"), ("P2G = PDMIG", "P2G (direct load input)"),
     ("K2PP = KAX", "K2PP"), ("M2GG = MDMIG", "M2GG"), ("LOADSET = 35", "LOADSET"),
     ("DEFORM = 2", "DEFORM"), ("TEMP(LOAD) = 4", "TEMPERATURE (thermal loads)"),
-    ("TEMPERATURE(INIT) = 4", "TEMPERATURE"), ("MPC = 3", "MPC"), ("CLOAD = 2", "CLOAD")])
+    ("TEMPERATURE(INIT) = 4", "TEMPERATURE"), ("CLOAD = 2", "CLOAD")])
 def test_commands_that_change_the_solution_are_refused(tmp_path, command, named):
     p = _deck(tmp_path, "101", f"SPC = 1\nLOAD = 5\n{command}\n")
     with pytest.raises(DeckFormatError) as exc:

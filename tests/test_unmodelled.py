@@ -182,11 +182,10 @@ def test_keep_reads_shells_and_solids_with_their_grids():
         read_deck_text(car_body_deck())
 
 
-@pytest.mark.parametrize("card, why", [("FORCE,1,3,,1.,1.,0.,0.", "loads are not part of the model"),
-                                       ("MPC,5,3,1,1.,4,1,-1.", "case control selects")])
+@pytest.mark.parametrize("card, why", [("FORCE,1,3,,1.,1.,0.,0.", "loads are not part of the model")])
 def test_keep_still_refuses_what_cannot_be_handed_on(card, why):
-    """Load sets (loads come from loads.csv) and MPC sets (applied only when the case control
-    selects them) would change the model if handed on: located errors, also when kept."""
+    """Load sets (loads come from loads.csv) would change the model if handed on: located
+    errors, also when kept."""
     text = car_body_deck().replace("ENDDATA", card + "\nENDDATA")
     with pytest.raises(DeckFormatError, match=why) as info:
         read_deck_text(text, name="car.bdf", unmodelled="keep")

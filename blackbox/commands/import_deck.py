@@ -35,6 +35,7 @@ from solver_adapters.protocol import DeckFormatError
 __all__ = ["ImportResult", "run", "parse_joint", "candidate_joints"]
 
 _SPC_CARDS = ("SPC", "SPC1", "SPCADD")
+_MPC_CARDS = ("MPC", "MPCADD")
 # MYSTRAN's own bulk-data card for debug printout: no effect on the solution, not NASTRAN.
 _SOLVER_DEBUG = ("DEBUG",)
 
@@ -229,10 +230,10 @@ def _plural(n: int, word: str) -> str:
     return f"{n} {word}{'' if n == 1 else 's'}"
 
 
-def _spc_sets_of(cards) -> dict[int, list]:
+def _spc_sets_of(cards, names=_SPC_CARDS) -> dict[int, list]:
     sets: dict[int, list] = {}
     for c in cards:
-        if c.name in _SPC_CARDS and c.text(2):
+        if c.name in names and c.text(2):
             try:
                 sets.setdefault(int(c.text(2)), []).append(c)
             except ValueError:
@@ -240,10 +241,11 @@ def _spc_sets_of(cards) -> dict[int, list]:
     return sets
 
 
-def _spc_members(sid: int, sets: dict[int, list]) -> set[int]:
-    """The SPC/SPC1 set IDs that constraint set ``sid`` stands for (through SPCADD)."""
+def _spc_members(sid: int, sets: dict[int, list], add: str = "SPCADD") -> set[int]:
+    """The SPC/SPC1 set IDs that constraint set ``sid`` stands for (through SPCADD; with
+    ``add="MPCADD"`` the MPC sets of an MPC set, through MPCADD)."""
     cards = sets.get(sid, [])
-    adds = [c for c in cards if c.name == "SPCADD"]
+    adds = [c for c in cards if c.name == add]
     if not adds:
         return {sid}
     members = {sid}
@@ -254,8 +256,36 @@ def _spc_members(sid: int, sets: dict[int, list]) -> set[int]:
                 try:
                     members.add(int(t))
                 except ValueError:
-                    raise c.error(i, "SPCADD set IDs must be integers") from None
+                    raise c.error(i, f"{add} set IDs must be integers") from None
     return members
+
+
+def _mpc_selection(cc: CaseControl, sets: dict[int, list], path: Path, notes: list[str]) -> list:
+    """The MPC/MPCADD cards to drop from model.bdf: every set the subcases do not select (all of
+    them when none selects one: NASTRAN then applies none). The subcases that import a load must
+    select the same MPC set (a study has one model)."""
+    chosen = {s.mpc for s in cc.subcases if s.load is not None}
+    if len(chosen) > 1:
+        detail = ", ".join(f"subcase {s.id}: {'none' if s.mpc is None else s.mpc}"
+                           for s in cc.subcases if s.load is not None)
+        raise DeckFormatError(f"the subcases select different MPC sets ({detail}); a study has one "
+                              f"model: give every subcase the same MPC = set (or import the deck "
+                              f"once per set)", file=str(path))
+    choice = chosen.pop() if chosen else None
+    if choice is None:
+        notes.append(f"no subcase selects an MPC set (no MPC =), so NASTRAN applies none: dropped "
+                     f"the MPC/MPCADD cards of set(s) {', '.join(map(str, sorted(sets)))}")
+        return [c for cs in sets.values() for c in cs]
+    line = next(s.mpc_line for s in cc.subcases if s.load is not None)
+    if choice not in sets:
+        raise DeckFormatError(f"MPC = {choice} selects a set the bulk data does not have (no MPC or "
+                              f"MPCADD with SID {choice})", file=str(path), line=line, card="MPC",
+                              value=str(choice))
+    keep = _spc_members(choice, sets, "MPCADD")
+    dropped = sorted(set(sets) - keep)
+    notes.append(f"MPC = {choice} selected: kept MPC set(s) {', '.join(map(str, sorted(keep & set(sets))))}"
+                 + (f"; dropped set(s) {', '.join(map(str, dropped))} (not selected)" if dropped else ""))
+    return [c for sid in dropped for c in sets[sid]]
 
 
 _STATIC_SOLS = ("1", "101", "SESTATIC", "SESTATICS", "STATICS")
@@ -312,6 +342,7 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
     cards, files, loads = source.cards, source.files, source.loads
     load_cards = [c for c in cards if c.name in LOAD_CARDS or c.name in OTHER_LOAD_CARDS]
     spc_sets = _spc_sets_of(cards)
+    mpc_sets = _spc_sets_of(cards, _MPC_CARDS)
 
     # the cases: one per subcase that selects a load set
     if cc is None:
@@ -365,13 +396,15 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
             notes.append(f"SPC = {spc_choice} selected: kept constraint set(s) "
                          f"{', '.join(map(str, sorted(keep & set(spc_sets))))}"
                          + (f"; dropped set(s) {', '.join(map(str, dropped))} (not selected)" if dropped else ""))
+    if cc is not None and (mpc_sets or any(s.mpc is not None for s in cc.subcases)):
+        drop_cards += _mpc_selection(cc, mpc_sets, path, notes)
     debug = [c for c in cards if c.name in _SOLVER_DEBUG]
     drop_cards += debug
     dropped_ids = {id(c) for c in drop_cards}
     kept = [c for c in cards if id(c) not in dropped_ids]
     # cards the reference solver does not model (shells, solids) are kept for an external solver:
     # the study's adapter is then MYSTRAN (study.toml, a note); load cards are gone already, and
-    # the cards that cannot be handed on (MPC, superelements) stay errors
+    # the cards that cannot be handed on (superelements) stay errors
     deck = deck_from_cards(kept, unmodelled="keep")
     if deck.unmodelled:
         kinds = ", ".join(f"{n} x{k}" for n, (k, _) in deck.unmodelled_counts().items())

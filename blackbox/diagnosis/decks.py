@@ -107,7 +107,7 @@ def cards_at(deck: Deck, grid: int) -> list[str]:
                                      ("pin flags", bool(b.pa or b.pb))) if on]
             out.append(f"{b.card} {b.eid}" + (f" ({', '.join(extra)})" if extra else ""))
     out += [f"{r.card} {r.eid}" for r in deck.rods.values() if grid in (r.ga, r.gb)]
-    out += [f"RBE2 {r.eid}" for r in deck.rbe2s.values() if grid in (r.gn, *r.gm)]
+    out += [f"{r.card} {r.eid}" for r in deck.rbe2s.values() if grid in (r.gn, *r.gm)]
     out += [f"{r.card} {r.eid}" for r in deck.rbe3s.values()
             if grid == r.refgrid or any(grid in gs for _, _, gs in r.groups)]
     out += [f"CBUSH {b.eid}" for b in deck.bushes.values() if grid in (b.ga, b.gb)]

@@ -3,19 +3,21 @@
 Organised as pyNastran organises cards: the tokenizer apart (:mod:`.tokens` one line at a time,
 :mod:`.table` the whole deck at once), one module per card family (:mod:`.grids` GRID, GRDSET and
 the coordinate systems; :mod:`.bars` CBAR, BAROR, PBAR, PBARL; :mod:`.beams` CBEAM, PBEAM,
-PBEAML; :mod:`.sections` the PBARL/PBEAML library sections; :mod:`.rods` CROD, PROD, CONROD;
-:mod:`.materials` MAT1; :mod:`.rigid` RBE2, RBE3; :mod:`.springs` CBUSH, PBUSH, PELAS, CELAS1/2;
-:mod:`.constraints` SPC, SPC1, SPCADD; :mod:`.params` PARAM and the cards with no effect),
-what the reader knows of each name (:mod:`.catalog`), the reader itself (:mod:`.reader`) and
-the cross-checks (:mod:`.checks`). A card family adds a card with a parser (one card at a
-time, located errors) and, for the cards a large deck holds by the thousand, a bulk converter.
+PBEAML; :mod:`.sections` the PBARL/PBEAML library sections; :mod:`.rods` CROD, PROD, CONROD,
+CTUBE, PTUBE; :mod:`.materials` MAT1; :mod:`.rigid` RBE2, RBAR, RBE3; :mod:`.springs` CBUSH,
+PBUSH, PELAS, CELAS1/2; :mod:`.constraints` SPC, SPC1, SPCADD; :mod:`.params` PARAM and the
+cards with no effect), what the reader knows of each name (:mod:`.catalog`), the reader itself
+(:mod:`.reader`) and the cross-checks (:mod:`.checks`). A card family adds a card with a parser
+(one card at a time, located errors) and, for the cards a large deck holds by the thousand, a
+bulk converter.
 
 Cards modelled: GRID (CP and CD systems), GRDSET, CORD1R/C/S and CORD2R/C/S (resolved to basic,
 nested in any order), CBAR (pin flags, offsets; orientation and offsets turned into basic),
-BAROR, PBAR (K1/K2, I12), PBARL (ROD, TUBE, BAR, BOX, I, CHAN, T, L), CBEAM/PBEAM/PBEAML (prismatic,
-no warping), CROD, PROD, CONROD, MAT1 (completed as NASTRAN does), SPC1, SPC (zero enforced value),
-SPCADD, RBE2, RBE3, CBUSH/PBUSH, PELAS, CELAS1, CELAS2, PARAM,AUTOSPC (on unless the deck says NO,
-as in NASTRAN's SOL 101) and PARAM,EPZERO. Cards in
+BAROR, PBAR (K1/K2, I12), PBARL (ROD, TUBE, BAR, BOX, I, CHAN, T, L), CBEAM/PBEAM/PBEAML
+(prismatic, no warping), CROD, PROD, CONROD, CTUBE and PTUBE (a rod of the tube's A and J), MAT1
+(completed as NASTRAN does), SPC1, SPC (zero enforced value), SPCADD, RBE2, RBAR (all six
+independent components at one grid: an RBE2), RBE3, CBUSH/PBUSH, PELAS, CELAS1, CELAS2,
+PARAM,AUTOSPC (on unless the deck says NO, as in NASTRAN's SOL 101) and PARAM,EPZERO. Cards in
 :data:`NO_EFFECT` (solver parameters, masses, eigenvalue and dynamic-analysis controls) are
 accepted with no effect on a linear static solve and
 counted in ``Deck.no_effect`` (``Deck.summary()`` lists them once). Every other card is an error;

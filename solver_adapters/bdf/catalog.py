@@ -38,8 +38,6 @@ NOT_PASSABLE = {
         "PLOAD1", "PLOAD2", "PLOAD4", "TEMP", "TEMPD", "SPCD", "DEFORM", "RFORCE", "RFORCE1",
         "ACCEL", "ACCEL1", "PLOADX1", "PLOADB3", "SLOAD", "TEMPP1", "TEMPRB", "QBDY1", "QVOL",
         "DAREA", "LSEQ", "CLOAD", "PRESAX", "FORCEAX", "MOMAX")},
-    **{k: "MPC sets apply only when the case control selects them, which a run deck does not: "
-          "the constraint would be dropped silently" for k in ("MPC", "MPCADD")},
     **{k: "superelements are not supported" for k in ("SEBULK", "SECONCT", "SESET")},
 }
 """Unmodelled cards that stay errors even when a deck is read for an external solver
@@ -48,11 +46,11 @@ NOT_PASSABLE = {
 KNOWN_UNMODELLED = frozenset({
     # shells, solids, other elements and their properties
     "CQUAD4", "CQUADR", "CQUAD8", "CQUAD", "CQUADX", "CTRIA3", "CTRIAR", "CTRIA6", "CTRIAX",
-    "CTRIAX6", "CSHEAR", "CHEXA", "CPENTA", "CTETRA", "CPYRAM", "CTUBE", "CBEND", "CVISC",
+    "CTRIAX6", "CSHEAR", "CHEXA", "CPENTA", "CTETRA", "CPYRAM", "CBEND", "CVISC",
     "CBEAM3", "CBARAO", "CELAS3", "CELAS4", "CDAMP1", "CDAMP2", "CDAMP3", "CDAMP4", "CDAMP5",
     "CGAP", "CWELD", "CFAST", "CSEAM", "CBUSH1D", "CBUSH2D", "CRAC2D", "CRAC3D", "GENEL",
     "CUSER1", "CUSERIN", "CONV", "CHBDYE", "CHBDYG", "CHBDYP",
-    "PSHELL", "PCOMP", "PCOMPG", "PCOMP1", "PSOLID", "PSHEAR", "PTUBE", "PBEND", "PVISC",
+    "PSHELL", "PCOMP", "PCOMPG", "PCOMP1", "PSOLID", "PSHEAR", "PBEND", "PVISC",
     "PBCOMP", "PBEAM3", "PBRSECT", "PBMSECT", "PDAMP", "PDAMP5", "PGAP", "PWELD", "PFAST",
     "PBUSH1D", "PBUSH2D", "PBUSHT", "PELAST", "PLPLANE", "PLSOLID", "PSHLN1", "PSHLN2",
     "PUSER1", "PUSERIN", "PHBDY", "PCONV",
@@ -60,7 +58,7 @@ KNOWN_UNMODELLED = frozenset({
     "MAT2", "MAT3", "MAT4", "MAT5", "MAT8", "MAT9", "MAT10", "MAT11", "MATT1", "MATT2", "MATT8",
     "MATT9", "MATS1", "TABLEM1", "TABLEM2", "TABLEM3", "TABLEM4", "TABLES1", "TABLEST",
     # rigid elements other than RBE2, RBE3
-    "RBAR", "RBAR1", "RBE1", "RROD", "RTRPLT", "RTRPLT1", "RSPLINE", "RJOINT",
+    "RBAR1", "RBE1", "RROD", "RTRPLT", "RTRPLT1", "RSPLINE", "RJOINT",
     # degree-of-freedom sets, scalar points, sequencing
     "SUPORT", "SUPORT1", "QSET", "QSET1", "BSET", "BSET1",
     "CSET", "CSET1", "USET", "USET1", "SEQGP", "SPOINT", "EPOINT",
@@ -77,11 +75,11 @@ ELEMENT_GRIDS: dict[str, tuple[int, ...]] = {
     **{k: (4, 5, 6) for k in ("CTRIA3", "CTRIAR")},
     "CQUAD8": tuple(range(4, 12)), "CTRIA6": tuple(range(4, 10)),
     "CHEXA": tuple(range(4, 24)), "CPENTA": tuple(range(4, 19)), "CTETRA": tuple(range(4, 14)),
-    "CPYRAM": tuple(range(4, 17)), "CTUBE": (4, 5), "CBEND": (4, 5), "CVISC": (4, 5),
+    "CPYRAM": tuple(range(4, 17)), "CBEND": (4, 5), "CVISC": (4, 5),
 }
 """NASTRAN field numbers of the grids of element cards the reader does not model but knows the
 layout of (MSC QRG: EID PID G1 G2 ...; a solid's midside grids may be blank): shells, solids,
-tubes. The grids are checked (they must exist) and :meth:`Deck.unmodelled_grids` names them."""
+bends. The grids are checked (they must exist) and :meth:`Deck.unmodelled_grids` names them."""
 
 _KNOWN = frozenset(PARSERS) | NO_EFFECT | KNOWN_UNMODELLED | frozenset(NOT_PASSABLE) | frozenset(ELEMENT_GRIDS)
 _KNOWN_SORTED = sorted(_KNOWN)

@@ -11,6 +11,9 @@ from solver_adapters.bdf.grids import PARALLEL_SINE, ZERO_LENGTH
 from solver_adapters.deck import Deck
 from solver_adapters.protocol import ModelError
 
+_ROD_PROPERTY = {"CROD": "PROD", "CTUBE": "PTUBE"}
+"""The property card each rod element with a PID needs."""
+
 
 def _ints(items, key: str) -> np.ndarray:
     return np.fromiter(map(attrgetter(key), items), np.int64, len(items))
@@ -84,7 +87,9 @@ def _bulk_ok(deck: Deck) -> bool:
     rods = list(deck.rods.values())
     if rods:
         for r in rods:
-            if (r.pid is not None and r.pid not in deck.prods) or (r.mid is not None and r.mid not in deck.mat1s):
+            if (r.pid is not None and (r.pid not in deck.prods or deck.prods[r.pid].card !=
+                                       _ROD_PROPERTY.get(r.card))) or \
+                    (r.mid is not None and r.mid not in deck.mat1s):
                 return False
         ga, gb = _ints(rods, "ga"), _ints(rods, "gb")
         ia, ib = pos(ga), pos(gb)
@@ -141,12 +146,16 @@ def _problems(deck: Deck, bulk_checked: bool) -> list[str]:
                                   f"has G = 0")
     for p in deck.prods.values():
         if p.mid not in deck.mat1s:
-            bad(p, "PROD", p.pid, f"material MID {p.mid} not found (no MAT1)")
+            bad(p, p.card, p.pid, f"material MID {p.mid} not found (no MAT1)")
     for r in () if bulk_checked else deck.rods.values():
+        wanted = _ROD_PROPERTY.get(r.card)
         if r.pid is not None and r.pid not in deck.prods:
             other = (" (it is a PBAR)" if r.pid in deck.pbars
                      else " (it is a PELAS)" if r.pid in deck.pelas else "")
-            bad(r, r.card, r.eid, f"property PID {r.pid} not found (no PROD){other}")
+            bad(r, r.card, r.eid, f"property PID {r.pid} not found (no {wanted}){other}")
+        elif r.pid is not None and deck.prods[r.pid].card != wanted:
+            bad(r, r.card, r.eid, f"property PID {r.pid} is a {deck.prods[r.pid].card}; a "
+                                  f"{r.card} needs a {wanted}")
         if r.mid is not None and r.mid not in deck.mat1s:
             bad(r, r.card, r.eid, f"material MID {r.mid} not found (no MAT1)")
         need_grids(r, r.card, r.eid, [r.ga, r.gb], "grid")
@@ -194,10 +203,11 @@ def _problems(deck: Deck, bulk_checked: bool) -> list[str]:
         elif np.linalg.norm(np.cross(v, axis)) <= PARALLEL_SINE * nv * na:
             bad(b, b.card, b.eid, "orientation vector is parallel to the bar axis")
     for e in deck.rbe2s.values():
-        need_grids(e, "RBE2", e.eid, [e.gn], "independent grid GN")
-        need_grids(e, "RBE2", e.eid, e.gm, "dependent grid(s)")
+        need_grids(e, e.card, e.eid, [e.gn], "independent grid GN" if e.card == "RBE2" else "grid")
+        need_grids(e, e.card, e.eid, e.gm, "dependent grid(s)" if e.card == "RBE2" else "grid")
         if e.gn in e.gm:
-            bad(e, "RBE2", e.eid, f"GN {e.gn} is also a dependent grid")
+            bad(e, e.card, e.eid, f"GN {e.gn} is also a dependent grid" if e.card == "RBE2"
+                else f"GA and GB are the same grid {e.gn}")
     for e in deck.rbe3s.values():
         need_grids(e, "RBE3", e.eid, [e.refgrid], "reference grid REFGRID")
         indep = [g for _, _, gs in e.groups for g in gs]
@@ -226,6 +236,16 @@ def _problems(deck: Deck, bulk_checked: bool) -> list[str]:
         if missing:
             bad(a, "SPCADD", a.sid, f"set(s) {', '.join(map(str, missing[:10]))} not found "
                                     f"(no SPC or SPC1 with that SID)")
+    for m in deck.mpcs:
+        need_grids(m, "MPC", m.sid, [g for g, _, _ in m.terms], "grid(s)")
+    mpc_sets = {m.sid for m in deck.mpcs}
+    for a in deck.mpcadds.values():
+        if a.sid in mpc_sets:
+            bad(a, "MPCADD", a.sid, f"SID {a.sid} is also the ID of an MPC set")
+        missing = [k for k in a.sets if k not in mpc_sets]
+        if missing:
+            bad(a, "MPCADD", a.sid, f"set(s) {', '.join(map(str, missing[:10]))} not found "
+                                    f"(no MPC with that SID)")
     for u in deck.unmodelled:
         if u.grids:
             need_grids(u, u.name, u.fields[0], u.grids, "grid(s)")

@@ -1,9 +1,10 @@
-"""Single-point constraints: SPC1, SPC (zero enforced value) and SPCADD."""
+"""Single-point constraints: SPC1, SPC (zero enforced value) and SPCADD; multipoint
+constraints: MPC and MPCADD."""
 
 from __future__ import annotations
 
 from solver_adapters.bdf.fields import _components, _id_list, _int, _max_fields, _real
-from solver_adapters.deck import SpcAdd
+from solver_adapters.deck import Mpc, SpcAdd
 
 
 def _spc1(r, c) -> None:
@@ -41,4 +42,44 @@ def _spcadd(r, c) -> None:
     r.deck.spcadds[sid] = SpcAdd(sid, tuple(sets), c.src)
 
 
-PARSERS = {"SPC1": _spc1, "SPC": _spc, "SPCADD": _spcadd}
+def _mpc(r, c) -> None:
+    """MPC: SID G1 C1 A1 G2 C2 A2 / (blank) G3 C3 A3 G4 C4 A4 / ... (MSC QRG MPC): the equation
+    sum A_i u(G_i, C_i) = 0, components in each grid's CD system. The first term's component
+    is the dependent one (A1 must not be 0). A scalar point (C blank or 0) is an error."""
+    sid = _int(c, 2)
+    terms: list[tuple[int, int, float]] = []
+    n = len(c.fields)
+    starts = [b for line in range(0, (n + 7) // 8 + 1) for b in (3 + 8 * line, 6 + 8 * line)]
+    for b in starts:
+        if b > n or not any(c.text(i) for i in (b, b + 1, b + 2)):
+            continue
+        g = _int(c, b)
+        comp = c.text(b + 1)
+        if comp not in ("1", "2", "3", "4", "5", "6"):
+            raise c.error(b + 1, "component must be one digit 1-6 (scalar points are not supported)")
+        a = _real(c, b + 2)
+        if not terms and a == 0.0:
+            raise c.error(b + 2, "A1, the coefficient of the dependent component, must not be 0")
+        terms.append((g, int(comp), a))
+    for i in range(9, n + 1, 8):
+        if c.text(i):
+            raise c.error(i, "field must be blank (an MPC line holds two G C A triples)")
+    for i in range(10, n + 1, 8):
+        if c.text(i):
+            raise c.error(i, "field must be blank (an MPC continuation starts with a blank field)")
+    if not terms:
+        raise c.error(3, "MPC needs at least one term G1 C1 A1")
+    r.deck.mpcs.append(Mpc(sid, tuple(terms), c.src))
+
+
+def _mpcadd(r, c) -> None:
+    """MPCADD: SID S1 S2 ... (the MPC sets it combines)."""
+    sid = _int(c, 2)
+    sets = [_int(c, i) for i in range(3, len(c.fields) + 1) if c.text(i)]
+    if not sets:
+        raise c.error(3, "MPCADD needs at least one set ID")
+    r.claim("MPCADD", sid, c, 2)
+    r.deck.mpcadds[sid] = SpcAdd(sid, tuple(sets), c.src)
+
+
+PARSERS = {"SPC1": _spc1, "SPC": _spc, "SPCADD": _spcadd, "MPC": _mpc, "MPCADD": _mpcadd}

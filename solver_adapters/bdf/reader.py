@@ -43,7 +43,7 @@ class _Reader:
         # ID -> "CARD at file:line"; elements (CBAR, RBE2, CELASi) share one ID space, as do
         # properties (PBAR, PELAS)
         self.ids: dict[str, dict[int, str]] = {"GRID": {}, "element": {}, "property": {}, "MAT1": {},
-                                               "SPCADD": {}, "CORD": {}}
+                                               "SPCADD": {}, "MPCADD": {}, "CORD": {}}
         self.spc1_pending: list[tuple[int, str, list[int | tuple[int, int]], str]] = []
         # card name -> [count, first card] of every card that is neither modelled nor NO_EFFECT
         self.unsupported: dict[str, list] = {}
@@ -57,7 +57,7 @@ class _Reader:
         # coordinate-system cards, resolved in finish(): CID -> (kind, card, definition)
         self.cords: dict[int, tuple] = {}
         self.cbar_offt: dict[int, str] = {}       # OFFT as written (blank: BAROR's or GGG)
-        self.pending_cids: list = []              # CBUSH CIDs, checked in finish()
+        self.pending_cids: list = []              # CBUSH CIDs and OCIDs (card, id, field), checked in finish()
         # BAROR defaults, applied in finish(): CBARs with a blank PID, with no orientation
         self.baror = None
         self.pid_blank: list[int] = []
@@ -287,9 +287,10 @@ class _Reader:
                 for gid in self.blank_ps:
                     self.deck.grids[gid] = replace(self.deck.grids[gid], ps=ps)
         self.resolve_coordinates()
-        for c, cid in self.pending_cids:
+        for c, cid, i in self.pending_cids:
             if cid not in self.deck.coords:
-                raise c.error(9, f"CID {cid}: coordinate system {cid} is not defined")
+                name = "CID" if i == 9 else "OCID"
+                raise c.error(i, f"{name} {cid}: coordinate system {cid} is not defined")
         self.apply_baror()
         self.resolve_bars()
         ordered = None

@@ -1,8 +1,9 @@
-"""RBE2 and RBE3: rigid and interpolation elements."""
+"""RBE2, RBAR and RBE3: rigid and interpolation elements."""
 
 from __future__ import annotations
 
-from solver_adapters.bdf.fields import _blank, _components, _id_list, _int, _real
+from solver_adapters.bdf.fields import (_blank, _components, _id_list, _ignored_reals, _int,
+                                        _max_fields, _real)
 from solver_adapters.bdf.numbers import _INT, _real_or_none
 from solver_adapters.deck import Rbe2, Rbe3
 
@@ -88,4 +89,40 @@ def _rbe3(r, c) -> None:
     r.deck.rbe3s[eid] = Rbe3(eid, ref, refc, tuple(groups), c.src)
 
 
-PARSERS = {"RBE2": _rbe2, "RBE3": _rbe3}
+def _rbar(r, c) -> None:
+    """RBAR: EID GA GB CNA CNB CMA CMB ALPHA / TREF (MSC QRG RBAR): a rigid bar between GA and
+    GB; CNA, CNB the independent components at GA, GB (six in all), CMA, CMB the dependent ones
+    (both blank: every component not independent), components of each grid's CD system.
+
+    All six independent components at one grid (CNA = 123456 or CNB = 123456, the way RBAR is
+    written almost always) make the RBAR the RBE2 of that grid with the other grid's dependent
+    components: it is held as that RBE2 (``card="RBAR"``). Independent components split over
+    both grids (CNA = 1236, CNB = 45) are an error: not supported. ALPHA and TREF (thermal
+    expansion) are read and have no effect."""
+    _max_fields(c, 10)
+    eid, ga, gb = _int(c, 2), _int(c, 3), _int(c, 4)
+    cna, cnb, cma, cmb = ("" if c.text(i) == "0" else _components(c, i, required=False)
+                          for i in (5, 6, 7, 8))      # 0: blank, as NASTRAN allows
+    _ignored_reals(c, (9, 10))
+    if len(cna) + len(cnb) != 6:
+        raise c.error(5, f"CNA ({cna or 'blank'}) and CNB ({cnb or 'blank'}) must hold six "
+                         f"independent components in all")
+    for i, (dep, ind, end) in enumerate(((cma, cna, "A"), (cmb, cnb, "B"))):
+        both = sorted(set(dep) & set(ind))
+        if both:
+            raise c.error(7 + i, f"CM{end} component(s) {''.join(both)} are also independent "
+                                 f"(in CN{end})")
+    if cna and cnb:
+        raise c.error(6, f"independent components at both grids (CNA={cna}, CNB={cnb}) not "
+                         f"supported: give all six at one grid (CNA=123456 or CNB=123456)")
+    if not cma and not cmb:              # NASTRAN: every component not independent is dependent
+        cma = "".join(d for d in "123456" if d not in cna)
+        cmb = "".join(d for d in "123456" if d not in cnb)
+    gn, gm, cm = (ga, gb, cmb) if cna else (gb, ga, cma)
+    if not cm:
+        raise c.error(8 if cna else 7, "no dependent component: the RBAR ties nothing")
+    r.claim("element", eid, c, 2)
+    r.deck.rbe2s[eid] = Rbe2(eid, gn, cm, (gm,), c.src, card="RBAR")
+
+
+PARSERS = {"RBE2": _rbe2, "RBE3": _rbe3, "RBAR": _rbar}

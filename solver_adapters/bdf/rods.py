@@ -1,6 +1,8 @@
-"""CROD, PROD and CONROD: axial and torsion members."""
+"""CROD, PROD, CONROD, CTUBE and PTUBE: axial and torsion members."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -58,5 +60,42 @@ def _conrod(r, c) -> None:
     r.deck.rods[eid] = Rod(eid, ga, gb, mid=mid, a=a, j=j, card="CONROD", src=c.src)
 
 
-PARSERS = {"CROD": _crod, "PROD": _prod, "CONROD": _conrod}
+def _ctube(r, c) -> None:
+    """CTUBE: EID PID (default EID) G1 G2: a rod whose section is a PTUBE's."""
+    _max_fields(c, 5)
+    eid = _int(c, 2)
+    pid = _int(c, 3, eid)
+    ga, gb = _int(c, 4), _int(c, 5)
+    r.claim("element", eid, c, 2)
+    r.deck.rods[eid] = Rod(eid, ga, gb, pid=pid, card="CTUBE", src=c.src)
+
+
+def tube_section(od: float, t: float) -> tuple[float, float]:
+    """``(A, J)`` of a circular tube of outer diameter ``od`` and wall ``t`` (MSC QRG PTUBE):
+    A = pi (OD^2 - D^2) / 4 and the polar moment J = pi (OD^4 - D^4) / 32, D = OD - 2 T the
+    inner diameter (T = OD / 2: a solid bar)."""
+    d = od - 2.0 * t
+    return math.pi * (od ** 2 - d ** 2) / 4.0, math.pi * (od ** 4 - d ** 4) / 32.0
+
+
+def _ptube(r, c) -> None:
+    """PTUBE: PID MID OD T NSM OD2 (MSC QRG): T blank is a solid bar (T = OD / 2); NSM is mass
+    (no effect on the stiffness); OD2 (a tapered tube) must be blank or equal to OD."""
+    _max_fields(c, 7)
+    pid, mid = _int(c, 2), _int(c, 3)
+    od = _real(c, 4)
+    if not od > 0.0:
+        raise c.error(4, "outer diameter OD must be > 0")
+    t = _real(c, 5, od / 2.0)
+    if not 0.0 < t <= od / 2.0:
+        raise c.error(5, f"wall thickness T must be in (0, OD/2 = {od / 2.0:g}] (blank: solid)")
+    _ignored_reals(c, (6,))
+    if c.text(7) and _real(c, 7) != od:
+        raise c.error(7, "a tapered tube (OD2 other than OD) is not supported: blank or OD")
+    a, j = tube_section(od, t)
+    r.claim("property", pid, c, 2)
+    r.deck.prods[pid] = Prod(pid, mid, a, j, c.src, card="PTUBE")
+
+
+PARSERS = {"CROD": _crod, "PROD": _prod, "CONROD": _conrod, "CTUBE": _ctube, "PTUBE": _ptube}
 BULK = {"CROD": bulk_crod}

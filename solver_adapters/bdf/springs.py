@@ -11,8 +11,10 @@ from solver_adapters.deck import Bush, PBush, Pelas, Spring
 def _cbush(r, c) -> None:
     """CBUSH: EID PID GA GB GO/X1 X2 X3 CID / S OCID S1 S2 S3 (MSC QRG). The element axes are
     CID's (CID >= 0) or, with CID blank, x from GA to GB and the orientation vector (GO, or X
-    in GA's CD system) in the x-y plane. S (default 0.5) places the springs on the line GA-GB.
-    OCID and S1-S3 (a spring location off that line) are not supported: errors."""
+    in GA's CD system) in the x-y plane. The springs are at one point: with OCID blank or -1 on
+    the line GA-GB at S (default 0.5); with OCID >= 0 at GA plus the offset S1 S2 S3 given in
+    system OCID (its axes at GA; 0: basic), S then ignored (MSC QRG CBUSH remark 8; S1-S3 with
+    OCID -1 are ignored as in NASTRAN, with a note)."""
     _max_fields(c, 14)
     eid = _int(c, 2)
     pid = _int(c, 3, eid)
@@ -22,17 +24,22 @@ def _cbush(r, c) -> None:
     s = _real(c, 10, 0.5)
     if not 0.0 <= s <= 1.0:
         raise c.error(10, "spring location S must be in [0, 1]")
-    if _int(c, 11, -1, minimum=-1) != -1:
-        raise c.error(11, "OCID (spring location off the line GA-GB) not supported: blank or -1")
-    for i in (12, 13, 14):
-        if _real(c, i, 0.0) != 0.0:
-            raise c.error(i, "offset S1-S3 of the spring location not supported: blank or 0.0")
+    ocid = _int(c, 11, -1, minimum=-1)
+    offset = (_real(c, 12, 0.0), _real(c, 13, 0.0), _real(c, 14, 0.0))
+    if ocid == -1:
+        if any(offset):
+            r.note(c, "CBUSH S1-S3 with OCID blank or -1 are ignored (as in NASTRAN: the spring "
+                      "is on the line GA-GB at S)")
+        offset = None
+    elif ocid != 0 and ocid not in r.cords:
+        r.pending_cids.append((c, ocid, 11))
     if cid is None and x is None and g0 is None and gb == 0:
         raise c.error(9, "a grounded CBUSH needs CID (or an orientation) for its element axes")
     if cid is not None and cid not in r.cords and cid != 0:
-        r.pending_cids.append((c, cid))
+        r.pending_cids.append((c, cid, 9))
     r.claim("element", eid, c, 2)
-    r.deck.bushes[eid] = Bush(eid, pid, ga, gb, x, g0, cid, s, c.src)
+    r.deck.bushes[eid] = Bush(eid, pid, ga, gb, x, g0, cid, s, c.src,
+                              ocid if offset is not None else -1, offset)
 
 
 def _pbush(r, c) -> None:

@@ -4,7 +4,8 @@ Elements: CBAR/CBEAM (Euler-Bernoulli or, with K1/K2, Timoshenko bending; pin fl
 CROD/CONROD (axial + torsion), element matrices in ``frame.py``; CBUSH springs; CELAS springs.
 Elements are assembled in basic; the g-set is in each grid's CD system (``u_basic = D u_cd``,
 ``K_gg = D^T K_basic D``), so SPCs, springs, loads and results are in CD components.
-RBE3 rows (weighted least squares) are eliminated like RBE2 rows; AUTOSPC (NASTRAN's SOL 101
+RBE3 rows (weighted least squares) and MPC equations (solved for their first component) are
+eliminated like RBE2 rows; AUTOSPC (NASTRAN's SOL 101
 default, off only with PARAM,AUTOSPC,NO) removes free components without stiffness
 (:func:`autospc`) and lists them. It removes grid-point singularities only: a mechanism of the
 structure (a rigid-body motion, a linkage) still fails the factorization with an error naming it.
@@ -378,7 +379,8 @@ def _skew(r: np.ndarray) -> np.ndarray:
 
 def bush_stiffness(deck: Deck, grid_ids: np.ndarray, xyz: np.ndarray) -> sp.csr_matrix:
     """Sum of the CBUSH stiffnesses in basic (MSC QRG CBUSH/PBUSH): six uncoupled springs
-    K1..K6 along the element axes at the spring point p = x_A + S (x_B - x_A), reached from
+    K1..K6 along the element axes at the spring point p = x_A + S (x_B - x_A) (with OCID >= 0:
+    x_A plus the offset S1-S3 in OCID's axes at GA), reached from
     each grid by a rigid link (u_p = u_g + theta_g x (p - x_g)), so that a bush of non-zero
     length carries moments consistently: K = C^T diag(K) C, C = [-E T_A, E T_B] with E the
     element axes (twice: translations and rotations) and T_g the rigid links. GB = 0: the
@@ -417,7 +419,11 @@ def bush_stiffness(deck: Deck, grid_ids: np.ndarray, xyz: np.ndarray) -> sp.csr_
             ex = ex / np.linalg.norm(ex)
             ez = ez / np.linalg.norm(ez)
             E = np.array([ex, np.cross(ez, ex), ez])
-        p = xa + b.s * (xb - xa)
+        if b.offset is None:
+            p = xa + b.s * (xb - xa)
+        else:                         # GA plus the offset in OCID's axes at GA
+            F = np.eye(3) if b.ocid == 0 else deck.coords[b.ocid].frames_at(xa[None, :])[0]
+            p = xa + F.T @ np.asarray(b.offset, float)
         R = np.kron(np.eye(2), E)
         ends = [(ia, xa, -1.0)] + ([(ib, xb, 1.0)] if ib is not None else [])
         C = np.zeros((6, 6 * len(ends)))
@@ -484,8 +490,8 @@ def constraint_map(deck: Deck, grid_ids: np.ndarray, pos: dict[int, int] | None 
     rbe2s = sorted(deck.rbe2s.values(), key=lambda r: r.eid)
     d_idx, d_gn, d_rbe = [], [], []
     for k, r in enumerate(rbe2s):
-        gm = _grid_pos(grid_ids, list(r.gm), f"{r.src}: RBE2 {r.eid}")
-        gn = _grid_pos(grid_ids, [r.gn], f"{r.src}: RBE2 {r.eid}")[0]
+        gm = _grid_pos(grid_ids, list(r.gm), f"{r.src}: {r.card} {r.eid}")
+        gn = _grid_pos(grid_ids, [r.gn], f"{r.src}: {r.card} {r.eid}")[0]
         comps = np.array([int(c) - 1 for c in r.cm], dtype=np.int64)
         i = (6 * gm[:, None] + comps).ravel()              # grid-major, component order of CM
         d_idx.append(i)
@@ -496,9 +502,12 @@ def constraint_map(deck: Deck, grid_ids: np.ndarray, pos: dict[int, int] | None 
     dep_rbe2 = np.concatenate(d_rbe) if d_rbe else np.zeros(0, np.int64)
     rbe3s = sorted(deck.rbe3s.values(), key=lambda r: r.eid)
     dep3, dep_rbe3, W3 = _rbe3_rows(deck, grid_ids, rbe3s, len(rbe2s))
-    rigid = rbe2s + rbe3s
-    dep = np.concatenate([dep2, dep3])
-    dep_rbe = np.concatenate([dep_rbe2, dep_rbe3])
+    mpcs = list(getattr(deck, "mpcs", ()))
+    depm, dep_mpc, WM = _mpc_rows(grid_ids, mpcs, len(rbe2s) + len(rbe3s))
+    W3 = W3 + WM
+    rigid = rbe2s + rbe3s + mpcs
+    dep = np.concatenate([dep2, dep3, depm])
+    dep_rbe = np.concatenate([dep_rbe2, dep_rbe3, dep_mpc])
     if dep.size:
         _check_dependents(dep, dep_rbe, fixed, rigid, grid_ids)
 
@@ -618,6 +627,37 @@ def _check_dependents(dep, dep_rbe, fixed, rigid, grid_ids) -> None:
                          f"dependent on {getattr(first, 'card', 'RBE2')} {first.eid}")
     raise ModelError(f"{r.src}: {name} {r.eid}: dependent grid {gm} component {comp} "
                      f"is also constrained by an SPC; constrain the independent grid instead")
+
+
+def _mpc_rows(grid_ids: np.ndarray, mpcs, first_index: int):
+    """Dependent rows of the MPC equations: ``(dep, equation index, WM)``, ``u[dep] = WM[dep] u``.
+
+    Each equation sum A_i u_i = 0 (components in each grid's CD system, as the g-set) is solved
+    for its first term: u_1 = -sum_{i>1} (A_i / A_1) u_i (NASTRAN's m-set: the first component
+    of each MPC is dependent). Independent terms may themselves be dependent (on a rigid element
+    or another MPC): the chains are followed as the rigid elements' are."""
+    n_g = 6 * len(grid_ids)
+    if not mpcs:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), sp.csr_matrix((n_g, n_g))
+    rows, cols, vals, deps = [], [], [], []
+    for m in mpcs:
+        where = f"{m.src}: MPC {m.sid}"
+        pos = _grid_pos(grid_ids, [g for g, _, _ in m.terms], where)
+        idx = 6 * pos + np.array([c for _, c, _ in m.terms], np.int64) - 1
+        a = np.array([t[2] for t in m.terms], float)
+        if np.any(idx[1:] == idx[0]):
+            raise ModelError(f"{where}: the dependent component (grid {m.terms[0][0]} component "
+                             f"{m.terms[0][1]}) appears again among the equation's other terms")
+        rows.append(np.full(idx.size - 1, idx[0]))
+        cols.append(idx[1:])
+        vals.append(-a[1:] / a[0])
+        deps.append(int(idx[0]))
+    WM = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                       shape=(n_g, n_g))
+    WM.sum_duplicates()
+    WM.eliminate_zeros()
+    return (np.array(deps, np.int64), np.arange(first_index, first_index + len(mpcs), dtype=np.int64),
+            WM)
 
 
 RBE3_COND = 1e12
