@@ -154,7 +154,31 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(r)
             print(json.dumps(r, default=str), flush=True)
     (args.out / "results.json").write_text(json.dumps(rows, indent=1, default=str))
+    print(table(rows))
     return 0
+
+
+def table(rows: list[dict]) -> str:
+    """One line per study: the defect and where, what was added (with the pattern named), the
+    verdict, and whether it was put on the data at the defect's place with nothing of the
+    structure added."""
+    out = ["| study | family | defect | at | added | verdict | on the data, at its place, nothing else |",
+           "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        if r.get("error"):
+            out.append(f"| {r['study']} | {r['family']} | {r['defect']} | {r['where']} | error: {r['error'][:80]} | | no |")
+            continue
+        w = r["where"]
+        at = f"{w['grid']}/{w['component']}" if "grid" in w else ", ".join(w.get("cases") or [w.get("case")])
+        added = "; ".join(f"{a[0]} @ {','.join(map(str, a[1]))}" + (f" ({a[4]})" if a[4] else "") for a in r["added"]) or "nothing"
+        if "grid" in w:
+            placed = bool(r["added"]) and all(a[2] == "data" and a[1][:1] == [w["grid"]] for a in r["added"])
+        else:
+            cases = set(w.get("cases") or [w.get("case")])
+            placed = bool(r["added"]) and all(a[2] == "data" and set(map(str, a[1])) <= cases for a in r["added"])
+        out.append(f"| {r['study']} | {r['family']} | {r['defect']} | {at} | {added} | {r['verdict']} | "
+                   f"{'yes' if placed else 'no'} |")
+    return "\n".join(out) + "\n"
 
 
 if __name__ == "__main__":
