@@ -24,9 +24,16 @@ effect to patch. Repeat until no candidate is accepted: a candidate that is sign
 correction is still added when the overall reduced chi2 is already inside its 99 % band (the band
 is a weak omnibus test; a localised effect is found by the targeted score first).
 
+An effect that sets readings aside (a bad channel, a bad case) takes the place of the effects of
+the current model it subsumes (:meth:`Effect.subsumes`: an offset, a sign flip, outliers of its
+channel), which the step records as removed; its hold-out check compares both fits on the
+hold-out rows it does not set aside.
+
 *Multiplicity* (alpha spending, :func:`round_level`): round ``r`` (1, 2, ...) spends
 ``alpha / 2^r``, split evenly (Bonferroni) over its hypotheses: every candidate scored in the
-round plus the variant upgrades each could be refined through (:attr:`Effect.variant_tests`).
+round plus the variant upgrades each could be refined through (:attr:`Effect.variant_tests`);
+candidates the data chose as one family (load-scale groups found from the case scales) are one
+hypothesis, tested for the choice (:meth:`Effect.selection_log_sf`).
 Each LR test of the round (a candidate's, a variant's) is made at ``alpha / (2^r M_r)``; the
 reported adjusted p-value is ``p 2^r M_r``, compared with ``alpha``. Over the whole search, with
 no effect present, the chance of any false addition is at most ``sum_r alpha / 2^r < alpha``,
