@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from blackbox.diagnosis.effects.bad_channel import _fits
-from blackbox.diagnosis.effects.base import Effect
+from blackbox.diagnosis.effects.base import Effect, SetAsideEffect
 from blackbox.diagnosis.effects.registry import register
 
 __all__ = ["BadCase", "case_pattern"]
@@ -57,70 +57,31 @@ def case_pattern(y: np.ndarray, u: np.ndarray, s: np.ndarray) -> dict:
 
 @register
 @dataclass(frozen=True, eq=False)
-class BadCase(Effect):
+class BadCase(SetAsideEffect):
     """``case``: the load case set aside; ``channels``: the ``(grid, component)`` read in it
-    (one parameter each); ``readings`` and ``sigmas``: each channel's reading (the mean of
-    repeats) and that mean's standard deviation."""
+    (one parameter each, ``readings`` in the same order)."""
     kind = "bad_case"
     of_data = True
     summary = "the readings of one load case follow no model (other units, exchanged files, a load elsewhere): set aside"
 
     case: str = ""
     channels: tuple[tuple[int, int], ...] = ()
-    readings: tuple[float, ...] = ()
-    sigmas: tuple[float, ...] = ()
 
     @classmethod
     def candidates(cls, ctx, split) -> list["BadCase"]:
-        obs = ctx.fit_obs
-        labels = obs.case_labels
-        per: dict = {}
-        for (g, c), ci, v, sg in zip(obs.dofs, obs.case_index, obs.values, obs.sigma):
-            per.setdefault(labels[int(ci)], {}).setdefault((int(g), int(c)), []).append((float(v), float(sg)))
+        per = cls.grouped_readings(ctx.fit_obs, lambda g, c, k: k, lambda g, c, k: (g, c))
         if len(per) < 3:
             return []
         out = []
         for case in (c for c in ctx.cases if c in per):
             chans = list(per[case])
-            ys, ss = [], []
-            for ch in chans:
-                v = np.array(per[case][ch])
-                w = 1.0 / v[:, 1] ** 2
-                ys.append(float(np.sum(w * v[:, 0]) / np.sum(w)))
-                ss.append(float(1.0 / np.sqrt(np.sum(w))))
             out.append(cls((case,), tuple(f"c_{case}_{g}_{c}" for g, c in chans), case=case, channels=tuple(chans),
-                           readings=tuple(ys), sigmas=tuple(ss)))
+                           readings=tuple(per[case][ch][0] for ch in chans),
+                           sigmas=tuple(per[case][ch][1] for ch in chans)))
         return out
-
-    @property
-    def nominal(self) -> np.ndarray:
-        return np.zeros(self.n_params)
-
-    @property
-    def bounds(self):
-        return np.full(self.n_params, -np.inf), np.full(self.n_params, np.inf)
-
-    @property
-    def acts_on_output(self) -> bool:
-        return True
 
     def offset_rows(self, om):
         return [(q, om.rows_of(g, c, self.case)) for q, (g, c) in enumerate(self.channels)]
-
-    @classmethod
-    def sparse_columns(cls, model, st, x, om, effects):
-        out = []
-        for e in effects:
-            idx = [i for i, lab in enumerate(om.labels) if lab == e.case]
-            rows = np.flatnonzero(np.isin(om.case, idx))
-            col = {ch: q for q, ch in enumerate(e.channels)}
-            cols = np.zeros((rows.size, e.n_params))
-            for i, r in enumerate(rows):
-                q = col.get((int(om.grid[r]), int(om.comp[r])))
-                if q is not None:
-                    cols[i, q] = 1.0
-            out.append((rows, cols))
-        return out
 
     def subsumes(self, other: Effect) -> bool:
         if other.kind == "outlier":
@@ -128,10 +89,7 @@ class BadCase(Effect):
         return other.kind == "load_scale" and tuple(other.where) == (self.case,)
 
     def findings(self, fit) -> dict:
-        i = next(i for i, e in enumerate(fit.spec.effects) if e.key == self.key)
-        o = fit.x[fit.spec.effect_slices()[i]]
-        y = np.array(self.readings)
-        return case_pattern(y, y - o, np.array(self.sigmas))
+        return case_pattern(*self.model_readings(fit))
 
     def label(self) -> str:
         return f"{self.kind} @ case {self.case}"

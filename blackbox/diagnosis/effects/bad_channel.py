@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from blackbox.diagnosis.effects.base import Effect
+from blackbox.diagnosis.effects.base import Effect, SetAsideEffect
 from blackbox.diagnosis.effects.registry import register
 
 __all__ = ["BadChannel", "channel_pattern"]
@@ -94,18 +94,15 @@ def channel_pattern(y: np.ndarray, u: np.ndarray, s: np.ndarray, cases: list[str
 
 @register
 @dataclass(frozen=True, eq=False)
-class BadChannel(Effect):
+class BadChannel(SetAsideEffect):
     """``component`` of grid ``where[0]``; ``cases``: the fitted cases it is read in (one
-    parameter each); ``readings`` and ``sigmas``: its reading in each of them (the mean of
-    repeats) and that mean's standard deviation."""
+    parameter each, ``readings`` in the same order)."""
     kind = "bad_channel"
     of_data = True
     summary = "one channel follows no model over the test (a drift, a jump, noise, a dead transducer): set aside"
 
     component: int = 0
     cases: tuple[str, ...] = ()
-    readings: tuple[float, ...] = ()
-    sigmas: tuple[float, ...] = ()
 
     @property
     def grid(self) -> int:
@@ -113,59 +110,24 @@ class BadChannel(Effect):
 
     @classmethod
     def candidates(cls, ctx, split) -> list["BadChannel"]:
-        obs = ctx.fit_obs
-        labels = obs.case_labels
         order = {c: i for i, c in enumerate(ctx.cases)}
-        per: dict = {}
-        for (g, c), ci, v, sg in zip(obs.dofs, obs.case_index, obs.values, obs.sigma):
-            per.setdefault((int(g), int(c)), {}).setdefault(labels[int(ci)], []).append((float(v), float(sg)))
+        per = cls.grouped_readings(ctx.fit_obs, lambda g, c, k: (g, c), lambda g, c, k: k)
         out = []
         for (g, c), by_case in per.items():
             if len(by_case) < 2:
                 continue
             cases = sorted(by_case, key=lambda k: order.get(k, len(order)))
-            ys, ss = [], []
-            for k in cases:
-                v = np.array(by_case[k])
-                w = 1.0 / v[:, 1] ** 2
-                ys.append(float(np.sum(w * v[:, 0]) / np.sum(w)))
-                ss.append(float(1.0 / np.sqrt(np.sum(w))))
             out.append(cls((g,), tuple(f"u_{g}_{c}_{k}" for k in cases), component=c, cases=tuple(cases),
-                           readings=tuple(ys), sigmas=tuple(ss)))
+                           readings=tuple(by_case[k][0] for k in cases),
+                           sigmas=tuple(by_case[k][1] for k in cases)))
         return out
 
     @property
     def key(self) -> tuple:
         return (self.kind, tuple(self.where), self.component)
 
-    @property
-    def nominal(self) -> np.ndarray:
-        return np.zeros(self.n_params)
-
-    @property
-    def bounds(self):
-        return np.full(self.n_params, -np.inf), np.full(self.n_params, np.inf)
-
-    @property
-    def acts_on_output(self) -> bool:
-        return True
-
     def offset_rows(self, om):
         return [(q, om.rows_of(self.grid, self.component, k)) for q, k in enumerate(self.cases)]
-
-    @classmethod
-    def sparse_columns(cls, model, st, x, om, effects):
-        out = []
-        for e in effects:
-            rows = np.flatnonzero(om.rows_of(e.grid, e.component))
-            col = {lab: q for q, lab in enumerate(e.cases)}
-            cols = np.zeros((rows.size, e.n_params))
-            for i, r in enumerate(rows):
-                q = col.get(om.labels[int(om.case[r])])
-                if q is not None:
-                    cols[i, q] = 1.0
-            out.append((rows, cols))
-        return out
 
     def set_aside_rows(self, om):
         return om.rows_of(self.grid, self.component)
@@ -175,10 +137,8 @@ class BadChannel(Effect):
         return same and other.kind in ("sensor_offset", "sign_flip", "outlier")
 
     def findings(self, fit) -> dict:
-        i = next(i for i, e in enumerate(fit.spec.effects) if e.key == self.key)
-        o = fit.x[fit.spec.effect_slices()[i]]
-        y = np.array(self.readings)
-        return channel_pattern(y, y - o, np.array(self.sigmas), list(self.cases))
+        y, u, s = self.model_readings(fit)
+        return channel_pattern(y, u, s, list(self.cases))
 
     def details_json(self) -> dict:
         return {"component": self.component}

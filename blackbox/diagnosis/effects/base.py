@@ -53,7 +53,7 @@ if TYPE_CHECKING:
     from blackbox.joints import JointModel
     from solver_adapters.protocol import Deck, LoadMatrix
 
-__all__ = ["CandidateContext", "CandidateLimit", "Effect", "JointCaseEffect", "finite_or_none"]
+__all__ = ["CandidateContext", "CandidateLimit", "Effect", "JointCaseEffect", "SetAsideEffect", "finite_or_none"]
 
 
 @dataclass(frozen=True)
@@ -429,3 +429,60 @@ class JointCaseEffect(Effect):
     @property
     def case_joint(self) -> str | None:
         return str(self.where[0])
+
+
+@dataclass(frozen=True, eq=False)
+class SetAsideEffect(Effect):
+    """An effect that sets readings aside (a bad channel, a bad case): one free offset per group
+    of rows (:meth:`offset_rows`, disjoint masks), nested at 0 and unbounded. ``readings`` and
+    ``sigmas``: each group's reading when the candidate was listed (the mean of repeats) and that
+    mean's standard deviation, from which :meth:`findings` reads the model's own prediction
+    (``reading - offset``: the offset makes the group's residual zero)."""
+    readings: tuple[float, ...] = ()
+    sigmas: tuple[float, ...] = ()
+
+    @staticmethod
+    def grouped_readings(obs: "Observations", outer, inner) -> dict:
+        """``{outer key: {inner key: (mean, sigma of the mean)}}`` of the rows of ``obs``, each
+        key a function of ``(grid, component, case label)``; repeats are averaged by their
+        weights ``1 / sigma^2``."""
+        labels = obs.case_labels
+        per: dict = {}
+        for (g, c), ci, v, sg in zip(obs.dofs, obs.case_index, obs.values, obs.sigma):
+            key = (int(g), int(c), labels[int(ci)])
+            per.setdefault(outer(*key), {}).setdefault(inner(*key), []).append((float(v), float(sg)))
+        out: dict = {}
+        for k, groups in per.items():
+            out[k] = {}
+            for j, vals in groups.items():
+                v = np.array(vals)
+                w = 1.0 / v[:, 1] ** 2
+                out[k][j] = (float(np.sum(w * v[:, 0]) / np.sum(w)), float(1.0 / np.sqrt(np.sum(w))))
+        return out
+
+    @property
+    def nominal(self) -> np.ndarray:
+        return np.zeros(self.n_params)
+
+    @property
+    def bounds(self):
+        return np.full(self.n_params, -np.inf), np.full(self.n_params, np.inf)
+
+    @property
+    def acts_on_output(self) -> bool:
+        return True
+
+    @classmethod
+    def sparse_columns(cls, model, st, x, om, effects):
+        out = []
+        for e in effects:
+            masks = np.array([m for _, m in e.offset_rows(om)], bool).reshape(e.n_params, -1)
+            rows = np.flatnonzero(masks.any(axis=0))
+            out.append((rows, masks[:, rows].T.astype(float)))
+        return out
+
+    def model_readings(self, fit: "Fit") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(readings, the model's prediction of them, sigmas)`` in ``fit``, which holds this effect."""
+        i = next(i for i, e in enumerate(fit.spec.effects) if e.key == self.key)
+        y = np.array(self.readings)
+        return y, y - fit.x[fit.spec.effect_slices()[i]], np.array(self.sigmas)
