@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from blackbox.diagnosis.effects.base import Effect, SetAsideEffect
+from blackbox.diagnosis.effects.base import Effect, OnChannel, SetAsideEffect
 from blackbox.diagnosis.effects.registry import register
 
 __all__ = ["BadChannel", "channel_pattern"]
@@ -94,7 +94,7 @@ def channel_pattern(y: np.ndarray, u: np.ndarray, s: np.ndarray, cases: list[str
 
 @register
 @dataclass(frozen=True, eq=False)
-class BadChannel(SetAsideEffect):
+class BadChannel(OnChannel, SetAsideEffect):
     """``component`` of grid ``where[0]``; ``cases``: the fitted cases it is read in (one
     parameter each, ``readings`` in the same order)."""
     kind = "bad_channel"
@@ -103,10 +103,6 @@ class BadChannel(SetAsideEffect):
 
     component: int = 0
     cases: tuple[str, ...] = ()
-
-    @property
-    def grid(self) -> int:
-        return int(self.where[0])
 
     @classmethod
     def candidates(cls, ctx, split) -> list["BadChannel"]:
@@ -122,10 +118,6 @@ class BadChannel(SetAsideEffect):
                            sigmas=tuple(by_case[k][1] for k in cases)))
         return out
 
-    @property
-    def key(self) -> tuple:
-        return (self.kind, tuple(self.where), self.component)
-
     def offset_rows(self, om):
         return [(q, om.rows_of(self.grid, self.component, k)) for q, k in enumerate(self.cases)]
 
@@ -139,12 +131,3 @@ class BadChannel(SetAsideEffect):
     def findings(self, fit) -> dict:
         y, u, s = self.model_readings(fit)
         return channel_pattern(y, u, s, list(self.cases))
-
-    def details_json(self) -> dict:
-        return {"component": self.component}
-
-    def label(self) -> str:
-        return f"{self.kind} @ {self.grid} component {self.component}"
-
-    def marker_points(self, xyz, deck):
-        return [xyz[self.grid]] if self.grid in xyz else []

@@ -53,7 +53,7 @@ if TYPE_CHECKING:
     from blackbox.joints import JointModel
     from solver_adapters.protocol import Deck, LoadMatrix
 
-__all__ = ["CandidateContext", "CandidateLimit", "Effect", "JointCaseEffect", "SetAsideEffect", "finite_or_none"]
+__all__ = ["CandidateContext", "CandidateLimit", "Effect", "JointCaseEffect", "OnChannel", "SetAsideEffect", "finite_or_none"]
 
 
 @dataclass(frozen=True)
@@ -416,6 +416,29 @@ class Effect:
     def marker_points(self, xyz: dict[int, np.ndarray], deck: "Deck") -> list[np.ndarray]:
         """Where to mark the effect on a residual map (none by default)."""
         return []
+
+
+class OnChannel:
+    """What an effect on one measurement channel (``component`` of grid ``where[0]``) reports:
+    the component is part of its key, its details and its label, and it is marked at its grid.
+    Mixed into an :class:`Effect` dataclass that declares ``component``."""
+
+    @property
+    def grid(self) -> int:
+        return int(self.where[0])
+
+    @property
+    def key(self) -> tuple:
+        return (self.kind, tuple(self.where), self.component)
+
+    def details_json(self) -> dict:
+        return {"component": self.component}
+
+    def label(self) -> str:
+        return f"{self.kind} @ {self.grid} component {self.component}"
+
+    def marker_points(self, xyz, deck):
+        return [xyz[self.grid]] if self.grid in xyz else []
 
 
 class JointCaseEffect(Effect):

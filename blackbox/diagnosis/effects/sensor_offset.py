@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from blackbox.diagnosis.effects.base import Effect
+from blackbox.diagnosis.effects.base import Effect, OnChannel
 from blackbox.diagnosis.effects.registry import register
 
 __all__ = ["SensorOffset"]
@@ -23,7 +23,7 @@ __all__ = ["SensorOffset"]
 
 @register
 @dataclass(frozen=True, eq=False)
-class SensorOffset(Effect):
+class SensorOffset(OnChannel, Effect):
     """``component``: the channel's component at grid ``where[0]``."""
     kind = "sensor_offset"
     of_data = True
@@ -31,17 +31,9 @@ class SensorOffset(Effect):
 
     component: int = 0
 
-    @property
-    def grid(self) -> int:
-        return int(self.where[0])
-
     @classmethod
     def candidates(cls, ctx, split) -> list["SensorOffset"]:
         return [cls((g,), (f"o_{g}_{c}",), component=int(c)) for g, c in dict.fromkeys(ctx.fit_obs.dofs)]
-
-    @property
-    def key(self) -> tuple:
-        return (self.kind, tuple(self.where), self.component)
 
     @property
     def nominal(self) -> np.ndarray:
@@ -64,12 +56,3 @@ class SensorOffset(Effect):
     @classmethod
     def batch_columns(cls, model, st, x, om, effects):
         return np.column_stack([e._rows(om).astype(float) for e in effects]) if effects else None
-
-    def details_json(self) -> dict:
-        return {"component": self.component}
-
-    def label(self) -> str:
-        return f"{self.kind} @ {self.grid} component {self.component}"
-
-    def marker_points(self, xyz, deck):
-        return [xyz[self.grid]] if self.grid in xyz else []

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from blackbox.diagnosis.effects.base import Effect
+from blackbox.diagnosis.effects.base import Effect, OnChannel
 from blackbox.diagnosis.effects.registry import register
 
 __all__ = ["SignFlip"]
@@ -25,24 +25,16 @@ __all__ = ["SignFlip"]
 
 @register
 @dataclass(frozen=True, eq=False)
-class SignFlip(Effect):
+class SignFlip(OnChannel, Effect):
     kind = "sign_flip"
     summary = "a measurement channel reads with the wrong sign (the data, not the structure)"
     of_data = True
 
     component: int = 0
 
-    @property
-    def grid(self) -> int:
-        return int(self.where[0])
-
     @classmethod
     def candidates(cls, ctx, split) -> list["SignFlip"]:
         return [cls((int(g),), (f"sign_{g}_{c}",), component=int(c)) for g, c in dict.fromkeys(ctx.fit_obs.dofs)]
-
-    @property
-    def key(self) -> tuple:
-        return (self.kind, tuple(self.where), self.component)
 
     @property
     def bounds(self):
@@ -77,12 +69,3 @@ class SignFlip(Effect):
             return (f"the channel's best factor is {g:+.3g}: nearer a channel that reads nothing than one "
                     "that reads with the wrong sign")
         return super().rejection(x_effect)
-
-    def details_json(self) -> dict:
-        return {"component": self.component}
-
-    def label(self) -> str:
-        return f"{self.kind} @ {self.grid} component {self.component}"
-
-    def marker_points(self, xyz, deck):
-        return [xyz[self.grid]] if self.grid in xyz else []
