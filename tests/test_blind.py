@@ -210,9 +210,14 @@ def test_data_defects_change_exactly_what_they_name(studies, kind):
         assert _changed(bad, clean) <= {(g, k) for k in e["components"]}
         truth = read_deck(st.hidden / "truth" / "truth.bdf")
         loads = gen.load_matrix([(c, gg, comp, v) for c, (gg, comp), v in _load_rows(load_study(st.folder))])
-        at_h = ReferenceAdapter(truth).solve(loads, [(h, k) for k in e["components"]]).values
-        for r, k in enumerate(e["components"]):
-            assert np.allclose(bad.read[bad.dofs.index((g, k))], at_h[r], rtol=1e-12, atol=0)
+        at_h = ReferenceAdapter(truth).solve(loads, [(h, k) for k in range(1, 7)]).values
+        # the gauge keeps its own direction: g's direction k, in basic, dotted with h's motion
+        Rg, Rh = truth.displacement_frames([g, h])
+        for k in e["components"]:
+            o = 3 if k >= 4 else 0
+            along = Rg[k - 1 - o] @ (Rh.T @ at_h[o:o + 3])
+            assert np.allclose(bad.read[bad.dofs.index((g, k))], along, rtol=1e-12, atol=1e-18)
+
     else:                                         # outlier: the readings agree, one value moved
         assert not _changed(bad, clean)
         moved = np.flatnonzero(bad.values != clean.values)
@@ -222,6 +227,45 @@ def test_data_defects_change_exactly_what_they_name(studies, kind):
         assert bad.values[i] - clean.values[i] == pytest.approx(e["offset"])
         assert abs(e["offset"]) / bad.rows.sigma[i] == pytest.approx(abs(e["sigma_units"]))
         assert e["case"] not in st.planted["holdout_cases"]
+
+
+def test_misplaced_sensor_reads_along_its_own_direction():
+    """A gauge mounted on the neighbouring grid still points where it was set up: with the two
+    grids in different displacement systems (a base in a rotated CD, as the hall family's), it
+    reads the neighbour's motion along its own direction, and no candidate of a channel reads
+    only components held at the neighbour (that would be a dead channel, not a misplacement)."""
+    deck = read_deck_text("""BEGIN BULK
+CORD2R,50,,0.,0.,0.,0.,0.,1.,+C
++C,0.6,0.8,0.
+GRID,1,,0.,0.,0.,50
+GRID,2,,0.,0.,3.
+ENDDATA
+""", "<two grids>")
+    # grid 1's x axis is basic (0.6, 0.8, 0): grid 2's x direction reads 0.6 u1 - 0.8 u2 of grid 1
+    w = dict(gen.misplaced_weights(2, 1, 1, deck.displacement_frames))
+    assert w == pytest.approx({(1, 1): 0.6, (1, 2): -0.8})
+    assert dict(gen.misplaced_weights(2, 1, 6, deck.displacement_frames)) == pytest.approx({(1, 6): 1.0})
+    assert gen.misplaced_weights(2, 1, 1, None) == [((1, 1), 1.0)]
+    # grid 1 pinned (translations held; its rotations free but 6 held): grid 2's translation
+    # channels and its rz channel would read nothing there; rx and ry read grid 1's free rotations
+    pinned = read_deck_text("""BEGIN BULK
+CORD2R,50,,0.,0.,0.,0.,0.,1.,+C
++C,0.6,0.8,0.
+GRID,1,,0.,0.,0.,50
+GRID,2,,0.,0.,3.
+GRID,3,,1.,0.,3.
+CBAR,1,1,1,2,1.,0.,0.
+CBAR,2,1,2,3,0.,0.,1.
+PBAR,1,1,1.e-3,1.e-6,1.e-6,1.e-6
+MAT1,1,2.1e11,,0.3
+SPC1,1,1236,1
+ENDDATA
+""", "<pinned>")
+    channels = [(2, k) for k in range(1, 7)]
+    places = gen.candidate_places(pinned, [], [2], [2], ["1"], ["1"], channels)["misplaced_sensor"]
+    at_1 = [(g, cs) for g, h, cs in places if h == 1]
+    assert sorted(at_1) == [(2, (4,)), (2, (5,))]
+    assert (2, 3, (1, 2, 3, 4, 5, 6)) in places         # grid 3 moves in every component
 
 
 def test_joint_gap_truth(studies):

@@ -478,6 +478,7 @@ class Response:
     Q: np.ndarray                # (n_dofs * n_fit, r)
     extra: dict                  # DOF -> (n_cases,) noise-free response
     rot: dict                    # joint name -> (rot DOFs, U_rot (nb, n_cases), G (n_dofs, nb), Gbb (nb, nb))
+    frames: Callable | None = None   # grid ids -> (n, 3, 3) displacement directions (Deck.displacement_frames)
 
     def whitened(self, U: np.ndarray) -> np.ndarray:
         """``(U - U0) / sigma`` on the fitted rows, flattened."""
@@ -536,7 +537,7 @@ def declared_response(declared: Deck, joints: list[dict], lm: LoadMatrix, dofs, 
     Us, s, _ = np.linalg.svd(J, full_matrices=False)
     Q = Us[:, s > 1e-10 * s.max()] if s.size else np.zeros((J.shape[0], 0))
     ext = {d: out.values[rix[d], :n_c] for d in extra}
-    return Response(U0, list(dofs), fc, sigma, Q, ext, rots)
+    return Response(U0, list(dofs), fc, sigma, Q, ext, rots, declared.displacement_frames)
 
 
 def threshold_noncentrality(p: int, m_candidates: int, alpha: float = ALPHA,
@@ -618,8 +619,14 @@ def candidate_places(deck: Deck, joints: list[dict], away: list[int], measured_g
         for h in neighbours_of(deck, g):
             if h in clamped or h in declared:
                 continue
-            misplaced.append((g, h, tuple(comps)))
-            misplaced += [(g, h, (k,)) for k in comps]
+            # a channel whose direction only meets components held at h would read nothing:
+            # that is a dead channel, not a misplacement the data could show
+            live = [k for k in comps
+                    if any(str(c) not in constrained.get(h, "")
+                           for (_, c), _ in misplaced_weights(g, h, k, deck.displacement_frames))]
+            if live == comps:
+                misplaced.append((g, h, tuple(comps)))
+            misplaced += [(g, h, (k,)) for k in live]
     return {
         "joint_coupling": [j["name"] for j in joints],
         "joint_translation": [j["name"] for j in joints],
@@ -679,28 +686,42 @@ def _channel_scale(resp: Response, channel) -> float:
     return float(np.abs(resp.U0[resp.dofs.index(tuple(channel))]).max())
 
 
-def read_map(effects: list[dict]) -> dict:
-    """What each defective channel really read: ``{(g, k): (source DOF, sign)}`` of the sign
-    flips, swaps and misplaced sensors among ``effects``."""
+def read_map(effects: list[dict], frames: Callable | None = None) -> dict:
+    """What each defective channel really read: ``{(g, k): [(source DOF, weight), ...]}`` of the
+    sign flips, swaps and misplaced sensors among ``effects``. A misplaced sensor still measures
+    along its own physical direction: channel ``k`` of ``g`` read at ``h`` sees ``h``'s motion
+    along ``g``'s direction ``k``, a combination of ``h``'s three components of that kind when
+    the two grids have different displacement systems (``frames``: grid ids -> their
+    directions, ``Deck.displacement_frames``; without it, the same system is assumed)."""
     out = {}
     for e in effects:
         if e["kind"] == "sign_flip":
-            out[(e["where"][0], e["component"])] = ((e["where"][0], e["component"]), -1.0)
+            out[(e["where"][0], e["component"])] = [((e["where"][0], e["component"]), -1.0)]
         elif e["kind"] == "channel_swap":
             a, b = e["where"]
             k = e["component"]
-            out[(a, k)], out[(b, k)] = ((b, k), 1.0), ((a, k), 1.0)
+            out[(a, k)], out[(b, k)] = [((b, k), 1.0)], [((a, k), 1.0)]
         elif e["kind"] == "misplaced_sensor":
             g, h = e["where"][0], e["read_at"]
             for k in e["components"]:
-                out[(g, k)] = ((h, k), 1.0)
+                out[(g, k)] = misplaced_weights(g, h, k, frames)
     return out
+
+
+def misplaced_weights(g: int, h: int, k: int, frames: Callable | None) -> list:
+    """``[((h, c), w), ...]``: ``h``'s motion along ``g``'s direction ``k``."""
+    if frames is None:
+        return [((h, k), 1.0)]
+    Rg, Rh = frames([g, h])
+    o = 3 if k >= 4 else 0
+    row = (Rg @ Rh.T)[k - 1 - o]            # g's direction k in h's components
+    return [((h, o + j + 1), float(w)) for j, w in enumerate(row) if abs(w) > 1e-12]
 
 
 def _read_values(resp: Response, mapping: dict) -> np.ndarray:
     U = resp.U0.copy()
-    for dof, (src, s) in mapping.items():
-        U[resp.dofs.index(dof)] = s * resp.value(src)
+    for dof, srcs in mapping.items():
+        U[resp.dofs.index(dof)] = sum(w * resp.value(src) for src, w in srcs)
     return U
 
 
@@ -766,7 +787,7 @@ def discrete_lambda(kind: str, place, resp: Response) -> float:
         e = {"kind": kind, "where": [place[0], place[1]], "component": place[2]}
     else:
         e = {"kind": kind, "where": [place[0]], "read_at": place[1], "components": list(place[2])}
-    return resp.noncentrality(resp.whitened(_read_values(resp, read_map([e]))))
+    return resp.noncentrality(resp.whitened(_read_values(resp, read_map([e], resp.frames))))
 
 
 # --------------------------------------------------------------------------------------------
@@ -1089,16 +1110,15 @@ def simulate_study(truth: Deck, loads, joints: list[dict], away: list[int], effe
     gap_joint = next(j for j in joints if j["name"] == gap["where"]) if gap else None
     dofs = list(dict.fromkeys([dd for j in joints for dd in joint_dofs(j["grids"])]
                               + [(g, c) for g in away for c in range(1, 7)]))
-    mapping = read_map(effects)
-    report = list(dict.fromkeys(dofs + [src for src, _ in mapping.values()]))
+    mapping = read_map(effects, truth.displacement_frames)
+    report = list(dict.fromkeys(dofs + [src for srcs in mapping.values() for src, _ in srcs]))
     cases = list(dict.fromkeys(r[0] for r in loads))
     U, iters = truth_response(truth, load_matrix(loads, scale), report, gap_joint, gap["ratio"] if gap else 1.0)
     row = {dd: i for i, dd in enumerate(report)}
     read = U[[row[dd] for dd in dofs]]
     for k, dd in enumerate(dofs):
         if dd in mapping:
-            src, s = mapping[dd]
-            read[k] = s * U[row[src]]
+            read[k] = sum(w * U[row[src]] for src, w in mapping[dd])
     rows = simulate_rows(read, {dd: i for i, dd in enumerate(dofs)}, len(cases), dofs, noise,
                          np.random.default_rng(noise_seed))
     values = rows.values.copy()
