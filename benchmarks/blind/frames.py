@@ -18,9 +18,12 @@ body of tubes, ``blackbox.structures.tube_body``), ``imported`` (the 216-member 
 tower of a public deck, ``decks/``: legs and horizontals as bars, diagonals as rods), ``hall``
 (an industrial hall: portal frames with haunched rafters, purlins, wind-bracing rods, column
 bases pinned in a rotated coordinate system), the small frames of the first benchmark
-(``portal``, ``box``, ``star``) and ``bus`` (a bus body: floor ladder, side walls of pillars,
+(``portal``, ``box``, ``star``), ``bus`` (a bus body: floor ladder, side walls of pillars,
 waist and cant rails, roof bows, end frames; on its suspension mounts, loaded as on a body test
-rig), the family held out of all tuning (:data:`HELD_OUT`).
+rig) and ``jacket`` (an offshore jacket platform: battered tubular legs, X- or K-braced faces,
+horizontal frames, a deck frame of I or box girders on deck legs; on its piles at the mudline,
+loaded by waves, wind, deck loads, torsion and a boat impact), the family held out of all tuning
+(:data:`HELD_OUT`).
 """
 
 from __future__ import annotations
@@ -111,8 +114,9 @@ class Frame:
     groups: dict[str, list[int]] = field(default_factory=dict)   # named member groups (for reports)
     force: float = 1000.0         # load magnitudes of the random cases (N, N m)
     moment: float = 500.0
-    # a test rig's load cases instead of random ones: ``rig_case(rng, avoid)`` draws one case as
-    # {grid: force vector in basic (N)} on grids not in ``avoid`` (the joints' and the supports')
+    # a test rig's (or a design analysis's) load cases instead of random ones: ``rig_case(rng,
+    # avoid)`` draws one case as {grid: force vector in basic (N)} on grids not in ``avoid`` (the
+    # joints' and the supports')
     rig_case: Callable[[np.random.Generator, set[int]], dict[int, np.ndarray]] | None = None
 
     # ---- building ------------------------------------------------------------------------
@@ -461,6 +465,17 @@ def tube(rng, r=(0.02, 0.06), t=(0.06, 0.15)) -> Section:
     return Section("TUBE", (ro, _r3(ro * (1 - rng.uniform(*t)))))
 
 
+def pipe(rng, r=(0.25, 0.5), t=(0.03, 0.08), as_pbar: bool = False) -> Section:
+    """A tubular member (outer radius ``r``, wall ``t`` times the radius): PBARL TUBE, or (as a
+    user who works from a section table writes it) a PBAR with the tube's A, I, I, J to four
+    digits."""
+    sec = tube(rng, r, t)
+    if not as_pbar:
+        return sec
+    a, i1, i2, j = (float(f"{v:.4g}") for v in sec.values()[:4])
+    return Section("PBAR", (a, i1, i2, j))
+
+
 def ibeam(rng, h=(0.16, 0.4), wide=False) -> Section:
     """An I section: IPE-like (narrow flanges) or HEB-like (``wide``)."""
     hh = _r3(rng.uniform(*h))
@@ -755,24 +770,23 @@ def hall(rng: np.random.Generator) -> Frame:
 
 
 def bus(rng: np.random.Generator) -> Frame:
-    """A bus or coach body frame (the held-out family), x forward, y across, z up: 7-12 panels
-    of 1.0-1.1 m (a body 7-13 m long, 2.40-2.55 m wide; 175-315 members). The floor is a ladder: two longitudinal
-    rails (channels or rectangular tubes) and a cross member at every station running from the
-    side sill through both rails and a centre grid to the other sill, plus a heavy cross beam
-    between the rails at each axle. Each side wall: the sill, a pillar at every station in two
-    segments (below and above the waist), the waist rail and the cant rail, a diagonal in about
-    half of the panels below the waist; on the door side (y = 0) the front panel and in half of
-    the bodies a middle panel are door openings (no waist rail, no diagonal). A roof bow (four
-    segments of a shallow arch) joins the cant rails at every station, with a crown stringer and
-    in half of the bodies two more stringers. The front and rear end frames (windscreen, rear
-    wall): a cross beam at waist height and a centre post from the floor to the roof crown.
-    Sections are thin rectangular tubes and channels. The body stands on its suspension mounts
-    under the rails at two axles (three on a long coach with a tag axle): front left 123, front
-    right 3, rear left 23, rear right 3, tag axle 3 and 3 (a body longer than 11 m has one in
-    half of the draws). Its load cases are a test rig's
-    (:attr:`Frame.rig_case`): vertical floor loads over a few seat rows, a torsion pair at one end,
-    lateral loads along one side's waist or cant rail, longitudinal loads at the rail ends, a
-    roof load."""
+    """A bus or coach body frame (held out until its misses were looked at), x forward, y across, z
+    up: 7-12 panels of 1.0-1.1 m (a body 7-13 m long, 2.40-2.55 m wide; 175-315 members). The floor
+    is a ladder: two longitudinal rails (channels or rectangular tubes) and a cross member at every
+    station running from the side sill through both rails and a centre grid to the other sill, plus
+    a heavy cross beam between the rails at each axle. Each side wall: the sill, a pillar at every
+    station in two segments (below and above the waist), the waist rail and the cant rail, a
+    diagonal in about half of the panels below the waist; on the door side (y = 0) the front panel
+    and in half of the bodies a middle panel are door openings (no waist rail, no diagonal). A roof
+    bow (four segments of a shallow arch) joins the cant rails at every station, with a crown
+    stringer and in half of the bodies two more stringers. The front and rear end frames
+    (windscreen, rear wall): a cross beam at waist height and a centre post from the floor to the
+    roof crown. Sections are thin rectangular tubes and channels. The body stands on its suspension
+    mounts under the rails at two axles (three on a long coach with a tag axle): front left 123,
+    front right 3, rear left 23, rear right 3, tag axle 3 and 3 (a body longer than 11 m has one in
+    half of the draws). Its load cases are a test rig's (:attr:`Frame.rig_case`): vertical floor
+    loads over a few seat rows, a torsion pair at one end, lateral loads along one side's waist or
+    cant rail, longitudinal loads at the rail ends, a roof load."""
     f = Frame("bus")
     n = int(np.clip(round(rng.uniform(9.0, 13.0) / rng.uniform(1.0, 1.4)), 7, 12))
     length = _r3(rng.uniform(1.0, 1.1) * n)
@@ -888,6 +902,267 @@ def bus(rng: np.random.Generator) -> Frame:
     return f
 
 
+def jacket(rng: np.random.Generator) -> Frame:
+    """An offshore jacket platform (the held-out family), x and y the platform axes, z up from mean
+    sea level. Four battered legs (in 15 % of the draws three, in 15 % six or eight in two rows),
+    batter 1:8 to 1:12 in each face a leg leans in (a four-leg jacket's legs lean in both plan
+    directions, the rows' inner legs across the rows only, a three-leg jacket's radially); 3-6
+    elevations of horizontal frames from the mudline (water about 10-100 m deep) to the top of the
+    jacket 5-9 m above sea level, the bays getting taller downwards, plan bracing (an X through a
+    centre node or single diagonals; a three-leg jacket's spokes to a centre node) at the mudline,
+    at the top and at some elevations between. Every face between two legs (and the transverse
+    frames at inner legs of six or eight) is braced bay by bay, the pattern one per jacket: X (the
+    two diagonals meet at a node of four branches), K (chevron and V alternating, so that two
+    braces meet at the middle of a horizontal and at a leg: K-joints), or mixed (a pattern drawn
+    per bay: X, chevron, V or a single diagonal). Legs, braces, horizontals and plan members are
+    tubes (PBARL TUBE; braces, horizontals and plan members in half of the draws a PBAR computed
+    from the tube).
+    Vertical deck legs continue the legs above the jacket to one or two deck levels (cellar and
+    main deck), with a knee brace from each deck leg to the girder of the deck's cantilever; the
+    deck frame is a grid of main girders along the leg rows (deep I or box sections), cross girders
+    (I) at every station and a middle stringer in half of the draws, cantilevered 3-6 m beyond the
+    end legs; a three-leg deck is a triangle of girders with spokes to its centre. 80-350 members.
+    The legs stand on their piles at the mudline: clamped (123456), pinned (123), or pinned with
+    the pile's torsion held (1236 in a system along the leg's axis, CORD2R 61...). Its load cases
+    are those of a design analysis (:attr:`Frame.rig_case`): wave and current forces on the grids
+    of the legs and faces near the surface, decaying with depth, from one of eight headings; wind
+    on the deck levels; a deck load (equipment or laydown) over a few girder nodes; a torsion
+    (tangential forces at the main deck's leg tops, no net force); a boat impact on one leg near
+    sea level."""
+    while True:
+        f, count = _jacket_attempt(rng)
+        if 80 <= count <= 350:
+            return f
+
+
+def _jacket_attempt(rng: np.random.Generator) -> tuple[Frame, int]:
+    f = Frame("jacket")
+    n_legs = int(rng.choice([4, 3, 6, 8], p=[0.7, 0.15, 0.075, 0.075]))
+    n_lev = int(rng.integers(3, 7))
+    batter = rng.uniform(8.0, 12.0)
+    z_top = _r3(rng.uniform(5.0, 9.0))
+    h_top, grow = rng.uniform(8.0, 12.0), rng.uniform(1.15, 1.35)
+    heights = [h_top * grow ** k for k in range(n_lev - 1)][::-1]      # bottom bay first
+    zs = [z_top - sum(heights[k:]) for k in range(n_lev - 1)] + [z_top]
+    zs = [_r3(z) if abs(z) >= 1 else round(z, 2) for z in zs]
+    as_pbar = bool(rng.random() < 0.5)
+    leg = f.section(tube(rng, (0.6, 1.0), (0.03, 0.06)))
+    deck_leg = f.section(tube(rng, (0.5, 0.8), (0.04, 0.07)))
+    brace = f.section(pipe(rng, (0.25, 0.5), (0.04, 0.08), as_pbar))
+    horizontal = f.section(pipe(rng, (0.2, 0.4), (0.04, 0.08), as_pbar))
+    plan = f.section(pipe(rng, (0.15, 0.3), (0.05, 0.1), as_pbar))
+    knee = f.section(tube(rng, (0.15, 0.25), (0.06, 0.1)))
+    main = f.section(ibeam(rng, (0.8, 1.4)) if rng.random() < 0.6 else box(rng, (0.6, 1.0), (0.5, 0.8), (0.03, 0.05)))
+    cross = f.section(ibeam(rng, (0.45, 0.8)))
+    stringer = f.section(ibeam(rng, (0.3, 0.5)))
+    # the legs: plan position at the top of the jacket and the outward batter direction
+    if n_legs == 3:
+        side = rng.uniform(12.0, 18.0)
+        rr = side / math.sqrt(3.0)
+        angles = [math.radians(a) for a in (-90.0, 30.0, 150.0)]
+        tops = [np.array([rr * math.cos(a), rr * math.sin(a)]) for a in angles]
+        outward = [t / np.linalg.norm(t) for t in tops]
+        faces = [(0, 1), (1, 2), (2, 0)]
+        m = 0
+    else:
+        m = n_legs // 2                           # legs per row: rows y < 0 (0..m-1) and y > 0
+        sx, half_y = rng.uniform(10.0, 14.0) if m > 2 else rng.uniform(10.0, 16.0), rng.uniform(5.0, 8.0)
+        xs = [_r3(sx * (c - (m - 1) / 2)) for c in range(m)]
+        tops, outward = [], []
+        for sy in (-1.0, 1.0):
+            for c in range(m):
+                tops.append(np.array([xs[c], _r3(sy * half_y)]))
+                outward.append(np.array([-1.0 if c == 0 else (1.0 if c == m - 1 else 0.0), sy]))
+        faces = ([(c, c + 1) for c in range(m - 1)] + [(m + c, m + c + 1) for c in range(m - 1)]
+                 + [(0, m), (m - 1, 2 * m - 1)] + [(c, m + c) for c in range(1, m - 1)])
+    L = [[f.grid((*np.round(tops[i] + (z_top - z) / batter * outward[i], 4), z)) for z in zs]
+         for i in range(n_legs)]
+    for i in range(n_legs):
+        for k in range(n_lev - 1):
+            d = np.subtract(f.grids[L[i][k + 1]], f.grids[L[i][k]])
+            v = np.cross(d, (0.0, 0.0, 1.0)) if np.linalg.norm(d[:2]) > 1e-6 else (1.0, 0.0, 0.0)
+            f.bar(L[i][k], L[i][k + 1], leg, v=tuple(np.round(v / np.linalg.norm(v), 6)), group="leg")
+    # the face bracing, one pattern per bay; a horizontal gets a middle node where K-braces meet it
+    style = str(rng.choice(["X", "K", "mixed"], p=[0.4, 0.3, 0.3]))
+    if style == "X":
+        bays = ["X"] * (n_lev - 1)
+    elif style == "K":
+        start = int(rng.integers(0, 2))
+        bays = [("chevron", "V")[(k + start) % 2] for k in range(n_lev - 1)]
+    else:
+        bays = [str(rng.choice(["X", "chevron", "V", "diagonal"])) for _ in range(n_lev - 1)]
+    mid_at = {k for k, b in enumerate(bays) if b == "V"} | {k + 1 for k, b in enumerate(bays) if b == "chevron"}
+    mids: dict[tuple[int, int, int], int] = {}
+    for a, b in faces:
+        for k in range(n_lev):
+            if k in mid_at:
+                mid = f.grid(np.round(0.5 * (np.add(f.grids[L[a][k]], f.grids[L[b][k]])), 4))
+                mids[(a, b, k)] = mid
+                f.bar(L[a][k], mid, horizontal, group="horizontal")
+                f.bar(mid, L[b][k], horizontal, group="horizontal")
+            else:
+                f.bar(L[a][k], L[b][k], horizontal, group="horizontal")
+        for k, pattern in enumerate(bays):
+            a0, b0, a1, b1 = L[a][k], L[b][k], L[a][k + 1], L[b][k + 1]
+            if pattern == "X":
+                pa, pb, qa, qb = (np.array(f.grids[g]) for g in (a0, b1, b0, a1))
+                st, *_ = np.linalg.lstsq(np.column_stack([pb - pa, qa - qb]), qa - pa, rcond=None)
+                x = f.grid(np.round(pa + st[0] * (pb - pa), 4))
+                for g in (a0, b1, b0, a1):
+                    f.bar(g, x, brace, group="face brace")
+            elif pattern == "chevron":
+                for g in (a0, b0):
+                    f.bar(g, mids[(a, b, k + 1)], brace, group="face brace")
+            elif pattern == "V":
+                for g in (a1, b1):
+                    f.bar(mids[(a, b, k)], g, brace, group="face brace")
+            else:
+                ends = (a0, b1) if (a + k) % 2 else (b0, a1)
+                f.bar(*ends, brace, group="face brace")
+    # plan bracing: at the mudline and the top, and at some elevations between
+    for k in range(n_lev):
+        kind = str(rng.choice(["X", "diagonal"])) if k in (0, n_lev - 1) or rng.random() < 0.4 else ""
+        if not kind:
+            continue
+        if n_legs == 3:
+            c = f.grid((0.0, 0.0, zs[k]))
+            for i in range(3):
+                f.bar(L[i][k], c, plan, group="plan brace")
+            continue
+        for c in range(m - 1):
+            cell = (L[c][k], L[c + 1][k], L[m + c + 1][k], L[m + c][k])
+            if kind == "X":
+                centre = f.grid(np.round(np.mean([f.grids[g] for g in cell], axis=0), 4))
+                for g in cell:
+                    f.bar(g, centre, plan, group="plan brace")
+            else:
+                f.bar(*((cell[0], cell[2]) if c % 2 == 0 else (cell[1], cell[3])), plan, group="plan brace")
+    jacket_grids = set(f.grids)                    # below the deck: where waves act
+    # the deck legs and the deck levels
+    n_decks = int(rng.integers(1, 3))
+    z_decks = [_r3(z_top + rng.uniform(7.0, 10.0))]
+    if n_decks == 2:
+        z_decks.append(_r3(z_decks[0] + rng.uniform(5.0, 8.0)))
+    else:
+        z_decks[0] = _r3(z_decks[0] + rng.uniform(1.0, 4.0))
+    over = _r3(rng.uniform(3.0, 6.0))
+    with_stringer = bool(rng.random() < 0.5)
+    decks: list[dict] = []          # per deck level: {(station, row): grid}
+    tops_at: list[list[int]] = []   # per deck level: the deck legs' top grids
+    below = [L[i][-1] for i in range(n_legs)]
+    knee_at = [f.grid((*f.grids[below[i]][:2], _r3(z_top + 0.6 * (z_decks[0] - z_top)))) for i in range(n_legs)]
+    for i in range(n_legs):
+        f.bar(below[i], knee_at[i], deck_leg, v=(1.0, 0.0, 0.0), group="deck leg")
+    below = knee_at
+    for zd in z_decks:
+        grid_at: dict = {}
+        lt = []
+        for i in range(n_legs):
+            g = f.grid((*f.grids[below[i]][:2], zd))
+            f.bar(below[i], g, deck_leg, v=(1.0, 0.0, 0.0), group="deck leg")
+            lt.append(g)
+        if n_legs == 3:
+            centre = f.grid((0.0, 0.0, zd))
+            for i in range(3):
+                pts = f.chain(lt[i], lt[(i + 1) % 3], 3, main, v=(0.0, 0.0, 1.0), group="main girder")
+                spoke = f.chain(lt[i], centre, 2, cross, v=(0.0, 0.0, 1.0), group="cross girder")
+                grid_at.update({(i, 0): lt[i], (i, 1): pts[1], (i, 2): pts[2], (i, 3): spoke[1]})
+                if zd == z_decks[0]:                   # a knee brace under each girder's first third
+                    f.bar(knee_at[i], pts[1], knee, group="knee brace")
+            grid_at[(3, 0)] = centre
+        else:
+            stations = sorted({*xs, *(0.5 * (a + b) for a, b in zip(xs, xs[1:])), xs[0] - over, xs[-1] + over})
+            stations = [_r3(x) if abs(x) >= 1 else round(x, 3) for x in stations]
+            rows = [-half_y, 0.0, half_y] if with_stringer else [-half_y, half_y]
+            rows = [_r3(y) if y else 0.0 for y in rows]
+            for si, x in enumerate(stations):
+                for ri, y in enumerate(rows):
+                    leg_here = [i for i in range(n_legs) if abs(tops[i][0] - x) < 1e-9 and abs(tops[i][1] - y) < 1e-9]
+                    grid_at[(si, ri)] = lt[leg_here[0]] if leg_here else f.grid((x, y, zd))
+            for si in range(len(stations)):
+                for ri in range(len(rows)):
+                    if si + 1 < len(stations):
+                        sec, grp = (stringer, "stringer") if rows[ri] == 0.0 else (main, "main girder")
+                        f.bar(grid_at[(si, ri)], grid_at[(si + 1, ri)], sec, v=(0.0, 0.0, 1.0), group=grp)
+                    if ri + 1 < len(rows):
+                        f.bar(grid_at[(si, ri)], grid_at[(si, ri + 1)], cross, v=(0.0, 0.0, 1.0), group="cross girder")
+            if zd == z_decks[0]:                       # knee braces under the cantilevers
+                for i in range(n_legs):
+                    if outward[i][0]:
+                        si = stations.index(xs[0] if outward[i][0] < 0 else xs[-1]) + int(outward[i][0])
+                        ri = rows.index(_r3(tops[i][1]))
+                        f.bar(knee_at[i], grid_at[(si, ri)], knee, group="knee brace")
+        decks.append(grid_at)
+        tops_at.append(lt)
+        below = lt
+    pile = str(rng.choice(["123456", "123", "1236"], p=[0.4, 0.3, 0.3]))
+    for i in range(n_legs):
+        g = L[i][0]
+        f.fix(g, pile, 1)
+        if pile == "1236":                             # the pile head's system: z along the leg
+            o = np.array(f.grids[g])
+            axis = np.subtract(f.grids[L[i][1]], o)
+            axis /= np.linalg.norm(axis)
+            side = np.array([*outward[i], 0.0])
+            cid = 61 + i
+            pts = (tuple(o), tuple(o + axis), tuple(o + side))
+            f.coords[cid] = CoordDef("CORD2R", coord_from_points(cid, pts), 0, pts)
+            f.cd[g] = cid
+    f.force, f.moment = 2.0e5, 1.0e5
+    depth = -zs[0]
+    sea = min(range(n_lev), key=lambda k: abs(zs[k]))     # the elevation nearest sea level
+    centroid = np.mean(tops, axis=0)
+
+    def heading(rng: np.random.Generator) -> np.ndarray:
+        """One of the eight headings 0, 45, ..., 315 degrees from the platform's x axis."""
+        t = math.radians(45.0 * int(rng.integers(0, 8)))
+        return np.round(np.array([math.cos(t), math.sin(t), 0.0]), 12)
+
+    def rig_case(rng: np.random.Generator, avoid: set[int]) -> dict[int, np.ndarray]:
+        """One load case of a design analysis (forces only: the environment and the deck's
+        loads act as nodal forces)."""
+        for _ in range(100):
+            kind = str(rng.choice(["wave", "wind", "deck", "torsion", "boat"], p=[0.35, 0.15, 0.25, 0.15, 0.1]))
+            u = rng.uniform(0.3, 1.0) * f.force
+            pts: list[tuple[int, np.ndarray]] = []
+            if kind == "wave":                       # waves and current from one heading, decaying with depth
+                d = heading(rng)
+                zone, decay = rng.uniform(0.3, 0.6) * depth, rng.uniform(0.15, 0.3) * depth
+                pts = [(g, d * float(np.clip(math.exp(f.grids[g][2] / decay), 0.3, 1.0)))
+                       for g in sorted(jacket_grids) if f.grids[g][2] >= -zone]
+            elif kind == "wind":                     # wind on the modules, carried by the deck legs
+                d = heading(rng) * 0.5
+                pts = [(g, d) for lt in tops_at for g in lt]
+            elif kind == "deck":                     # equipment or laydown over a few girder nodes
+                deck = decks[int(rng.integers(0, len(decks)))]
+                keys = sorted(deck)
+                k0 = keys[int(rng.integers(0, len(keys)))]
+                window = [k for k in keys if abs(k[0] - k0[0]) <= 1 and abs(k[1] - k0[1]) <= 1][:6]
+                pts = [(deck[k], np.array([0.0, 0.0, -1.0])) for k in window]
+            elif kind == "torsion":                  # tangential forces at the main deck's leg tops
+                lt = tops_at[-1]
+                if any(g in avoid for g in lt):
+                    continue
+                sign = float(rng.choice([-1.0, 1.0]))
+                for g in lt:
+                    r = np.array([*(np.array(f.grids[g][:2]) - centroid), 0.0])
+                    t = np.cross((0.0, 0.0, sign), r)
+                    pts.append((g, t / np.linalg.norm(t)))
+            else:                                    # a boat against one leg near sea level
+                i = int(rng.integers(0, n_legs))
+                out_i = np.array([*outward[i], 0.0])
+                d = heading(rng)
+                while d @ out_i >= 0:
+                    d = heading(rng)
+                pts = [(L[i][sea], d)]
+            out = {g: u * np.asarray(v, float) for g, v in pts if g not in avoid}
+            if out:
+                return out
+        raise RuntimeError("jacket: no load case on the grids left free")
+    f.rig_case = rig_case
+    return f, f.n_members()
+
+
 def _portal_fb(rng: np.random.Generator) -> FrameBuilder:
     """Two parallel multi-bay portal frames tied by beams at every floor; bases clamped."""
     f = FrameBuilder(**TUBE_STEEL)
@@ -967,8 +1242,8 @@ def star(rng: np.random.Generator) -> Frame:
 
 
 FAMILIES = {"ladder": ladder, "truss": truss, "storey": storey, "tube": tube_family, "imported": imported,
-            "portal": portal, "box": box_frame, "star": star, "hall": hall, "bus": bus}
-HELD_OUT = ("bus",)
+            "portal": portal, "box": box_frame, "star": star, "hall": hall, "bus": bus, "jacket": jacket}
+HELD_OUT = ("jacket",)
 """Families kept out of all tuning: reported apart, run only with ``--include-held-out``. (``hall``
-was held out until its misses were looked at; it is tuned on since.)"""
+and then ``bus`` were held out until their misses were looked at; both are tuned on since.)"""
 TUNED = tuple(f for f in FAMILIES if f not in HELD_OUT)

@@ -8,8 +8,8 @@ is written beside the study (``hidden/``), never into it.
 One study (:func:`generate_study`):
 
 * a frame of one of the families of :mod:`benchmarks.blind.frames` (ladder, truss, storey, tube,
-  imported, portal, box, star, hall; ``bus`` is held out of all tuning: :func:`study_family` draws
-  it too, and ``run.py`` runs its studies only with ``--include-held-out``);
+  imported, portal, box, star, hall, bus; ``jacket`` is held out of all tuning: :func:`study_family`
+  draws it too, and ``run.py`` runs its studies only with ``--include-held-out``);
 * written in one of three styles: ``plain`` (the project's own writing, two studies of three),
   ``user`` (a user's bulk data: CORD2R/CORD1R chains, grids in CP and CD systems, GRDSET,
   PBARL, CBAR vectors and offsets in the grids' systems, CONM2, SPC1 sets combined by an
@@ -21,7 +21,8 @@ One study (:func:`generate_study`):
   never share or touch a member; the truth of each is the simple model, every spring a random
   factor of the branch members' bending stiffness 4EI/L;
 * 8-20 load cases on free grids, components in the grids' CD systems (random forces and moments,
-  or on a frame that has them a test rig's cases: the bus's); in two studies of three a
+  or on a frame that has them a test rig's cases, the bus's, or a design analysis's, the
+  jacket's); in two studies of three a
   fifth of them are hold-out cases, in the third none (the diagnosis then checks additions by
   K-fold cross-validation over the load cases);
 * sensors: every joint DOF and all six components of 4-10 random grids;

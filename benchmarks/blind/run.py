@@ -5,7 +5,7 @@
 Study ``i`` (seeded by ``--seed`` and ``i``) is written by :mod:`benchmarks.blind.generate`: the
 study folder and, outside it, ``planted.json``. Its family is drawn first, from its own random
 stream; ``--n`` counts the studies of the families tuned on, and the held-out family's
-(``frames.HELD_OUT``: ``bus``) are skipped unless ``--include-held-out`` adds those among them,
+(``frames.HELD_OUT``: ``jacket``) are skipped unless ``--include-held-out`` adds those among them,
 so the tuned studies and their draws are the same in every run. :func:`blackbox.commands.diagnose.run` (the study's own adapter,
 in-process, default settings) diagnoses the folder, and only its result document is read
 (``added``: kind, where, details, parameters; ``before``/``after``; ``verdict``). The score of
@@ -372,9 +372,12 @@ def markdown(summary: dict, settings: dict) -> str:
         "diagonals), `storey` (multi-storey frames of PBARL I sections, rod bracing), `tube` (a body of "
         "tubes), `imported` (the 216-member tower of a public deck, `benchmarks/blind/decks/`), `portal`, "
         "`box`, `star` (the small frames of the first benchmark), `hall` (portal frames with haunched "
-        "rafters, purlins, bracing rods, bases pinned in a rotated system), and the held-out `bus` (a bus "
-        "body of thin rectangular tubes and channels: floor ladder, side walls with pillars, waist and cant "
-        "rails, roof bows, end frames; on its suspension mounts, loaded as on a body test rig). A third of the "
+        "rafters, purlins, bracing rods, bases pinned in a rotated system), `bus` (a bus body of thin "
+        "rectangular tubes and channels: floor ladder, side walls with pillars, waist and cant rails, roof "
+        "bows, end frames; on its suspension mounts, loaded as on a body test rig), and the held-out `jacket` "
+        "(an offshore jacket platform: 3-8 battered tubular legs, horizontal frames, X- or K-braced faces, a "
+        "deck frame of I or box girders on deck legs; on its piles at the mudline, loaded by waves, wind, "
+        "deck loads, torsion and a boat impact). A third of the "
         "studies are written as users write decks (CORD2R/CORD1R chains, grids in CP and CD systems, "
         "GRDSET, PBARL, offsets, CONM2, SPC1 sets in an SPCADD; half of them whole input files made into "
         "the study by `blackbox import`); a few percent run through MYSTRAN. 1-3 joints of 2-6 "
