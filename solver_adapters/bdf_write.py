@@ -167,6 +167,8 @@ def format_card(name: str, fields: Sequence[Field], fmt: str = "small") -> str:
 def write_grid(g: Grid, fmt: str = "small") -> str:
     """GRID: ID, CP (blank: the position is in basic, as the reader holds it), X1, X2, X3, CD
     (the displacement system as given, blank for basic), PS, SEID (blank)."""
+    if getattr(g, "scalar", False):
+        return format_card("SPOINT", [g.id], fmt)
     return format_card("GRID", [g.id, None, *g.xyz, getattr(g, "cd", 0) or None, g.ps or None], fmt)
 
 
@@ -282,8 +284,10 @@ def write_celas2(s: Spring, fmt: str = "small", k: float | None = None) -> str:
 
 
 def write_spring(s: Spring, fmt: str = "small") -> str:
-    """The spring as it was read: CELAS1 (``pid`` set) or CELAS2."""
-    return write_celas1(s, fmt) if s.card == "CELAS1" else write_celas2(s, fmt)
+    """The spring as it was read: CELAS1 (``pid`` set) or CELAS2; a CELAS3 (CELAS4) as the
+    CELAS1 (CELAS2) it is, with component 1 on its scalar points (MYSTRAN, which runs the
+    written decks, needs a digit 1-6 in CELAS1/CELAS2; the reader takes 1 on a scalar point)."""
+    return write_celas1(s, fmt) if s.card in ("CELAS1", "CELAS3") else write_celas2(s, fmt)
 
 
 def write_coord(c, fmt: str = "small") -> str:
