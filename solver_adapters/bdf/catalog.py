@@ -52,7 +52,7 @@ KNOWN_UNMODELLED = frozenset({
     "CUSER1", "CUSERIN", "CONV", "CHBDYE", "CHBDYG", "CHBDYP",
     "PSHELL", "PCOMP", "PCOMPG", "PCOMP1", "PSOLID", "PSHEAR", "PBEND", "PVISC",
     "PBCOMP", "PBEAM3", "PBRSECT", "PBMSECT", "PDAMP", "PDAMP5", "PGAP", "PWELD", "PFAST",
-    "PBUSH1D", "PBUSH2D", "PBUSHT", "PELAST", "PLPLANE", "PLSOLID", "PSHLN1", "PSHLN2",
+    "PBUSH1D", "PBUSH2D", "PELAST", "PLPLANE", "PLSOLID", "PSHLN1", "PSHLN2",
     "PUSER1", "PUSERIN", "PHBDY", "PCONV",
     # materials other than MAT1, and temperature- or stress-dependent material tables
     "MAT2", "MAT3", "MAT4", "MAT5", "MAT8", "MAT9", "MAT10", "MAT11", "MATT1", "MATT2", "MATT8",

@@ -23,7 +23,7 @@ from solver_adapters.bdf.catalog import (BULK, ELEMENT_GRIDS, NOT_PASSABLE, PARS
 from solver_adapters.bdf.fields import _components, _int, _orientation
 from solver_adapters.bdf.grids import coord_from_points
 from solver_adapters.bdf.numbers import typed
-from solver_adapters.bdf.params import NO_EFFECT, _param
+from solver_adapters.bdf.params import NO_EFFECT, PBUSHT_NOTE, _param
 from solver_adapters.bdf.table import CardTable, Irregular, TableCard
 from solver_adapters.deck import Deck, Spc1, Unmodelled
 from solver_adapters.errors import ReaderFallback as Fallback
@@ -77,6 +77,8 @@ class _Reader:
         if card.name == "PARAM":
             _param(self, card)
         if card.name in NO_EFFECT:
+            if card.name == "PBUSHT":
+                self.note(card, PBUSHT_NOTE)
             n, src = self.deck.no_effect.get(card.name, (0, card.src))
             self.deck.no_effect[card.name] = (n + 1, src)
             return
@@ -411,6 +413,9 @@ def _read_table(table, keep_unmodelled, validate, cards):
             if name == "PARAM":
                 for c in idx.tolist():
                     _param(r, TableCard(table, c, name))
+            elif name == "PBUSHT":
+                for c in idx.tolist():
+                    r.note(TableCard(table, c, name), PBUSHT_NOTE)
         elif name in BULK:
             bulk[name] = idx
         elif name in PARSERS or (keep_unmodelled and name not in NOT_PASSABLE and known(name)):
