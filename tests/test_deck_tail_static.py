@@ -51,3 +51,21 @@ def test_pbusht_leaves_the_nominal_stiffness_in_a_static_solution(tmp_path):
 @needs_mystran
 def test_pbusht_deck_agrees_with_mystran(tmp_path):
     assert _study_against_mystran(tmp_path, BUSH, 1) <= RTOL
+
+
+def test_a_free_field_line_past_field_10_stays_a_located_error():
+    """Vega's nas101prob2.dat writes MAT1,20,2.9+7,,.32,7.349-4,6.78-6,72.,24000.,24000.,24000.:
+    ten fields after the name, where a card image has eight data fields and the continuation
+    marker. pyNastran drops the fields past the ninth without a word (GE = 24000., the stress
+    limits lost); whether the writer meant GE or ST SC SS is not in the line. An error that
+    names the file and line and says how to split it, never a guess."""
+    import re
+    from solver_adapters.bdf import read_deck_text
+    from solver_adapters.protocol import DeckFormatError
+    line = "MAT1,20,2.9+7,,.32,7.349-4,6.78-6,72.,24000.,24000.,24000."
+    with pytest.raises(DeckFormatError, match=re.escape("10 fields after field 1; at most 8 data")) as info:
+        read_deck_text("GRID,1,,0.,0.,0.\n" + line + "\n", name="m.bdf")
+    assert info.value.line == 2 and "split the line" in str(info.value)
+    # written with a continuation, the same values read as MSC's field order gives them
+    deck = read_deck_text("MAT1,20,2.9+7,,.32,7.349-4,6.78-6,72.,,+M\n+M,24000.,24000.,24000.\n", name="m.bdf")
+    assert deck.mat1s[20].e == 2.9e7 and deck.mat1s[20].nu == 0.32
