@@ -284,10 +284,12 @@ def write_celas2(s: Spring, fmt: str = "small", k: float | None = None) -> str:
 
 
 def write_spring(s: Spring, fmt: str = "small") -> str:
-    """The spring as it was read: CELAS1 (``pid`` set) or CELAS2; a CELAS3 (CELAS4) as the
-    CELAS1 (CELAS2) it is, with component 1 on its scalar points (MYSTRAN, which runs the
-    written decks, needs a digit 1-6 in CELAS1/CELAS2; the reader takes 1 on a scalar point)."""
-    return write_celas1(s, fmt) if s.card in ("CELAS1", "CELAS3") else write_celas2(s, fmt)
+    """The spring as it was read: CELAS1 (``pid`` set), CELAS2, CELAS3 EID PID S1 S2 or CELAS4
+    EID K S1 S2 (scalar points; S2 blank: grounded)."""
+    if s.card in ("CELAS3", "CELAS4"):
+        value = s.pid if s.card == "CELAS3" else float(s.k)
+        return format_card(s.card, [s.eid, value, s.g1, s.g2 or None], fmt)
+    return write_celas1(s, fmt) if s.card == "CELAS1" else write_celas2(s, fmt)
 
 
 def write_coord(c, fmt: str = "small") -> str:

@@ -222,8 +222,9 @@ WRITTEN = frozenset({"GRID", "GRDSET", "CBAR", "CBEAM", "BAROR", "PBAR", "PBARL"
 GRIDs and CBARs they complete, SPC as SPC1, RBAR as the RBE2 it is (all six independent
 components at one grid), CTUBE/PTUBE as the CROD/PROD of the tube's A and J (MYSTRAN 18 has no
 CTUBE), every coordinate system as a CORD2x in basic, scalar points (SPOINT) with component 1
-on them in CELAS1/CELAS2 (CELAS3/CELAS4 as those) and MPC, the form MYSTRAN 18 requires (it
-refuses a blank or 0 component there), and a CBEAM with its PBEAM/PBEAML, or a
+on them in CELAS1/CELAS2 and MPC, the form MYSTRAN 18 requires (it refuses a blank or 0
+component there; a grounded CELAS3/CELAS4 ends on the fixed dummy grid as a CELAS1/CELAS2), and
+a CBEAM with its PBEAM/PBEAML, or a
 PBARL, as the CBAR/PBAR the reference solver makes of them (MYSTRAN 18 has no CBEAM: "CODE NOT
 WRITTEN"; its own PBARL section constants may differ)."""
 
@@ -351,7 +352,7 @@ def model_cards(model, ground_grid: int, fmt: str = RUN_FORMAT) -> list[str]:
     """Every card the reader modelled, written back from the parsed model in format ``fmt``
     (one text per card): GRID (GRDSET applied), coordinate systems (as CORD2R/C/S in the basic
     system), CBAR (BAROR applied), PBAR, CROD/CONROD, PROD, MAT1, SPC1 (SPC as SPC1), SPCADD,
-    RBE2, MPC, MPCADD, PELAS, CELAS1/CELAS2 (CELAS3/CELAS4 as those), SPOINT. A spring to ground ends on ``ground_grid`` (same component)."""
+    RBE2, MPC, MPCADD, PELAS, CELAS1-4, SPOINT. A spring to ground ends on ``ground_grid`` (same component)."""
     from solver_adapters import bdf_write as w
     check_writable(model)
     out = [_grid_text(model.grids[i], fmt) for i in sorted(model.grids)]
@@ -372,8 +373,9 @@ def model_cards(model, ground_grid: int, fmt: str = RUN_FORMAT) -> list[str]:
     out += [w.write_pelas(model.pelas[i], None, fmt=fmt) for i in sorted(model.pelas)]
     for i in sorted(model.springs):
         s = model.springs[i]
-        if s.g2 == 0:
-            s = replace(s, g2=ground_grid, c2=s.c1)
+        if s.g2 == 0:       # a grid's end: a CELAS3/CELAS4 becomes the CELAS1/CELAS2 it is
+            s = replace(s, g2=ground_grid, c2=s.c1,
+                        card={"CELAS3": "CELAS1", "CELAS4": "CELAS2"}.get(s.card, s.card))
         out.append(w.write_spring(s, fmt))
     return out
 
