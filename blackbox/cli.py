@@ -19,7 +19,7 @@ import numpy as np
 from blackbox.commands.output import check_out, write_output
 from blackbox.errors import BlackboxError, EditedDeckError
 from solver_adapters.errors import ConsentError
-from solver_adapters.protocol import DeckFormatError, ModelError, SolverError, UnknownDofError
+from solver_adapters.protocol import Deck, DeckFormatError, ModelError, SolverError, UnknownDofError
 
 EXIT_OK, EXIT_BAD_INPUT, EXIT_SOLVER, EXIT_UNUSABLE = 0, 2, 3, 4
 """The documented exit codes (docs/commands.md)."""
@@ -51,7 +51,9 @@ def cmd_solve(args) -> int:
     with _executor(args, "solver chunks") as ex:
         adapter = _chunked(study, args, ex)
         adapter = make_adapter_for(study, adapter) if adapter is None or isinstance(adapter, str) else adapter
-        report = adapter.dofs()
+        # a scalar point (SPOINT) has one DOF, component 1; its other five are held, not reported
+        scalar = study.deck.scalar_points() if isinstance(study.deck, Deck) else set()
+        report = [d for d in adapter.dofs() if d[1] == 1 or d[0] not in scalar]
         t0 = time.perf_counter()
         out = adapter.solve(study.loads, report)
         wall = time.perf_counter() - t0

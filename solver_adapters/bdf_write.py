@@ -167,6 +167,8 @@ def format_card(name: str, fields: Sequence[Field], fmt: str = "small") -> str:
 def write_grid(g: Grid, fmt: str = "small") -> str:
     """GRID: ID, CP (blank: the position is in basic, as the reader holds it), X1, X2, X3, CD
     (the displacement system as given, blank for basic), PS, SEID (blank)."""
+    if getattr(g, "scalar", False):
+        return format_card("SPOINT", [g.id], fmt)
     return format_card("GRID", [g.id, None, *g.xyz, getattr(g, "cd", 0) or None, g.ps or None], fmt)
 
 
@@ -282,7 +284,11 @@ def write_celas2(s: Spring, fmt: str = "small", k: float | None = None) -> str:
 
 
 def write_spring(s: Spring, fmt: str = "small") -> str:
-    """The spring as it was read: CELAS1 (``pid`` set) or CELAS2."""
+    """The spring as it was read: CELAS1 (``pid`` set), CELAS2, CELAS3 EID PID S1 S2 or CELAS4
+    EID K S1 S2 (scalar points; S2 blank: grounded)."""
+    if s.card in ("CELAS3", "CELAS4"):
+        value = s.pid if s.card == "CELAS3" else float(s.k)
+        return format_card(s.card, [s.eid, value, s.g1, s.g2 or None], fmt)
     return write_celas1(s, fmt) if s.card == "CELAS1" else write_celas2(s, fmt)
 
 

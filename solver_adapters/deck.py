@@ -18,6 +18,11 @@ class Grid:
     ``xyz`` is the position in the basic system (the reader converts the coordinates given in
     the CP system); ``cp`` and ``cd`` are the system numbers as given (GRDSET applied). The
     grid's six components (SPC, springs, loads, results) are in its CD system.
+
+    ``scalar``: a scalar point (SPOINT), which has one degree of freedom and no position. It is
+    held as a point at the basic origin whose component 1 is that degree of freedom and whose
+    components 2-6 are held (``ps`` ``"23456"``); a reference to it with component 0 or blank
+    (NASTRAN's way of naming a scalar point's one DOF) is to component 1.
     """
     id: int
     xyz: tuple[float, float, float]
@@ -25,6 +30,7 @@ class Grid:
     src: str = ""
     cp: int = 0
     cd: int = 0
+    scalar: bool = False
 
 
 @dataclass(frozen=True)
@@ -265,9 +271,10 @@ class Pelas:
 
 @dataclass(frozen=True)
 class Spring:
-    """CELAS1 (``pid`` set, ``k`` None until resolved) or CELAS2 (``k`` set).
+    """CELAS1 or CELAS3 (``pid`` set, ``k`` None until resolved) or CELAS2 or CELAS4 (``k`` set).
 
-    ``g2``/``c2`` are 0 for a spring to ground.
+    ``g2``/``c2`` are 0 for a spring to ground. An end on a scalar point has component 1 (its
+    one DOF; CELAS3/CELAS4 join scalar points only).
     """
     eid: int
     g1: int
@@ -413,6 +420,10 @@ class Deck:
                                  f"system and GRID {g.id} lies on its axis, where the displacement "
                                  f"directions are undefined", g.id) from None
         return out
+
+    def scalar_points(self) -> set[int]:
+        """The IDs of the deck's scalar points (SPOINT)."""
+        return {g.id for g in self.grids.values() if g.scalar}
 
     def spring_stiffness(self, s: Spring) -> float:
         """The spring's K: its own (CELAS2) or its PELAS's (CELAS1)."""

@@ -97,6 +97,8 @@ def unsupported_features(m) -> list[tuple[str, str, str]]:
     another structure with exit code 0.
     """
     out: list[tuple[str, str, str]] = []
+    out += [(f"SPOINT {g.id}", g.src, "a scalar point (one DOF, no position): FRAMESOLVE's nodes "
+                                      "are points in space") for g in m.grids.values() if g.scalar]
     rotated = []
     if m.grids:
         ids = sorted(m.grids)

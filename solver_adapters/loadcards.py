@@ -1,4 +1,4 @@
-"""NASTRAN static load cards: FORCE, MOMENT, FORCE1, MOMENT1, FORCE2, MOMENT2, PLOAD1, GRAV and LOAD.
+"""NASTRAN static load cards: FORCE, MOMENT, FORCE1, MOMENT1, FORCE2, MOMENT2, SLOAD, PLOAD1, GRAV and LOAD.
 
 The study's ``model.bdf`` carries no loads (they come from ``loads.csv``), so the bulk-data reader
 (:mod:`solver_adapters.bdf`) rejects these cards. ``blackbox import`` reads them here from the
@@ -12,6 +12,7 @@ subcase selects with ``LOAD = n`` into nodal forces and moments in the basic sys
 * ``PLOAD1 SID EID TYPE SCALE X1 P1 X2 P2``: a load on a bar or beam, and ``GRAV SID CID A N1
   N2 N3``: the acceleration A N on the lumped mass, both as NASTRAN's equivalent nodal loads
   (:mod:`solver_adapters.elementloads`, :mod:`solver_adapters.reference.loads`);
+* ``SLOAD SID S1 F1 S2 F2 S3 F3``: the loads Fi on scalar points Si (their one DOF);
 * ``LOAD SID S S1 L1 S2 L2 ...``: the set S * sum(Si * set Li), the Li being sets of the cards
   above (a LOAD set may not name another LOAD set, as in NASTRAN; a pair left blank, as the
   trailing fields of a line, is skipped).
@@ -38,12 +39,12 @@ __all__ = ["LOAD_CARDS", "OTHER_LOAD_CARDS", "PointLoad", "LoadCombination", "Lo
            "InputFile", "read_input_file"]
 
 LOAD_CARDS = frozenset({"FORCE", "MOMENT", "FORCE1", "MOMENT1", "FORCE2", "MOMENT2", "LOAD",
-                        "PLOAD1", "GRAV"})
+                        "PLOAD1", "GRAV", "SLOAD"})
 """The load cards this module reads (PLOAD1 and GRAV through :mod:`solver_adapters.elementloads`)."""
 
 OTHER_LOAD_CARDS = frozenset({
     "ACCEL", "ACCEL1", "RFORCE", "RFORCE1", "PLOAD", "PLOAD2", "PLOAD4", "PLOADX1",
-    "PLOADB3", "SLOAD", "SPCD", "DEFORM", "TEMP", "TEMPD", "TEMPP1", "TEMPRB", "QBDY1", "QVOL",
+    "PLOADB3", "SPCD", "DEFORM", "TEMP", "TEMPD", "TEMPP1", "TEMPRB", "QBDY1", "QVOL",
     "DAREA", "LSEQ", "CLOAD", "PRESAX", "FORCEAX", "MOMAX",
 })
 """Load cards of other kinds: dropped from the model, an error when a selected set uses them."""
@@ -52,7 +53,9 @@ OTHER_LOAD_CARDS = frozenset({
 @dataclass(frozen=True)
 class PointLoad:
     """One FORCE/MOMENT-family card: ``vector`` is F*(N1, N2, N3) for FORCE/MOMENT (in system
-    ``cid``); for FORCE1/2, MOMENT1/2 the direction comes from ``direction_grids``."""
+    ``cid``); for FORCE1/2, MOMENT1/2 the direction comes from ``direction_grids``. One pair
+    Si Fi of an SLOAD (``card`` ``"SLOAD"``): ``grid`` the scalar point, ``vector`` (F, 0, 0),
+    ``field`` the NASTRAN field of Si."""
     card: str
     sid: int
     grid: int
@@ -62,6 +65,7 @@ class PointLoad:
     direction_grids: tuple[int, ...] = ()
     src: str = ""
     raw: object = None   # the card, for located errors
+    field: int = 3       # the field naming the grid (point), for located errors
 
     @property
     def is_moment(self) -> bool:
@@ -110,13 +114,13 @@ class LoadCards:
                                                      f"NASTRAN does not allow nested LOAD sets")
                 if not self._has(li):
                     raise combo.raw.error(5 + 2 * k, f"load set {li} not found (no FORCE, MOMENT, "
-                                                     f"PLOAD1 or GRAV card with SID {li}){sel}")
+                                                     f"SLOAD, PLOAD1 or GRAV card with SID {li}){sel}")
                 for dof, v in self._point_set(li, deck, sel).items():
                     total[dof] = total.get(dof, 0.0) + combo.scale * si * v
             return total
         if not self._has(sid):
-            raise DeckFormatError(f"load set {sid}{sel} not found: no LOAD, FORCE, MOMENT, PLOAD1 "
-                                  f"or GRAV card has SID {sid}")
+            raise DeckFormatError(f"load set {sid}{sel} not found: no LOAD, FORCE, MOMENT, SLOAD, "
+                                  f"PLOAD1 or GRAV card has SID {sid}")
         return self._point_set(sid, deck, sel)
 
     def _point_set(self, sid: int, deck, sel: str) -> dict[tuple[int, int], float]:
@@ -124,11 +128,23 @@ class LoadCards:
             c = self.other[sid][0]
             kinds = sorted({o.name for o in self.other[sid]})
             raise c.error(1, f"load set {sid}{sel} contains {', '.join(kinds)}: only FORCE, MOMENT, "
-                             f"FORCE1/2, MOMENT1/2, PLOAD1, GRAV and LOAD are imported")
+                             f"FORCE1/2, MOMENT1/2, SLOAD, PLOAD1, GRAV and LOAD are imported")
         out: dict[tuple[int, int], float] = {}
         for p in self.point.get(sid, ()):
             if p.grid not in deck.grids:
-                raise p.raw.error(3, f"grid {p.grid} does not exist (no GRID){sel}")
+                raise p.raw.error(p.field, f"{'scalar point' if p.card == 'SLOAD' else 'grid'} "
+                                           f"{p.grid} does not exist (no "
+                                           f"{'SPOINT' if p.card == 'SLOAD' else 'GRID'}){sel}")
+            is_scalar = getattr(deck.grids[p.grid], "scalar", False)
+            if p.card == "SLOAD" or is_scalar:
+                if p.card != "SLOAD" or not is_scalar:
+                    raise p.raw.error(p.field, f"point {p.grid} is a scalar point (SPOINT): its "
+                                               f"load is an SLOAD{sel}" if is_scalar else
+                                      f"point {p.grid} is a GRID, not a scalar point (SPOINT): "
+                                      f"SLOAD loads scalar points only{sel}")
+                dof = (p.grid, 1)
+                out[dof] = out.get(dof, 0.0) + p.vector[0]
+                continue
             vec = _basic_vector(p, deck)
             if getattr(deck.grids[p.grid], "cd", 0):
                 # components in the grid's displacement system (rows: its directions in basic)
@@ -218,6 +234,22 @@ def _point(c) -> PointLoad:
     return PointLoad(name, sid, g, 0, f, None, grids, c.src, c)
 
 
+def _sload(c) -> list[PointLoad]:
+    """SLOAD SID S1 F1 S2 F2 S3 F3 (MSC QRG SLOAD): one load per pair; a pair left blank is
+    skipped."""
+    _max_fields(c, 8)
+    sid = _int(c, 2)
+    out = []
+    for i in (3, 5, 7):
+        if not c.text(i) and not c.text(i + 1):
+            continue
+        s, f = _int(c, i), _real(c, i + 1)
+        out.append(PointLoad("SLOAD", sid, s, 0, f, (f, 0.0, 0.0), (), c.src, c, i))
+    if not out:
+        raise c.error(3, "SLOAD needs at least one pair S1 F1")
+    return out
+
+
 def _combination(c) -> LoadCombination:
     sid, s = _int(c, 2), _real(c, 3)
     terms: list[tuple[float, int]] = []
@@ -290,6 +322,9 @@ def read_load_cards(cards) -> LoadCards:
         elif c.name == "GRAV":
             g = read_grav(c)
             out.gravity.setdefault(g.sid, []).append(g)
+        elif c.name == "SLOAD":
+            for p in _sload(c):
+                out.point.setdefault(p.sid, []).append(p)
         elif c.name in LOAD_CARDS:
             p = made.get(id(c)) or _point(c)
             out.point.setdefault(p.sid, []).append(p)

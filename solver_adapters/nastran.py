@@ -216,16 +216,19 @@ class RawCard:
 
 WRITTEN = frozenset({"GRID", "GRDSET", "CBAR", "CBEAM", "BAROR", "PBAR", "PBARL", "PBEAM", "PBEAML",
                      "CROD", "PROD", "CONROD", "CTUBE", "PTUBE", "MAT1", "SPC1", "SPC", "SPCADD",
-                     "RBE2", "RBAR", "PELAS", "CELAS1", "CELAS2", "CORD1R", "CORD1C", "CORD1S",
-                     "CORD2R", "CORD2C", "CORD2S"})
+                     "RBE2", "RBAR", "PELAS", "CELAS1", "CELAS2", "CELAS3", "CELAS4", "SPOINT",
+                     "MPC", "MPCADD", "CORD1R", "CORD1C", "CORD1S", "CORD2R", "CORD2C", "CORD2S"})
 """Cards :func:`model_cards` writes back from the parsed model: GRDSET and BAROR through the
 GRIDs and CBARs they complete, SPC as SPC1, RBAR as the RBE2 it is (all six independent
 components at one grid), CTUBE/PTUBE as the CROD/PROD of the tube's A and J (MYSTRAN 18 has no
-CTUBE), every coordinate system as a CORD2x in basic, and a CBEAM with its PBEAM/PBEAML, or a
+CTUBE), every coordinate system as a CORD2x in basic, scalar points (SPOINT) with component 1
+on them in CELAS1/CELAS2 and MPC, the form MYSTRAN 18 requires (it refuses a blank or 0
+component there; a grounded CELAS3/CELAS4 ends on the fixed dummy grid as a CELAS1/CELAS2), and
+a CBEAM with its PBEAM/PBEAML, or a
 PBARL, as the CBAR/PBAR the reference solver makes of them (MYSTRAN 18 has no CBEAM: "CODE NOT
 WRITTEN"; its own PBARL section constants may differ)."""
 
-RAW_MODELLED = frozenset({"RBE3", "CBUSH", "PBUSH", "MPC", "MPCADD"})
+RAW_MODELLED = frozenset({"RBE3", "CBUSH", "PBUSH"})
 """Cards the reader models that reach MYSTRAN field by field (:func:`raw_card_text`): each is a
 card of its own in the model, and MYSTRAN reads it with the same meaning."""
 
@@ -332,6 +335,8 @@ def _grid_text(g, fmt: str) -> str:
     """GRID with the position in the basic system (CP blank: the reader has already converted
     it) and the displacement system CD as given."""
     from solver_adapters.bdf_write import format_card
+    if getattr(g, "scalar", False):
+        return format_card("SPOINT", [g.id], fmt)
     return format_card("GRID", [g.id, None, *g.xyz, getattr(g, "cd", 0) or None, g.ps or None], fmt)
 
 
@@ -347,7 +352,7 @@ def model_cards(model, ground_grid: int, fmt: str = RUN_FORMAT) -> list[str]:
     """Every card the reader modelled, written back from the parsed model in format ``fmt``
     (one text per card): GRID (GRDSET applied), coordinate systems (as CORD2R/C/S in the basic
     system), CBAR (BAROR applied), PBAR, CROD/CONROD, PROD, MAT1, SPC1 (SPC as SPC1), SPCADD,
-    RBE2, PELAS, CELAS1/CELAS2. A spring to ground ends on ``ground_grid`` (same component)."""
+    RBE2, MPC, MPCADD, PELAS, CELAS1-4, SPOINT. A spring to ground ends on ``ground_grid`` (same component)."""
     from solver_adapters import bdf_write as w
     check_writable(model)
     out = [_grid_text(model.grids[i], fmt) for i in sorted(model.grids)]
@@ -361,12 +366,16 @@ def model_cards(model, ground_grid: int, fmt: str = RUN_FORMAT) -> list[str]:
     out += [w.write_spc1(s, fmt) for s in model.spc1s]
     out += [w.write_spcadd(model.spcadds[i], fmt) for i in sorted(model.spcadds)]
     out += [w.write_rbe2(model.rbe2s[i], fmt) for i in sorted(model.rbe2s)]
+    out += [w.write_mpc(m, fmt) for m in getattr(model, "mpcs", ())]
+    mpcadds = getattr(model, "mpcadds", {})
+    out += [w.write_spcadd(mpcadds[i], fmt, "MPCADD") for i in sorted(mpcadds)]
     # one property per PELAS: MYSTRAN 18 ignores the second (PID2 K2, "FIELD(s) 6 7 ... IGNORED")
     out += [w.write_pelas(model.pelas[i], None, fmt=fmt) for i in sorted(model.pelas)]
     for i in sorted(model.springs):
         s = model.springs[i]
-        if s.g2 == 0:
-            s = replace(s, g2=ground_grid, c2=s.c1)
+        if s.g2 == 0:       # a grid's end: a CELAS3/CELAS4 becomes the CELAS1/CELAS2 it is
+            s = replace(s, g2=ground_grid, c2=s.c1,
+                        card={"CELAS3": "CELAS1", "CELAS4": "CELAS2"}.get(s.card, s.card))
         out.append(w.write_spring(s, fmt))
     return out
 
@@ -376,10 +385,12 @@ def has_grounded(model) -> bool:
 
 
 def load_cards(loads: LoadMatrix, first_sid: int = 1, idle_grid: int | None = None,
-               cid: dict[int, int] | None = None, fmt: str = RUN_FORMAT) -> list[str]:
+               cid: dict[int, int] | None = None, fmt: str = RUN_FORMAT,
+               scalar=frozenset()) -> list[str]:
     """FORCE/MOMENT cards, load set ``first_sid + j`` for column ``j``: one card per grid and kind,
     ``F = 1.0`` and the components in N1..N3 (16 characters each), in the grid's displacement
-    system ``cid[grid]`` (default basic). An all-zero column gets a zero FORCE on ``idle_grid``
+    system ``cid[grid]`` (default basic); an SLOAD for a load on component 1 of a point of
+    ``scalar`` (the scalar points). An all-zero column gets a zero FORCE on ``idle_grid``
     (MYSTRAN needs every requested set to exist: ``*ERROR 1007``)."""
     from solver_adapters.bdf_write import format_card
     cid = cid or {}
@@ -390,15 +401,24 @@ def load_cards(loads: LoadMatrix, first_sid: int = 1, idle_grid: int | None = No
         by_grid: dict[tuple[int, str], list[float]] = defaultdict(lambda: [0.0, 0.0, 0.0])
         for i, v in zip(vals.indices[lo:hi], vals.data[lo:hi]):
             g, c = loads.dofs[i]
-            if v != 0.0:
+            if g in scalar:
+                if c == 1 and v != 0.0:       # 2-6 of a scalar point are held: no load there
+                    by_grid[(g, "SLOAD")][0] += v
+            elif v != 0.0:
                 by_grid[(g, "FORCE" if c <= 3 else "MOMENT")][(c - 1) % 3] += v
         sid = first_sid + j
         if not by_grid:
             if idle_grid is None:
                 raise ValueError("an all-zero load case needs idle_grid")
-            cards.append(format_card("FORCE", [sid, idle_grid, None, 0.0, 1.0, 0.0, 0.0], fmt))
+            if idle_grid in scalar:
+                cards.append(format_card("SLOAD", [sid, idle_grid, 0.0], fmt))
+            else:
+                cards.append(format_card("FORCE", [sid, idle_grid, None, 0.0, 1.0, 0.0, 0.0], fmt))
         for (g, kind), n in sorted(by_grid.items()):
-            cards.append(format_card(kind, [sid, g, cid.get(g) or None, 1.0, *map(float, n)], fmt))
+            if kind == "SLOAD":
+                cards.append(format_card("SLOAD", [sid, g, float(n[0])], fmt))
+            else:
+                cards.append(format_card(kind, [sid, g, cid.get(g) or None, 1.0, *map(float, n)], fmt))
     return cards
 
 
@@ -608,7 +628,7 @@ MYSTRAN_CARDS = frozenset({
 })
 """The cards the reader keeps for an external solver (``unmodelled="pass"``) that MYSTRAN 18
 runs: the entries its bulk-data reader (LOADB) processes, less those a run deck must not carry
-(loads, SUPORT; MPC and MPCADD are modelled, and reach it as written with the run deck's MPC =). MYSTRAN matches entry names on a prefix, so it would read a CBARAO as a
+(loads, SUPORT; MPC and MPCADD are modelled, and written back from the model with the run deck's MPC =). MYSTRAN matches entry names on a prefix, so it would read a CBARAO as a
 CBAR, a CBEAM3 as a CBEAM, a CQUAD8 not at all (a warning only): every kept card outside this
 set is refused by the mystran adapter before it runs (:attr:`NastranDialect.runs_cards`)."""
 
@@ -692,7 +712,9 @@ class NastranDialect:
         lines += body
         lines.append("$ ---- blackbox: loads")
         cid = {g.id: getattr(g, "cd", 0) for g in model.grids.values() if getattr(g, "cd", 0)}
-        lines += [t.rstrip("\n") for t in load_cards(loads, 1, idle_grid=min(model.grids), cid=cid)]
+        scalar = {g.id for g in model.grids.values() if getattr(g, "scalar", False)}
+        lines += [t.rstrip("\n") for t in load_cards(loads, 1, idle_grid=min(model.grids), cid=cid,
+                                                     scalar=scalar)]
         if len(sids) > 1:
             from solver_adapters.bdf_write import format_card
             lines.append(format_card("SPCADD", [spc_sid, *sids], RUN_FORMAT).rstrip("\n"))

@@ -156,6 +156,10 @@ class Translation:
         m, d = self.model, self.deck
         d.add("model", "basic", "-ndm", 3, "-ndf", 6)
         for g in self.grids:
+            if m.grids[g].scalar:
+                self.refuse(f"SPOINT {g}", m.grids[g].src, "a scalar point (one DOF, no position): "
+                                                         "an OpenSees node is a point in space")
+        for g in self.grids:
             d.add("node", g, *map(_num, self.xyz[g]))
         self._supports()
         for b in sorted(m.cbars.values(), key=lambda b: b.eid):

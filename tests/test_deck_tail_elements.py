@@ -391,7 +391,7 @@ def test_mpc_not_selected_is_dropped(tmp_path):
 
 
 @pytest.mark.parametrize("cards, select, field, line, why", [
-    ("MPC,7,2,0,1.,3,1,-2.\n", "MPC = 7\n", 4, 16, "scalar points are not supported"),
+    ("MPC,7,2,0,1.,3,1,-2.\n", "MPC = 7\n", 4, 16, "point 2 is no SPOINT"),
     ("MPC,7,2,1,0.,3,1,-2.\n", "MPC = 7\n", 5, 16, "A1, the coefficient of the dependent"),
     ("MPC,7,2,1,1.,3,1,-2.\n", "MPC = 5\n", None, 5, "MPC = 5 selects a set the bulk data"),
     ("MPC,7,2,1,1.,9,1,-2.\n", "MPC = 7\n", None, None, "grid(s) 9 does not exist"),

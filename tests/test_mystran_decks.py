@@ -135,6 +135,12 @@ RBAR,12,5,6,123456,,,12345
 GRID,7,,4.,2.,0.
 CTUBE,13,14,6,7
 PTUBE,14,1,.05,.004
+SPOINT,20,21
+CELAS3,15,11,20,21
+CELAS4,16,4.E4,21
+CELAS2,17,5.E4,20,,4,1
+MPC,30,20,,1.,5,2,-.5
+MPCADD,31,30
 """
 
 
@@ -160,7 +166,9 @@ def test_run_deck_reads_back_as_the_model(name, tmp_path):
         for s in grounded:
             t = again.springs[s.eid]
             assert (t.g2, t.c2) == (ids.ground_grid, s.c1)
-            again.springs[s.eid] = dataclasses.replace(t, g2=0, c2=0)
+            # a grounded CELAS3/CELAS4 ends on that grid as the CELAS1/CELAS2 it is
+            assert t.card == {"CELAS3": "CELAS1", "CELAS4": "CELAS2"}.get(s.card, s.card)
+            again.springs[s.eid] = dataclasses.replace(t, g2=0, c2=0, card=s.card)
     want, got = _entities(model), _entities(again)
     coords_w, coords_g = model.coords, again.coords
     _close(got, want)

@@ -47,12 +47,12 @@ KNOWN_UNMODELLED = frozenset({
     # shells, solids, other elements and their properties
     "CQUAD4", "CQUADR", "CQUAD8", "CQUAD", "CQUADX", "CTRIA3", "CTRIAR", "CTRIA6", "CTRIAX",
     "CTRIAX6", "CSHEAR", "CHEXA", "CPENTA", "CTETRA", "CPYRAM", "CBEND", "CVISC",
-    "CBEAM3", "CBARAO", "CELAS3", "CELAS4", "CDAMP1", "CDAMP2", "CDAMP3", "CDAMP4", "CDAMP5",
+    "CBEAM3", "CBARAO", "CDAMP1", "CDAMP2", "CDAMP3", "CDAMP4", "CDAMP5",
     "CGAP", "CWELD", "CFAST", "CSEAM", "CBUSH1D", "CBUSH2D", "CRAC2D", "CRAC3D", "GENEL",
     "CUSER1", "CUSERIN", "CONV", "CHBDYE", "CHBDYG", "CHBDYP",
     "PSHELL", "PCOMP", "PCOMPG", "PCOMP1", "PSOLID", "PSHEAR", "PBEND", "PVISC",
     "PBCOMP", "PBEAM3", "PBRSECT", "PBMSECT", "PDAMP", "PDAMP5", "PGAP", "PWELD", "PFAST",
-    "PBUSH1D", "PBUSH2D", "PBUSHT", "PELAST", "PLPLANE", "PLSOLID", "PSHLN1", "PSHLN2",
+    "PBUSH1D", "PBUSH2D", "PELAST", "PLPLANE", "PLSOLID", "PSHLN1", "PSHLN2",
     "PUSER1", "PUSERIN", "PHBDY", "PCONV",
     # materials other than MAT1, and temperature- or stress-dependent material tables
     "MAT2", "MAT3", "MAT4", "MAT5", "MAT8", "MAT9", "MAT10", "MAT11", "MATT1", "MATT2", "MATT8",
@@ -61,7 +61,7 @@ KNOWN_UNMODELLED = frozenset({
     "RBAR1", "RBE1", "RROD", "RTRPLT", "RTRPLT1", "RSPLINE", "RJOINT",
     # degree-of-freedom sets, scalar points, sequencing
     "SUPORT", "SUPORT1", "QSET", "QSET1", "BSET", "BSET1",
-    "CSET", "CSET1", "USET", "USET1", "SEQGP", "SPOINT", "EPOINT",
+    "CSET", "CSET1", "USET", "USET1", "SEQGP", "EPOINT",
     # other coordinate systems, direct matrix input, tables, functions
     "CORD3G", "CORD3R", "DTI", "DMI", "DMIG", "DMIJ", "DMIK", "DEQATN", "BEAMOR",
 })

@@ -249,9 +249,25 @@ def _problems(deck: Deck, bulk_checked: bool) -> list[str]:
     for u in deck.unmodelled:
         if u.grids:
             need_grids(u, u.name, u.fields[0], u.grids, "grid(s)")
+    scalar = deck.scalar_points()
+    if scalar:             # a scalar point has no position and one DOF: springs, MPC, SPC only
+        joined = [(b, b.card, b.eid, (b.ga, b.gb, b.g0)) for b in deck.cbars.values()]
+        joined += [(r, r.card, r.eid, (r.ga, r.gb)) for r in deck.rods.values()]
+        joined += [(b, "CBUSH", b.eid, (b.ga, b.gb, b.g0)) for b in deck.bushes.values()]
+        joined += [(e, e.card, e.eid, (e.gn, *e.gm)) for e in deck.rbe2s.values()]
+        joined += [(e, "RBE3", e.eid, (e.refgrid, *(g for _, _, gs in e.groups for g in gs)))
+                   for e in deck.rbe3s.values()]
+        joined += [(u, u.name, u.fields[0], u.grids) for u in deck.unmodelled if u.grids]
+        for entity, card, ident, points in joined:
+            hit = sorted({g for g in points if g in scalar})
+            if hit:
+                bad(entity, card, ident, f"{'point' if len(hit) == 1 else 'points'} "
+                                         f"{', '.join(map(str, hit[:10]))}: scalar point(s) (SPOINT), "
+                                         f"which only CELAS springs, MPCs and SPCs can join (a "
+                                         f"scalar point has one DOF and no position)")
     for s in deck.springs.values():
         need_grids(s, s.card, s.eid, [g for g in (s.g1, s.g2) if g != 0], "grid(s)")
-        if s.card == "CELAS1" and s.pid not in deck.pelas:
+        if s.card in ("CELAS1", "CELAS3") and s.pid not in deck.pelas:
             other = " (it is a PBAR)" if s.pid in deck.pbars else ""
             bad(s, s.card, s.eid, f"property PID {s.pid} not found (no PELAS){other}")
     return problems

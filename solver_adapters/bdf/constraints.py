@@ -7,13 +7,21 @@ from solver_adapters.bdf.fields import _components, _id_list, _int, _max_fields,
 from solver_adapters.deck import Mpc, SpcAdd
 
 
+def _point_components(c, i: int) -> str:
+    """SPC/SPC1 C: digits 1-6 (a grid) or ``"0"`` for 0 or blank (MSC QRG: a scalar point),
+    checked against the points named in the reader's ``finish``."""
+    if c.text(i) in ("", "0"):
+        return "0"
+    return _components(c, i, required=True)
+
+
 def _spc1(r, c) -> None:
     sid = _int(c, 2)
-    comps = _components(c, 3, required=True)
+    comps = _point_components(c, 3)
     items = _id_list(c, 4, len(c.fields))
     if not items:
         raise c.error(4, "SPC1 needs at least one grid")
-    r.spc1_pending.append((sid, comps, items, c.src))
+    r.spc1_pending.append((sid, comps, items, c.src, c, 3))
 
 
 def _spc(r, c) -> None:
@@ -25,10 +33,10 @@ def _spc(r, c) -> None:
         if base == 6 and not any(c.text(i) for i in (6, 7, 8)):
             break
         g = _int(c, base)
-        comps = _components(c, base + 1, required=True)
+        comps = _point_components(c, base + 1)
         if _real(c, base + 2, 0.0) != 0.0:
             raise c.error(base + 2, "enforced displacement not supported: D must be 0.0 or blank")
-        r.spc1_pending.append((sid, comps, [g], c.src))
+        r.spc1_pending.append((sid, comps, [g], c.src, c, base + 1))
 
 
 def _spcadd(r, c) -> None:
@@ -55,12 +63,13 @@ def _mpc(r, c) -> None:
             continue
         g = _int(c, b)
         comp = c.text(b + 1)
-        if comp not in ("1", "2", "3", "4", "5", "6"):
-            raise c.error(b + 1, "component must be one digit 1-6 (scalar points are not supported)")
+        if comp not in ("", "0", "1", "2", "3", "4", "5", "6"):
+            raise c.error(b + 1, "component must be one digit 1-6 (a grid) or 0 or blank (a scalar point)")
+        r.point_refs.append((c, b + 1, g, int(comp or 0)))
         a = _real(c, b + 2)
         if not terms and a == 0.0:
             raise c.error(b + 2, "A1, the coefficient of the dependent component, must not be 0")
-        terms.append((g, int(comp), a))
+        terms.append((g, int(comp or 0), a))
     for i in range(9, n + 1, 8):
         if c.text(i):
             raise c.error(i, "field must be blank (an MPC line holds two G C A triples)")

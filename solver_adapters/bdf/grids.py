@@ -1,4 +1,4 @@
-"""GRID, GRDSET and the coordinate systems CORD1R/C/S, CORD2R/C/S."""
+"""GRID, SPOINT, GRDSET and the coordinate systems CORD1R/C/S, CORD2R/C/S."""
 
 from __future__ import annotations
 
@@ -6,7 +6,8 @@ from itertools import repeat
 
 import numpy as np
 
-from solver_adapters.bdf.fields import _blank, _components, _int, _max_fields, _real, valid_components
+from solver_adapters.bdf.fields import (_blank, _components, _id_list, _int, _max_fields, _real,
+                                       valid_components)
 from solver_adapters.bdf.numbers import int_column, real_column
 from solver_adapters.bdf.table import entities
 from solver_adapters.deck import Coord, Grid
@@ -156,6 +157,24 @@ def coord_from_points(cid: int, kind: str, pts: np.ndarray, c, d: tuple) -> Coor
                                                tuple(ez.tolist())), c.name, c.src)
 
 
-PARSERS = {"GRID": _grid, "GRDSET": _grdset, **{f"CORD2{k}": _cord2 for k in "RCS"},
+def _spoint(r, c) -> None:
+    """SPOINT ID1 ID2 ... or ID1 THRU ID2 (MSC QRG SPOINT): scalar points, each one degree of
+    freedom, held in ``Deck.grids`` as a ``Grid`` with ``scalar`` set (component 1 its DOF,
+    2-6 held). Their IDs share the grids' ID space, as NASTRAN requires."""
+    items = _id_list(c, 2, len(c.fields))
+    if not items:
+        raise c.error(2, "SPOINT needs at least one scalar point ID")
+    for item in items:
+        lo, hi = item if isinstance(item, tuple) else (item, item)
+        if lo < 1:
+            raise c.error(2, f"scalar point ID {lo} must be positive")
+        for sid in range(lo, hi + 1):
+            if sid in r.spoints:     # NASTRAN allows a scalar point to be listed twice
+                continue
+            r.claim("GRID", sid, c, 2)
+            r.spoints[sid] = Grid(sid, (0.0, 0.0, 0.0), "23456", c.src, 0, 0, True)
+
+
+PARSERS = {"GRID": _grid, "SPOINT": _spoint, "GRDSET": _grdset, **{f"CORD2{k}": _cord2 for k in "RCS"},
            **{f"CORD1{k}": _cord1 for k in "RCS"}}
 BULK = {"GRID": bulk_grid}

@@ -35,6 +35,9 @@ NO_EFFECT = frozenset({
     # dynamic excitation (selected by DLOAD, never by a static LOAD) and its tables
     "RLOAD1", "RLOAD2", "TLOAD1", "TLOAD2", "DLOAD", "DELAY", "DPHASE",
     "TABLED1", "TABLED2", "TABLED3", "TABLED4",
+    # frequency-dependent and nonlinear bush properties: a linear static solution uses the
+    # PBUSH's nominal K (MSC QRG PBUSH remark 1; a note names every PBUSHT, PBUSHT_NOTE)
+    "PBUSHT",
     # static condensation sets: the reduction of a linear static solution to them is exact
     "ASET", "ASET1", "OMIT", "OMIT1",
     # output only: plot elements and monitor points
@@ -51,5 +54,11 @@ NO_EFFECT = frozenset({
 """Cards with no effect on a linear static solve: accepted, counted in ``Deck.no_effect`` (one
 line of :meth:`~solver_adapters.deck.Deck.summary`), never handed to an external solver but
 PARAM (which MYSTRAN reads: AUTOSPC, ...), and never a reason to choose another adapter."""
+
+PBUSHT_NOTE = ("PBUSHT (frequency-dependent damping and stiffness, nonlinear force-deflection "
+               "tables) is not used by a linear static solution: NASTRAN uses the PBUSH's nominal K "
+               "there (MSC QRG PBUSH remark 1), and so does the study")
+"""The note of every PBUSHT the reader reads (it changes frequency-response and nonlinear
+solutions, and a reader of the deck should know the study's bushes have their nominal K)."""
 
 PARSERS = {}

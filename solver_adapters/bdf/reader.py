@@ -23,7 +23,7 @@ from solver_adapters.bdf.catalog import (BULK, ELEMENT_GRIDS, NOT_PASSABLE, PARS
 from solver_adapters.bdf.fields import _components, _int, _orientation
 from solver_adapters.bdf.grids import coord_from_points
 from solver_adapters.bdf.numbers import typed
-from solver_adapters.bdf.params import NO_EFFECT, _param
+from solver_adapters.bdf.params import NO_EFFECT, PBUSHT_NOTE, _param
 from solver_adapters.bdf.table import CardTable, Irregular, TableCard
 from solver_adapters.deck import Deck, Spc1, Unmodelled
 from solver_adapters.errors import ReaderFallback as Fallback
@@ -44,7 +44,11 @@ class _Reader:
         # properties (PBAR, PELAS)
         self.ids: dict[str, dict[int, str]] = {"GRID": {}, "element": {}, "property": {}, "MAT1": {},
                                                "SPCADD": {}, "MPCADD": {}, "CORD": {}}
-        self.spc1_pending: list[tuple[int, str, list[int | tuple[int, int]], str]] = []
+        self.spc1_pending: list[tuple[int, str, list[int | tuple[int, int]], str, object, int]] = []
+        self.spoints: dict[int, object] = {}      # SPOINT ID -> its Grid (scalar), in finish()
+        # (card, field, point, component) of every spring end and MPC term (component 0: blank
+        # or 0, a scalar point's DOF): checked against the kind of point in finish()
+        self.point_refs: list[tuple[object, int, int, int]] = []
         # card name -> [count, first card] of every card that is neither modelled nor NO_EFFECT
         self.unsupported: dict[str, list] = {}
         # GRDSET defaults, applied in finish() (bulk data is unordered: GRDSET may come last)
@@ -73,6 +77,8 @@ class _Reader:
         if card.name == "PARAM":
             _param(self, card)
         if card.name in NO_EFFECT:
+            if card.name == "PBUSHT":
+                self.note(card, PBUSHT_NOTE)
             n, src = self.deck.no_effect.get(card.name, (0, card.src))
             self.deck.no_effect[card.name] = (n + 1, src)
             return
@@ -293,8 +299,13 @@ class _Reader:
                 raise c.error(i, f"{name} {cid}: coordinate system {cid} is not defined")
         self.apply_baror()
         self.resolve_bars()
+        self.deck.grids.update(self.spoints)
+        scalar = set(self.spoints)
+        for c, i, g, comp in self.point_refs:
+            if g in self.deck.grids:              # a missing point: validate() names it
+                _check_point(c, i, g, comp, scalar)
         ordered = None
-        for sid, comps, items, src in self.spc1_pending:
+        for sid, comps, items, src, card, field in self.spc1_pending:
             grids: list[int] = []
             for item in items:
                 if isinstance(item, tuple):
@@ -304,11 +315,56 @@ class _Reader:
                     grids.extend(ordered[lo:hi].tolist())
                 else:
                     grids.append(item)
+            if grids and (scalar or comps == "0"):
+                comps = _spc_on_points(card, field, comps, grids, scalar, self.deck.grids)
             if grids:
                 self.deck.spc1s.append(Spc1(sid, comps, tuple(grids), src))
+        if scalar:
+            _to_component_1(self.deck, scalar)
         self.deck.notes = [f"{', '.join(cards[:5])}{f' and {len(cards) - 5} more' if len(cards) > 5 else ''}: "
                            f"{message}" for message, cards in self.notes.items()]
         return self.deck
+
+
+def _check_point(c, i: int, g: int, comp: int, scalar: set[int]) -> None:
+    """A reference to point ``g`` with component ``comp`` (0: blank or 0) must fit its kind
+    (MSC QRG: 1-6 on a grid, 0 or blank on a scalar point; 1, which MYSTRAN requires on a
+    scalar point in CELAS1/CELAS2 and MPC, is taken as its one DOF too). A point that exists in
+    neither kind is left to ``validate``, which names it."""
+    if g in scalar:
+        if comp not in (0, 1):
+            raise c.error(i, f"point {g} is a scalar point (SPOINT): its one component is 0 or "
+                             f"blank, not {comp}")
+    elif comp == 0 and c.name not in ("CELAS3", "CELAS4"):
+        raise c.error(i, f"component 0 or blank names a scalar point, but point {g} is no SPOINT "
+                         f"(a grid needs a component 1-6)")
+    elif comp == 0:
+        raise c.error(i, f"{c.name} joins scalar points only, and point {g} is no SPOINT")
+
+
+def _spc_on_points(c, i: int, comps: str, grids: list[int], scalar: set[int], known) -> str:
+    """The components of an SPC/SPC1 entry on ``grids``, checked against their kinds: ``"0"``
+    (blank or 0) for scalar points only, digits for grids only (``"1"`` also on a scalar point).
+    A point in neither (``known``: every point) is left to ``validate``, which names it."""
+    for g in grids:
+        if g not in known:
+            continue
+        if comps == "0" and g not in scalar:
+            raise c.error(i, f"component 0 or blank names scalar points, but point {g} is no "
+                             f"SPOINT (a grid needs components 1-6)")
+        if comps not in ("0", "1") and g in scalar:
+            raise c.error(i, f"point {g} is a scalar point (SPOINT): its one component is 0 or "
+                             f"blank, not {comps}")
+    return "1" if comps == "0" else comps
+
+
+def _to_component_1(deck: Deck, scalar: set[int]) -> None:
+    """Component 0 (a scalar point's one DOF) as the component 1 that holds it."""
+    for eid, s in deck.springs.items():
+        if (s.g1 and not s.c1) or (s.g2 and not s.c2):
+            deck.springs[eid] = replace(s, c1=s.c1 or (1 if s.g1 else 0), c2=s.c2 or (1 if s.g2 else 0))
+    deck.mpcs[:] = [m if all(c for _, c, _ in m.terms) else
+                    replace(m, terms=tuple((g, c or 1, a) for g, c, a in m.terms)) for m in deck.mpcs]
 
 
 # --------------------------------------------------------------------------------------------
@@ -357,6 +413,9 @@ def _read_table(table, keep_unmodelled, validate, cards):
             if name == "PARAM":
                 for c in idx.tolist():
                     _param(r, TableCard(table, c, name))
+            elif name == "PBUSHT":
+                for c in idx.tolist():
+                    r.note(TableCard(table, c, name), PBUSHT_NOTE)
         elif name in BULK:
             bulk[name] = idx
         elif name in PARSERS or (keep_unmodelled and name not in NOT_PASSABLE and known(name)):

@@ -1,4 +1,4 @@
-"""CBUSH/PBUSH bushings and the scalar springs PELAS, CELAS1, CELAS2."""
+"""CBUSH/PBUSH bushings and the scalar springs PELAS, CELAS1, CELAS2, CELAS3, CELAS4."""
 
 from __future__ import annotations
 
@@ -83,27 +83,48 @@ def _pelas(r, c) -> None:
         r.deck.pelas[pid] = Pelas(pid, k, c.src)
 
 
-def _spring_end(c, ig: int) -> tuple[int, int]:
+def _spring_end(r, c, ig: int) -> tuple[int, int]:
+    """G and C of one end (MSC QRG CELAS1/2: C is 1-6 on a grid, 0 or blank on a scalar point;
+    G blank or 0: grounded). Component 0 stands for a scalar point's DOF until the reader's
+    ``finish`` has checked that G is one."""
     g = _int(c, ig, 0, minimum=0)
     text = c.text(ig + 1)
     if g == 0:
         if text not in ("", "0"):
             raise c.error(ig + 1, "component given for a grounded end (G blank or 0)")
         return 0, 0
+    if text in ("", "0"):
+        r.point_refs.append((c, ig + 1, g, 0))
+        return g, 0
     if not re.fullmatch(r"[1-6]", text):
-        raise c.error(ig + 1, "component must be one digit 1-6 (scalar points are not supported)")
+        raise c.error(ig + 1, "component must be one digit 1-6 (a grid) or 0 or blank (a scalar point)")
+    r.point_refs.append((c, ig + 1, g, int(text)))
     return g, int(text)
 
 
+def _scalar_end(r, c, i: int) -> tuple[int, int]:
+    """S of CELAS3/CELAS4: a scalar point (component 0 until checked) or blank/0 (grounded)."""
+    g = _int(c, i, 0, minimum=0)
+    if g:
+        r.point_refs.append((c, i, g, 0))
+    return g, 0
+
+
 def _celas(r, c) -> None:
-    _max_fields(c, 7 if c.name == "CELAS1" else 9)
+    """CELAS1 EID PID G1 C1 G2 C2; CELAS2 EID K G1 C1 G2 C2 GE S; CELAS3 EID PID S1 S2;
+    CELAS4 EID K S1 S2 (MSC QRG: CELAS3/CELAS4 join scalar points only; GE, S have no effect)."""
+    _max_fields(c, {"CELAS1": 7, "CELAS2": 9, "CELAS3": 5, "CELAS4": 5}[c.name])
     eid = _int(c, 2)
-    if c.name == "CELAS1":
+    if c.name in ("CELAS1", "CELAS3"):
         pid, k = _int(c, 3, eid), None
     else:
         pid, k = None, _real(c, 3)
-        _ignored_reals(c, (8, 9))  # GE, S
-    (g1, c1), (g2, c2) = _spring_end(c, 4), _spring_end(c, 6)
+        if c.name == "CELAS2":
+            _ignored_reals(c, (8, 9))  # GE, S
+    if c.name in ("CELAS3", "CELAS4"):
+        (g1, c1), (g2, c2) = _scalar_end(r, c, 4), _scalar_end(r, c, 5)
+    else:
+        (g1, c1), (g2, c2) = _spring_end(r, c, 4), _spring_end(r, c, 6)
     if g1 == 0:
         if g2 == 0:
             raise c.error(4, "both ends of the spring are grounded")
@@ -112,4 +133,5 @@ def _celas(r, c) -> None:
     r.deck.springs[eid] = Spring(eid, g1, c1, g2, c2, k, pid, c.name, c.src)
 
 
-PARSERS = {"CBUSH": _cbush, "PBUSH": _pbush, "PELAS": _pelas, "CELAS1": _celas, "CELAS2": _celas}
+PARSERS = {"CBUSH": _cbush, "PBUSH": _pbush, "PELAS": _pelas, "CELAS1": _celas, "CELAS2": _celas,
+           "CELAS3": _celas, "CELAS4": _celas}

@@ -119,8 +119,16 @@ def _split(raw: str, file: str, lineno: int) -> _Line:
         while len(items) > width + 2 and items[-1] == "":
             items.pop()                   # trailing commas beyond field 10
         if len(items) > width + 2:
+            # NASTRAN's free-field line is the ten fields of a card image: field 10 is the
+            # continuation marker, and nothing follows it. Readers differ on the rest (pyNastran
+            # drops every field past the ninth without a word), so which card field a value past
+            # field 9 was meant for is the writer's guess: an error, never a guess of ours.
             raise fail(f"free-field line has {len(items) - 1} fields after field 1; at most "
-                       f"{width} data fields and a continuation marker fit on one line")
+                       f"{width} data fields and a continuation marker fit on one line (field "
+                       f"{width + 2} is the continuation marker: a value there or beyond would be "
+                       f"lost or read as a field its writer may not have meant); split the line: "
+                       f"end it with a continuation marker such as +A and go on on a line "
+                       f"starting with +A")
         data = items[1:width + 1]
         cont = items[width + 1] if len(items) > width + 1 else ""
         return _Line(file, lineno, first, data + [""] * (width - len(data)), cont)
