@@ -126,7 +126,42 @@ def _estimate(prob: _Problem, k0: np.ndarray, fixed_point: bool, max_iterations:
         return _Fit(prob.to_phi(k), k, prob.predict(k)[0], F, 0, 0), history, n_fp, 0
     fit = _newton(prob, prob.to_phi(k), max_iterations=max_iterations - n_fp, xtol=xtol, ftol=ftol,
                   first_iteration=n_fp + 1, history=history, callback=callback)
+    if fit.status != 5:
+        fit = _restart_trapped(prob, fit, k0, max_iterations, xtol, ftol, history)
     return fit, history, n_fp, fit.iterations
+
+
+RESTARTS = 12
+TRAPPED_RATIO = 1e3
+
+
+def trapped(prob: _Problem, k: np.ndarray, k0: np.ndarray) -> np.ndarray:
+    """Simple-model springs that ended at the floor or ``TRAPPED_RATIO`` times stiffer than their
+    start: in log coordinates such a spring's column shrinks like ``k`` (or ``1/k``), so once a
+    step has thrown it there the iteration cannot bring it back, even where a finite value fits
+    better."""
+    lg = prob.log_mask
+    return lg & (prob.at_floor(k, 2.0 * SPRING_FLOOR) | (k > TRAPPED_RATIO * k0))
+
+
+def _restart_trapped(prob: _Problem, fit: _Fit, k0: np.ndarray, max_iterations: int, xtol: float,
+                     ftol: float, history: list) -> _Fit:
+    """Restarts of a fit with trapped springs (:func:`trapped`): those springs back at their
+    start, the others where they are, the Newton phase again; kept only when chi2 ends lower
+    (a spring the data really want at 0 or rigid goes back there and the first fit stands),
+    at most :data:`RESTARTS` times. An accepted restart is one ``"restart"`` record in the
+    history (its own iterates start above the fit it improves, so they are not listed)."""
+    for _ in range(RESTARTS):
+        bad = trapped(prob, fit.k, k0)
+        if not bad.any():
+            break
+        again = _newton(prob, prob.to_phi(np.where(bad, k0, fit.k)), max_iterations=max_iterations,
+                        xtol=xtol, ftol=ftol)
+        if not again.chi2 < fit.chi2 * (1.0 - 1e-9):
+            break
+        fit = _Fit(again.phi, again.k, again.f, again.chi2, again.status, fit.iterations + again.iterations)
+        history.append(IterationRecord(history[-1].iteration + 1, "restart", fit.k.copy(), fit.chi2))
+    return fit
 
 
 def identify(model: CondensedModel, obs: Observations, k0, *, fixed_point: bool = True,

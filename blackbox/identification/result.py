@@ -17,7 +17,9 @@ __all__ = ["IterationRecord", "HoldoutStats", "IdentificationResult"]
 
 @dataclass(frozen=True, eq=False)
 class IterationRecord:
-    """One accepted iterate: ``phase`` is ``"start"``, ``"fixed-point"`` or ``"newton"``."""
+    """One accepted iterate: ``phase`` is ``"start"``, ``"fixed-point"``, ``"newton"`` or
+    ``"restart"`` (a Newton phase again from springs that ended trapped at 0 or rigid, kept
+    because it ends lower)."""
     iteration: int
     phase: str
     k: np.ndarray
