@@ -127,11 +127,11 @@ def _estimate(prob: _Problem, k0: np.ndarray, fixed_point: bool, max_iterations:
     fit = _newton(prob, prob.to_phi(k), max_iterations=max_iterations - n_fp, xtol=xtol, ftol=ftol,
                   first_iteration=n_fp + 1, history=history, callback=callback)
     if fit.status != 5:
-        fit = _restart_trapped(prob, fit, k0, max_iterations, xtol, ftol, history)
+        fit = _restart_trapped(prob, fit, k0, max_iterations, xtol, ftol, history, callback)
     return fit, history, n_fp, fit.iterations
 
 
-RESTARTS = 12
+RESTARTS = 8
 TRAPPED_RATIO = 1e3
 
 
@@ -145,12 +145,13 @@ def trapped(prob: _Problem, k: np.ndarray, k0: np.ndarray) -> np.ndarray:
 
 
 def _restart_trapped(prob: _Problem, fit: _Fit, k0: np.ndarray, max_iterations: int, xtol: float,
-                     ftol: float, history: list) -> _Fit:
+                     ftol: float, history: list, callback=None) -> _Fit:
     """Restarts of a fit with trapped springs (:func:`trapped`): those springs back at their
     start, the others where they are, the Newton phase again; kept only when chi2 ends lower
     (a spring the data really want at 0 or rigid goes back there and the first fit stands),
     at most :data:`RESTARTS` times. An accepted restart is one ``"restart"`` record in the
-    history (its own iterates start above the fit it improves, so they are not listed)."""
+    history, passed to ``callback`` like every iterate (its own iterates start above the fit it
+    improves, so they are not listed); a true return stops the restarts."""
     for _ in range(RESTARTS):
         bad = trapped(prob, fit.k, k0)
         if not bad.any():
@@ -160,7 +161,10 @@ def _restart_trapped(prob: _Problem, fit: _Fit, k0: np.ndarray, max_iterations: 
         if not again.chi2 < fit.chi2 * (1.0 - 1e-9):
             break
         fit = _Fit(again.phi, again.k, again.f, again.chi2, again.status, fit.iterations + again.iterations)
-        history.append(IterationRecord(history[-1].iteration + 1, "restart", fit.k.copy(), fit.chi2))
+        rec = IterationRecord(history[-1].iteration + 1, "restart", fit.k.copy(), fit.chi2)
+        history.append(rec)
+        if callback is not None and callback(rec):
+            break
     return fit
 
 
