@@ -798,3 +798,45 @@ def test_explanations_the_data_hardly_tell_apart_are_named(tmp_path):
     named = {(a["effect"], tuple(a["where"])) for a in first["alternatives"]}
     assert other <= named, first["alternatives"]
     assert all(0 <= a["evidence_gap"] < 10 for a in first["alternatives"])
+
+
+def test_unlisted_structure_defects_change_exactly_what_they_name(tmp_path):
+    """``benchmarks/unlisted_structure.py``: each defect of the real structure changes the truth
+    deck in the one way it names (a member gone; one member's orientation vector turned 90
+    degrees about its axis, so its two bending planes exchange; a pinned support's free
+    rotations held) and nothing else, and the study's readings are re-simulated from it with
+    the study's own noise draws (a clean study's readings are reproduced exactly)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import unlisted_structure as us
+
+    st = gen.generate_study(0, 5, tmp_path, kind=gen.NONE, shape="hall", style="plain")
+    truth = read_deck(st.hidden / "truth" / "truth.bdf")
+    joint_grids = {g for j in st.planted["joints"] for g in j["grids"]}
+    for defect in us.DEFECTS:
+        places = us._places(truth, defect, joint_grids)
+        assert places, defect
+        what, key = place = places[0]
+        d = us._changed(truth, defect, place)
+        if defect == "missing_member":
+            assert key not in (d.cbars if what == "cbar" else d.rods)
+            assert len(d.cbars) + len(d.rods) == len(truth.cbars) + len(truth.rods) - 1
+        elif defect == "rotated_section":
+            b0, b1 = truth.cbars[key], d.cbars[key]
+            axis = np.subtract(truth.grids[b0.gb].xyz, truth.grids[b0.ga].xyz)
+            v0 = np.array(b0.x, float) if b0.x is not None else np.subtract(truth.grids[b0.g0].xyz, truth.grids[b0.ga].xyz)
+            v0 = v0 - (v0 @ axis) / (axis @ axis) * axis
+            assert abs(np.dot(b1.x, axis)) < 1e-9 * np.linalg.norm(axis) * np.linalg.norm(b1.x)
+            assert abs(np.dot(b1.x, v0)) < 1e-9 * np.linalg.norm(v0) * np.linalg.norm(b1.x)
+            assert {k: v for k, v in d.cbars.items() if k != key} == {k: v for k, v in truth.cbars.items() if k != key}
+        else:
+            held = "".join(sorted({c for s in d.spc1s if key in s.grids for c in s.components}))
+            assert held == "123456" and len(d.spc1s) == len(truth.spc1s) + 1
+    # the readings of the unchanged structure, simulated again, are the study's own
+    p = st.planted
+    seed = json.loads((st.hidden / "truth.json").read_text())["seed"]
+    sim = gen.simulate_study(truth, us._loads(st.folder), p["joints"], p["away_grids"], [],
+                             gen.NoiseConfig(**p["noise"]), seed)
+    # to a millionth of each reading's sigma (truth.bdf holds the truth to ~15 digits; small
+    # readings are differences of large displacements)
+    m = load_study(st.folder).measurements
+    assert np.all(np.abs(m.values - sim.values) <= 1e-6 * sim.rows.sigma)
