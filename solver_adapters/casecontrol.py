@@ -8,6 +8,10 @@ data:
   inherits (a deck without SUBCASE has one case, numbered 1);
 * ``LOAD = n``, ``SPC = n`` and ``MPC = n`` select the load set, the constraint set and the
   multipoint-constraint set of a subcase;
+* ``TEMPERATURE(LOAD) = n`` selects its thermal load, ``TEMPERATURE(MATERIAL) = n`` the
+  temperatures of temperature-dependent materials, ``TEMPERATURE(INITIAL) = n`` the initial
+  temperatures; ``TEMPERATURE = n`` and ``TEMPERATURE(BOTH) = n`` are LOAD and MATERIAL (MSC QRG,
+  TEMPERATURE);
 * ``TITLE``, ``SUBTITLE``, ``LABEL`` are kept as text;
 * output requests (``DISP``, ``STRESS``, ``FORCE`` ...), output controls (``ECHO``, ``SET``,
   ``LINE`` ...), selections of other solutions (``METHOD``, ``FREQ``, ``DESOBJ``, ``TSTEPNL``,
@@ -17,7 +21,7 @@ data:
   (to say what a deck without a static load selects instead);
 * ``AUTOSPC = YES/NO`` is kept in :attr:`CaseControl.autospc`;
 * commands that change the static solution and that an import cannot carry over
-  (``TEMPERATURE``, ``DEFORM``, ``K2GG``, ``P2G``, ``LOADSET``, ``SYMCOM`` ...) are errors naming the
+  (``DEFORM``, ``K2GG``, ``P2G``, ``LOADSET``, ``SYMCOM`` ...) are errors naming the
   line; an unknown command is an error naming the line and the known commands closest to it;
 * ``SUBCOM`` (a combination of subcases) is skipped with its ``SUBSEQ``: the subcases it
   combines are imported themselves.
@@ -72,7 +76,6 @@ _NOT_STATIC = {  # selections of other solutions: no effect on the static soluti
     "AECO": "AECONFIG",
 }
 _UNSUPPORTED = {  # change the static solution; an imported study cannot carry them
-    "TEMP": "TEMPERATURE (thermal loads)",
     "DEFO": "DEFORM (enforced element deformation)", "SUPO": "SUPORT1 (inertia relief)",
     "K2GG": "K2GG (direct matrix input)", "P2G": "P2G (direct load input)",
     "K2PP": "K2PP (direct matrix input)", "K42G": "K42GG (direct matrix input)",
@@ -84,7 +87,11 @@ _UNSUPPORTED = {  # change the static solution; an imported study cannot carry t
 }
 _PLOT_PACKETS = {"PLOT", "XYPLOT", "XYOUT", "XYPUNCH", "POST", "CARDS"}
 _OTHER = ("SUBCASE", "SUBCOM", "SUBSEQ", "LOAD", "SPC", "MPC", "OUTPUT", "PARAM", "BEGIN", "AUTOSPC",
-          "SEALL", "SUPER")
+          "SEALL", "SUPER", "TEMPERATURE")
+# TEMPERATURE(option): the kinds of temperature set each option selects (MSC QRG TEMPERATURE:
+# blank and BOTH are LOAD and MATERIAL)
+_TEMP_OPTIONS = {"": ("LOAD", "MAT"), "BOTH": ("LOAD", "MAT"), "LOAD": ("LOAD",), "MATE": ("MAT",),
+                 "MATERIAL": ("MAT",), "INIT": ("INIT",), "INITIAL": ("INIT",)}
 
 
 def _lookup(table: dict[str, str], word: str) -> str | None:
@@ -120,6 +127,17 @@ class Subcase:
     others: tuple[str, ...] = ()
     mpc: int | None = None          # the MPC set selected (MPC = n), and the line that did
     mpc_line: int = 0
+    temp_load: int | None = None    # TEMPERATURE(LOAD) (or BOTH) = n: the thermal load's set
+    temp_load_line: int = 0
+    temp_mat: int | None = None     # TEMPERATURE(MATERIAL) (or BOTH) = n
+    temp_mat_line: int = 0
+    temp_init: int | None = None    # TEMPERATURE(INITIAL) = n
+    temp_init_line: int = 0
+
+    @property
+    def static(self) -> bool:
+        """The subcase has a static load: a LOAD set or a thermal load."""
+        return self.load is not None or self.temp_load is not None
 
 
 @dataclass(frozen=True)
@@ -255,6 +273,14 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
             current["SPC"] = (_integer(file, line, "SPC", value.strip()), line)
         elif word == "MPC":
             current["MPC"] = (_integer(file, line, "MPC", value.strip()), line)
+        elif key == "TEMP" and _is(word, "TEMPERATURE"):
+            option = options.strip("() ").upper()
+            kinds = _TEMP_OPTIONS.get(option)
+            if kinds is None:
+                raise DeckFormatError("TEMPERATURE's option must be LOAD, MATERIAL, INITIAL or BOTH",
+                                      file=file, line=line, card=word, value=stmt)
+            for kind in kinds:
+                current[f"TEMP_{kind}"] = (_integer(file, line, "TEMPERATURE", value.strip()), line)
         elif key in _TITLES and _is(word, _TITLES[key]):
             current[_TITLES[key]] = (value, line)
         elif word == "OUTPUT":
@@ -312,10 +338,11 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
         load, load_line = merged.get("LOAD", (None, 0))
         spc, spc_line = merged.get("SPC", (None, 0))
         mpc, mpc_line = merged.get("MPC", (None, 0))
+        temps = [v for k in ("TEMP_LOAD", "TEMP_MAT", "TEMP_INIT") for v in merged.get(k, (None, 0))]
         return Subcase(sid, load, spc, line, load_line, spc_line,
                        str(merged.get("TITLE", ("", 0))[0]), str(merged.get("SUBTITLE", ("", 0))[0]),
                        str(merged.get("LABEL", ("", 0))[0]),
-                       tuple(f"{k} = {v}" if v else k for k, v in others.items()), mpc, mpc_line)
+                       tuple(f"{k} = {v}" if v else k for k, v in others.items()), mpc, mpc_line, *temps)
 
     if subcases:
         cases = tuple(make(sid, line, own) for sid, line, own in subcases)

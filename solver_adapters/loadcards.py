@@ -21,8 +21,10 @@ Several cards of one set add up. A CID other than 0 gives the vector in that coo
 CORD2R/C/S of the deck; for a cylindrical or spherical system, along its directions at the
 grid). The resolved loads are returned in each grid's displacement system (its CD; the basic
 system for CD 0), the components loads.csv holds.
-Other load cards (PLOAD, PLOAD2, PLOAD4, TEMP, SPCD, RFORCE, ...) are recorded by set: selecting
-such a set is an error naming the card.
+Other load cards (PLOAD, PLOAD2, PLOAD4, TEMPP1, SPCD, RFORCE, ...) are recorded by set: selecting
+such a set is an error naming the card. A subcase's thermal load (``TEMPERATURE(LOAD) = n``: TEMP,
+TEMPD, TEMPRB) is resolved by :meth:`LoadCards.resolve_thermal` (:mod:`solver_adapters.thermalloads`);
+a LOAD set does not include temperature cards (NASTRAN selects them with TEMPERATURE only).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ import numpy as np
 # the field readers every load card shares (located errors for blank, bad or extra fields)
 from solver_adapters.elementloads import MassReader, _int, _max_fields, _real, read_grav, read_pload1
 from solver_adapters.protocol import DeckFormatError
+from solver_adapters.thermalloads import TEMPERATURE_CARDS, ThermalCards, read_thermal_cards
 
 __all__ = ["LOAD_CARDS", "OTHER_LOAD_CARDS", "PointLoad", "LoadCombination", "LoadCards", "read_load_cards",
            "InputFile", "read_input_file"]
@@ -92,6 +95,16 @@ class LoadCards:
     bar: dict[int, list] = field(default_factory=dict)              # SID -> PLOAD1 (BarLoad)
     gravity: dict[int, list] = field(default_factory=dict)          # SID -> GRAV (Gravity)
     masses: object = None                                            # elementloads.MassReader
+    cards: list = field(default_factory=list)                       # every bulk card (thermal)
+    _thermal: ThermalCards | None = None
+
+    @property
+    def thermal(self) -> ThermalCards:
+        """TEMP, TEMPD, TEMPRB and MAT1 A/TREF, read when a subcase first selects a thermal load
+        (a deck whose temperature cards no subcase selects is not held to them)."""
+        if self._thermal is None:
+            self._thermal = read_thermal_cards(self.cards)
+        return self._thermal
 
     @property
     def set_ids(self) -> set[int]:
@@ -122,6 +135,27 @@ class LoadCards:
             raise DeckFormatError(f"load set {sid}{sel} not found: no LOAD, FORCE, MOMENT, SLOAD, "
                                   f"PLOAD1 or GRAV card has SID {sid}")
         return self._point_set(sid, deck, sel)
+
+    def resolve_thermal(self, tsid: int, deck, *, where: str = "",
+                        initial: int | None = None) -> dict[tuple[int, int], float]:
+        """The nodal loads of temperature set ``tsid`` (selected by ``TEMPERATURE(LOAD)``), in
+        each grid's displacement system, as :meth:`resolve` gives a load set's; ``initial`` the
+        TEMPERATURE(INITIAL) set, if any."""
+        sel = f" (selected by {where})" if where else ""
+        others = [c for c in self.other.get(tsid, ()) if c.name not in TEMPERATURE_CARDS]
+        if others:
+            kinds = sorted({c.name for c in others})
+            raise others[0].error(1, f"temperature set {tsid}{sel} contains {', '.join(kinds)}: only "
+                                     f"TEMP, TEMPD and TEMPRB (on bars, beams and rods) are imported")
+        if not self.thermal.has(tsid):
+            raise DeckFormatError(f"temperature set {tsid}{sel} not found: no TEMP, TEMPD or TEMPRB "
+                                  f"card has SID {tsid}")
+        if initial is not None and not self.thermal.has(initial):
+            raise DeckFormatError(f"initial temperature set {initial} not found: no TEMP, TEMPD or "
+                                  f"TEMPRB card has SID {initial}")
+        out: dict[tuple[int, int], float] = {}
+        _add_basic(out, self.thermal.loads(tsid, deck, sel, initial), deck)
+        return out
 
     def _point_set(self, sid: int, deck, sel: str) -> dict[tuple[int, int], float]:
         if sid in self.other:
@@ -375,4 +409,5 @@ def read_input_file(path, text: str | None = None, include_dirs=None) -> InputFi
     bulk = read_bulk(p, text, include_dirs)
     loads = read_load_cards(c for c in bulk.cards if c.name in LOAD_CARDS or c.name in OTHER_LOAD_CARDS)
     loads.masses = MassReader(bulk.cards)
+    loads.cards = bulk.cards
     return InputFile(str(p), cc, bulk.cards, bulk.files, loads, bulk)

@@ -264,10 +264,10 @@ def _mpc_selection(cc: CaseControl, sets: dict[int, list], path: Path, notes: li
     """The MPC/MPCADD cards to drop from model.bdf: every set the subcases do not select (all of
     them when none selects one: NASTRAN then applies none). The subcases that import a load must
     select the same MPC set (a study has one model)."""
-    chosen = {s.mpc for s in cc.subcases if s.load is not None}
+    chosen = {s.mpc for s in cc.subcases if s.static}
     if len(chosen) > 1:
         detail = ", ".join(f"subcase {s.id}: {'none' if s.mpc is None else s.mpc}"
-                           for s in cc.subcases if s.load is not None)
+                           for s in cc.subcases if s.static)
         raise DeckFormatError(f"the subcases select different MPC sets ({detail}); a study has one "
                               f"model: give every subcase the same MPC = set (or import the deck "
                               f"once per set)", file=str(path))
@@ -276,7 +276,7 @@ def _mpc_selection(cc: CaseControl, sets: dict[int, list], path: Path, notes: li
         notes.append(f"no subcase selects an MPC set (no MPC =), so NASTRAN applies none: dropped "
                      f"the MPC/MPCADD cards of set(s) {', '.join(map(str, sorted(sets)))}")
         return [c for cs in sets.values() for c in cs]
-    line = next(s.mpc_line for s in cc.subcases if s.load is not None)
+    line = next(s.mpc_line for s in cc.subcases if s.static)
     if choice not in sets:
         raise DeckFormatError(f"MPC = {choice} selects a set the bulk data does not have (no MPC or "
                               f"MPCADD with SID {choice})", file=str(path), line=line, card="MPC",
@@ -319,6 +319,37 @@ def _no_static_load(cc: CaseControl | None, path: Path) -> str:
             f"yourself) and import again")
 
 
+def _initial_temperatures(cc: CaseControl | None) -> int | None:
+    """The TEMPERATURE(INITIAL) set of the subcases that import a load (one, else an error)."""
+    if cc is None:
+        return None
+    chosen = {s.temp_init for s in cc.subcases if s.static and s.temp_init is not None}
+    if len(chosen) > 1:
+        s = next(s for s in cc.subcases if s.static and s.temp_init is not None)
+        raise DeckFormatError(f"the subcases select different initial temperature sets "
+                              f"({', '.join(map(str, sorted(chosen)))}); NASTRAN uses one",
+                              file=cc.file, line=s.temp_init_line, card="TEMPERATURE")
+    return chosen.pop() if chosen else None
+
+
+def _temperature_selections(cc: CaseControl, cards, path: Path, notes: list[str]) -> None:
+    """TEMPERATURE(MATERIAL) (also from TEMPERATURE = n) selects the temperatures of
+    temperature-dependent materials (MATTi): no effect on a deck without MATTi cards, and an
+    error with them (the reference solver has no temperature-dependent material)."""
+    mat = [s for s in cc.subcases if s.static and s.temp_mat is not None]
+    if not mat:
+        return
+    matt = next((c for c in cards if c.name.startswith("MATT")), None)
+    if matt is not None:
+        raise DeckFormatError(f"TEMPERATURE(MATERIAL) = {mat[0].temp_mat} selects temperatures for "
+                              f"temperature-dependent materials, and the deck has {matt.name} at "
+                              f"{matt.src}: temperature-dependent materials are not modelled",
+                              file=str(path), line=mat[0].temp_mat_line, card="TEMPERATURE")
+    notes.append(f"TEMPERATURE(MATERIAL) = {', '.join(sorted({str(s.temp_mat) for s in mat}))} "
+                 f"(TEMPERATURE = n is LOAD and MATERIAL): no effect, the deck has no "
+                 f"temperature-dependent material (MATTi)")
+
+
 def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
         include_dirs: list | tuple = ()) -> ImportResult:
     """Read the NASTRAN input file ``deck_path`` and make the study's files (not written yet).
@@ -353,22 +384,35 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
                                   f"({', '.join(map(str, top[:10]))}); add a case control with one "
                                   f"SUBCASE per load case (SUBCASE n / LOAD = set) and import again",
                                   file=str(path))
-        selected = [("1", top[0], f"{path}: the only load set")] if top else []
+        selected = [("1", top[0], None, f"{path}: the only load set")] if top else []
         if top:
             notes.append(f"no case control: load set {top[0]} (the deck's only one) imported as case 1")
         spc_choice = None
     else:
         selected = []
+        if cc.sol and cc.sol.upper() not in _STATIC_SOLS:
+            for s in cc.subcases:
+                line = s.temp_load_line or s.temp_mat_line or s.temp_init_line
+                if line:
+                    raise DeckFormatError(f"the deck's solution is {_sol_text(cc.sol)}, not linear "
+                                          f"statics: its TEMPERATURE selections mean what that "
+                                          f"solution makes of them, and are imported in a linear "
+                                          f"static deck (SOL 101) only", file=str(path), line=line,
+                                          card="TEMPERATURE")
         for s in cc.subcases:
-            if s.load is None:
-                notes.append(f"subcase {s.id} selects no load set (no LOAD =): not imported")
+            if not s.static:
+                notes.append(f"subcase {s.id} selects no load set (no LOAD = or TEMPERATURE(LOAD) =): not imported")
                 continue
-            where = f"LOAD = {s.load} at {path}:{s.load_line}" + (f", subcase {s.id}" if cc.explicit else "")
-            selected.append((str(s.id), s.load, where))
-        spcs = {s.spc for s in cc.subcases if s.load is not None}
+            what = ([f"LOAD = {s.load} at {path}:{s.load_line}"] if s.load is not None else []) + \
+                ([f"TEMPERATURE(LOAD) = {s.temp_load} at {path}:{s.temp_load_line}"]
+                 if s.temp_load is not None else [])
+            where = " and ".join(what) + (f", subcase {s.id}" if cc.explicit else "")
+            selected.append((str(s.id), s.load, s.temp_load, where))
+        _temperature_selections(cc, cards, path, notes)
+        spcs = {s.spc for s in cc.subcases if s.static}
         if len(spcs) > 1:
             detail = ", ".join(f"subcase {s.id}: {'none' if s.spc is None else s.spc}"
-                               for s in cc.subcases if s.load is not None)
+                               for s in cc.subcases if s.static)
             raise DeckFormatError(f"the subcases select different constraint sets ({detail}); a study "
                                   f"has one set of supports: give every subcase the same SPC = set "
                                   f"(or import the deck once per set)", file=str(path))
@@ -385,7 +429,7 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
                          f"dropped the SPC/SPC1/SPCADD cards of set(s) "
                          f"{', '.join(map(str, sorted(spc_sets)))}")
         else:
-            line = next(s.spc_line for s in cc.subcases if s.load is not None)
+            line = next(s.spc_line for s in cc.subcases if s.static)
             if spc_choice not in spc_sets:
                 raise DeckFormatError(f"SPC = {spc_choice} selects a constraint set the bulk data "
                                       f"does not have (no SPC, SPC1 or SPCADD with SID {spc_choice})",
@@ -415,11 +459,19 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
     # loads.csv
     rows: list[str] = ["case,grid,component,value"]
     cases: list[str] = []
-    for label, sid, where in selected:
-        values = loads.resolve(sid, deck, where=where)
+    initial = _initial_temperatures(cc)
+    if initial is not None and not any(tsid is not None for _, _, tsid, _ in selected):
+        notes.append(f"TEMPERATURE(INITIAL) = {initial}: no effect, no imported case has a thermal load")
+    for label, sid, tsid, where in selected:
+        values = loads.resolve(sid, deck, where=where) if sid is not None else {}
+        if tsid is not None:
+            for dof, v in loads.resolve_thermal(tsid, deck, where=where, initial=initial).items():
+                values[dof] = values.get(dof, 0.0) + v
         nonzero = sorted((d, v) for d, v in values.items() if v != 0.0)
         if not nonzero:
-            notes.append(f"case {label}: load set {sid} sums to zero at every DOF: not imported")
+            what = " and ".join(([f"load set {sid}"] if sid is not None else []) +
+                                ([f"temperature set {tsid}"] if tsid is not None else []))
+            notes.append(f"case {label}: {what} sums to zero at every DOF: not imported")
             continue
         cases.append(label)
         rows += [f"{label},{g},{comp},{v!r}" for (g, comp), v in nonzero]
@@ -438,8 +490,10 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
         ex = [w if w != "SOL" else f"SOL {cc.sol}" for w in dict.fromkeys(cc.executive)]
         notes.append(f"skipped the executive control ({', '.join(ex)})")
         if cc.sol and cc.sol.upper() not in _STATIC_SOLS:
-            taken = ", ".join(f"{label} (LOAD = {sid})" for label, sid, _ in selected
-                              if label in cases)
+            taken = ", ".join(f"{label} (" + " and ".join(
+                ([f"LOAD = {sid}"] if sid is not None else []) +
+                ([f"TEMPERATURE(LOAD) = {tsid}"] if tsid is not None else [])) + ")"
+                for label, sid, tsid, _ in selected if label in cases)
             notes.append(f"note: the deck's own solution is {_sol_text(cc.sol)}, not linear statics: "
                          f"imported its structure and, as linear static load cases, the load sets "
                          f"its subcases select: {taken}; the deck's own results are not these")

@@ -21,6 +21,18 @@ GRAV (MSC QRG): the acceleration A (N1, N2, N3) in system CID applied to the mas
 default lumped mass (PARAM,COUPMASS off): half of a bar's or rod's mass (rho A + NSM) L at each
 of its ends (a bar's offset ends, the force then carried to the grid with its moment), a
 CONM2's mass at its centre of gravity (offset X from the grid), all mass times PARAM,WTMASS.
+
+Thermal loads (MSC QRG TEMP, TEMPD, TEMPRB, MAT1; MYSTRAN's BAR1 and ROD1 compute the same): a
+bar's or rod's free thermal strain alpha (T - TREF), T the element's mean temperature (TEMPRB's
+TA and TB, or the mean of its two grids' temperatures), and for a bar the curvatures of the
+effective linear gradients TP1 (element y) and TP2 (element z), varying linearly from end A to
+end B. TEMPRB defines TP1 and TP2 by the thermal moments they give, int T y dA = I1 TP1 and
+int T z dA = I2 TP2, so the free curvatures solve [I1 I12; I12 I2] (v'', w'') = -alpha (I1 TP1,
+I2 TP2) (plane 1: v'' with theta_z = v'; plane 2: w'' with theta_y = -w'). The equivalent nodal
+loads are the fixed-end forces of that free deformation: with d the free displacements of end B
+of the bar clamped at end A, K [0; d] (K the bar's exact element stiffness), pin flags condensed
+and offsets carried to the grids as for PLOAD1. So a bar clamped at both ends gets no
+displacement and the reaction E A alpha (T - TREF), and a free end moves alpha (T - TREF) L.
 """
 
 from __future__ import annotations
@@ -160,6 +172,48 @@ def pload1_loads(deck, b, load: Pload1) -> dict[tuple[int, int], float]:
     R, L, wa, wb = bar_frame(deck, b)
     f12 = fixed_end_loads(deck, b, L, pload1_points(load, R, L))
     return _to_grids(b, R, wa, wb, f12)
+
+
+def thermal_bar_loads(deck, b, alpha: float, strain: float, tp1: tuple[float, float],
+                      tp2: tuple[float, float]) -> dict[tuple[int, int], float]:
+    """The nodal loads (basic) of bar ``b``'s free thermal deformation: axial ``strain`` (alpha
+    (T - TREF)), gradients ``tp1`` = (TP1A, TP1B), ``tp2`` = (TP2A, TP2B) (see the module
+    docstring). :class:`LoadError` for gradients on a PBEAM with a neutral-axis offset."""
+    R, L, wa, wb = bar_frame(deck, b)
+    p = deck.pbars[b.pid]
+    d = np.zeros(12)
+    d[6] = strain * L
+    if any(tp1) or any(tp2):
+        if p.n1 or p.n2:
+            raise LoadError(1, f"a temperature gradient on bar {b.eid}, whose {p.card} {p.pid} has "
+                               f"a neutral-axis offset (N1, N2): its thermal curvature about the "
+                               f"offset axis is not modelled")
+        inertia = np.array([[p.i1, p.i12], [p.i12, p.i2]])
+        moments = -alpha * np.array([[p.i1 * tp1[0], p.i1 * tp1[1]], [p.i2 * tp2[0], p.i2 * tp2[1]]])
+        (va, vb), (wa_, wb_) = np.linalg.solve(inertia, moments)    # curvatures at A and B
+        d[7] = L * L * (va / 3.0 + vb / 6.0)                       # v(L), v'' linear in x
+        d[8] = L * L * (wa_ / 3.0 + wb_ / 6.0)                     # w(L)
+        d[10] = -0.5 * L * (wa_ + wb_)                             # theta_y = -w'(L)
+        d[11] = 0.5 * L * (va + vb)                                # theta_z = v'(L)
+    f = _local_stiffness(deck, b, np.array([L]))[0] @ d
+    f12 = fixed_end_loads(deck, b, L, [(0.0, f[:6]), (L, f[6:])])
+    return _to_grids(b, R, wa, wb, f12)
+
+
+def thermal_rod_loads(deck, r, strain: float) -> dict[tuple[int, int], float]:
+    """The nodal loads (basic) of rod ``r``'s free axial thermal ``strain``: E A strain along
+    the rod, pulling its ends apart."""
+    mid, a, _ = deck.rod_section(r)
+    xa, xb = np.array(deck.grids[r.ga].xyz), np.array(deck.grids[r.gb].xyz)
+    e = (xb - xa) / np.linalg.norm(xb - xa)
+    n = deck.mat1s[mid].e * a * strain
+    out: dict[tuple[int, int], float] = {}
+    for grid, sign in ((r.ga, -1.0), (r.gb, 1.0)):
+        for c in range(3):
+            v = float(sign * n * e[c])
+            if v != 0.0:
+                out[(grid, c + 1)] = out.get((grid, c + 1), 0.0) + v
+    return out
 
 
 @dataclass
