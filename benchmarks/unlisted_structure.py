@@ -220,7 +220,7 @@ def main(argv: list[str] | None = None) -> int:
     for defect in args.defects:
         i = 0
         done = 0
-        while done < args.n and i < 4 * args.n:
+        while done < args.n and i < 10 * args.n:
             r = run_one(i, args.seed, fams[(i + DEFECTS.index(defect)) % len(fams)], defect, args.out)
             i += 1
             if r is None:

@@ -348,20 +348,7 @@ def test_user_deck_through_mystran(tmp_path):
     PBARL, offsets, rods, SPCADD) through MYSTRAN agrees with the project's plain writing of the
     same frame through the reference solver to the 7 digits MYSTRAN prints (1e-5 of the largest
     value); and the study the generator writes for ``adapter = "mystran"`` names it."""
-    from solver_adapters.registry import make_adapter
-
-    rng = np.random.default_rng(8)
-    f = fr.hall(rng)
-    fr.assign_user_systems(f, rng)
-    gen.add_offsets(f, rng)
-    gen.place_joints(f, rng)
-    (tmp_path / "user.bdf").write_text(fr.user_text(f, fr.user_style(f, rng), "user"))
-    plain = read_deck_text(fr.plain_text(f, "plain"), "<plain>")
-    loads = gen.load_matrix(gen.random_loads(f, 4, rng, 3, ["L1", "L2", "L3", "L4"]))
-    report = [(g, c) for g in sorted(f.grids)[::3] for c in range(1, 7)]
-    m = make_adapter("mystran", tmp_path / "user.bdf").solve(loads, report).values
-    r = ReferenceAdapter(plain).solve(loads, report).values
-    assert np.allclose(m, r, rtol=0, atol=1e-5 * np.abs(r).max())
+    _user_deck_through_mystran_is_the_plain_structure(tmp_path, fr.hall, 8)
     st = gen.generate_study(0, SEED, tmp_path / "study", kind="none", shape="portal", style="user", adapter="mystran")
     assert load_study(st.folder).config.solver.adapter == "mystran"
 
@@ -687,21 +674,9 @@ def test_jacket_through_mystran(tmp_path):
     the 7 digits MYSTRAN prints (1e-5 of the largest value); a study of the family named
     ``adapter = "mystran"`` identifies through it."""
     from blackbox.commands.identify import run as identify
-    from solver_adapters.registry import make_adapter
 
-    rng = np.random.default_rng(2)
-    f = fr.jacket(rng)
+    f = _user_deck_through_mystran_is_the_plain_structure(tmp_path, fr.jacket, 2)
     assert set(f.spcs.values()) == {"1236"}
-    fr.assign_user_systems(f, rng)
-    gen.add_offsets(f, rng)
-    gen.place_joints(f, rng)
-    (tmp_path / "user.bdf").write_text(fr.user_text(f, fr.user_style(f, rng), "user"))
-    plain = read_deck_text(fr.plain_text(f, "plain"), "<plain>")
-    loads = gen.load_matrix(gen.random_loads(f, 4, rng, 3, ["L1", "L2", "L3", "L4"]))
-    report = [(g, c) for g in sorted(f.grids)[::3] for c in range(1, 7)]
-    m = make_adapter("mystran", tmp_path / "user.bdf").solve(loads, report).values
-    r = ReferenceAdapter(plain).solve(loads, report).values
-    assert np.allclose(m, r, rtol=0, atol=1e-5 * np.abs(r).max())
     st = gen.generate_study(9, SEED, tmp_path / "study", kind="none", shape="jacket", style="user", adapter="mystran")
     assert load_study(st.folder).config.solver.adapter == "mystran"
     assert identify(st.folder, profile=False).ok
@@ -840,3 +815,24 @@ def test_unlisted_structure_defects_change_exactly_what_they_name(tmp_path):
     # readings are differences of large displacements)
     m = load_study(st.folder).measurements
     assert np.all(np.abs(m.values - sim.values) <= 1e-6 * sim.rows.sigma)
+
+
+def _user_deck_through_mystran_is_the_plain_structure(tmp_path, family, seed):
+    """A frame of ``family`` written as a user writes it (systems, offsets), run by MYSTRAN,
+    against its plain deck through the reference solver (to 1e-5 of the largest value: MYSTRAN
+    prints 7 digits); returns the frame."""
+    from solver_adapters.registry import make_adapter
+
+    rng = np.random.default_rng(seed)
+    f = family(rng)
+    fr.assign_user_systems(f, rng)
+    gen.add_offsets(f, rng)
+    gen.place_joints(f, rng)
+    (tmp_path / "user.bdf").write_text(fr.user_text(f, fr.user_style(f, rng), "user"))
+    plain = read_deck_text(fr.plain_text(f, "plain"), "<plain>")
+    loads = gen.load_matrix(gen.random_loads(f, 4, rng, 3, ["L1", "L2", "L3", "L4"]))
+    report = [(g, c) for g in sorted(f.grids)[::3] for c in range(1, 7)]
+    m = make_adapter("mystran", tmp_path / "user.bdf").solve(loads, report).values
+    r = ReferenceAdapter(plain).solve(loads, report).values
+    assert np.allclose(m, r, rtol=0, atol=1e-5 * np.abs(r).max())
+    return f
