@@ -16,7 +16,9 @@ Two ways, chosen by the study:
   addition must lower ``cv_chi2``. Each fold's fit is *one Gauss-Newton step* from the full fit
   (approximate cross-validation: the leave-fold-out optimum of the model linearised at the full
   optimum), so a K-fold check costs K small least-squares solves, no refits and no solver runs.
-  Parameters at a bound stay there; an effect parameter that only the left-out fold informs
+  Parameters at a bound stay there, and so does a joint parameter the step would move by more
+  than its own value (a spring in the flat valley of running rigid or free, where one linearised
+  step predicts nonsense); an effect parameter that only the left-out fold informs
   (one case's load scale when that case is left out) goes back to its nested value, since nothing
   else can tell it. An effect whose parameters no fold can both learn and predict (confined to
   one case) cannot be checked by prediction at all: it rests on the LR test and BIC, and the
@@ -95,11 +97,26 @@ def cv_chi2(J: np.ndarray, r: np.ndarray, x: np.ndarray, lo: np.ndarray, hi: np.
         d = np.zeros(p)
         reset = resettable & ~informed
         d[reset] = nominal[reset] - x[reset]
-        if learn.any():
+        # a joint parameter that the step would move by more than its own size lies in a flat
+        # valley of the fold's fit (a spring running rigid or free): the linearised step means
+        # nothing there, so the fold keeps it at the full fit's value and solves again
+        for _ in range(p):
+            if not learn.any():
+                break
             s = np.linalg.norm(Jt[:, learn], axis=0)
             sol = np.linalg.lstsq(Jt[:, learn] / s, r[~out], rcond=1e-10)[0]
             d[learn] = sol / s
+            wild = learn & ~resettable & (np.abs(d) > np.abs(x))
+            if not wild.any():
+                break
+            learn &= ~wild
+            d[wild] = 0.0
         e = r[out] - Jg @ d
+        import os
+        if os.environ.get("CVDBG"):
+            rel = np.abs(d) / np.maximum(np.abs(x), 1e-300)
+            top = np.argsort(-rel)[:4]
+            print("CV fold", len(fold), "chi2", round(float(e @ e)), "top rel steps", [(int(i), float(f"{rel[i]:.3g}"), float(f"{x[i]:.3g}"), float(f"{hi[i]:.3g}")) for i in top], flush=True)
         total += float(e @ e)
         seen |= learn & (np.linalg.norm(Jg, axis=0) > tiny)
     return total, [bool(seen[sl].any()) for sl in owners]
