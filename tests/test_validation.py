@@ -93,3 +93,28 @@ def test_a_parameter_at_its_bound_stays_there():
     folds = kfold(range(10)).folds
     cv, _ = cv_chi2(J, r, x, lo, np.full(3, np.inf), np.full(3, np.nan), case, folds)
     assert cv == pytest.approx(_explicit(J[:, :2], y, case, folds), rel=1e-9)
+
+
+def test_a_spring_in_a_flat_valley_stays_at_the_full_fit():
+    """A spring (a joint parameter bounded at 0) that a fold's linearised step would move by more
+    than its own value (a spring running rigid or free, where one step predicts nonsense) stays
+    at the full fit's value in that fold: here a spring at 1e-6 of what the data alone would give
+    it, which every fold would move a millionfold, so every fold's refit holds it (the explicit
+    refits with that column held). A free (complex-joint) parameter is never held: for it the
+    one-step K-fold stays exact (the refits without a hold)."""
+    case, J, y = _problem(seed=5)
+    x = np.linalg.lstsq(J, y, rcond=None)[0]
+    folds = kfold(range(10)).folds
+    nan = np.full(3, np.nan)
+    lo = np.array([-np.inf, -np.inf, 0.0])
+    x_spring = x.copy()
+    x_spring[2] = abs(x[2]) * 1e-6
+    x_spring[:2] = np.linalg.lstsq(J[:, :2], y - J[:, 2] * x_spring[2], rcond=None)[0]
+    r_spring = y - J @ x_spring
+    cv, _ = cv_chi2(J, r_spring, x_spring, lo, np.full(3, np.inf), nan, case, folds)
+    expect = _explicit(J[:, :2], y - J[:, 2] * x_spring[2], case, folds)
+    assert cv == pytest.approx(expect, rel=1e-9)
+    inf = np.full(3, np.inf)
+    r = y - J @ x
+    cv_free, _ = cv_chi2(J, r, x, -inf, inf, nan, case, folds)
+    assert cv_free == pytest.approx(_explicit(J, y, case, folds), rel=1e-9)

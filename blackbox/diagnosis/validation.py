@@ -16,9 +16,9 @@ Two ways, chosen by the study:
   addition must lower ``cv_chi2``. Each fold's fit is *one Gauss-Newton step* from the full fit
   (approximate cross-validation: the leave-fold-out optimum of the model linearised at the full
   optimum), so a K-fold check costs K small least-squares solves, no refits and no solver runs.
-  Parameters at a bound stay there, and so does a joint parameter the step would move by more
-  than its own value (a spring in the flat valley of running rigid or free, where one linearised
-  step predicts nonsense); an effect parameter that only the left-out fold informs
+  Parameters at a bound stay there, and so does a spring the step would move by more than its
+  own value (in the flat valley of running rigid or free, where one linearised step predicts
+  nonsense); an effect parameter that only the left-out fold informs
   (one case's load scale when that case is left out) goes back to its nested value, since nothing
   else can tell it. An effect whose parameters no fold can both learn and predict (confined to
   one case) cannot be checked by prediction at all: it rests on the LR test and BIC, and the
@@ -97,16 +97,16 @@ def cv_chi2(J: np.ndarray, r: np.ndarray, x: np.ndarray, lo: np.ndarray, hi: np.
         d = np.zeros(p)
         reset = resettable & ~informed
         d[reset] = nominal[reset] - x[reset]
-        # a joint parameter that the step would move by more than its own size lies in a flat
-        # valley of the fold's fit (a spring running rigid or free): the linearised step means
-        # nothing there, so the fold keeps it at the full fit's value and solves again
+        # a spring (a joint parameter bounded at 0) that the step would move by more than its own
+        # value lies in a flat valley of the fold's fit (running rigid or free): the linearised
+        # step means nothing there, so the fold keeps it at the full fit's value and solves again
         for _ in range(p):
             if not learn.any():
                 break
             s = np.linalg.norm(Jt[:, learn], axis=0)
             sol = np.linalg.lstsq(Jt[:, learn] / s, r[~out], rcond=1e-10)[0]
             d[learn] = sol / s
-            wild = learn & ~resettable & (np.abs(d) > np.abs(x))
+            wild = learn & ~resettable & (lo >= 0.0) & (np.abs(d) > np.abs(x))
             if not wild.any():
                 break
             learn &= ~wild
