@@ -68,10 +68,10 @@ from blackbox.diagnosis.split import SplitBase
 from blackbox.diagnosis.validation import Validation, cv_chi2, kfold
 from blackbox.errors import EditedDeckError, IdentificationError
 from blackbox.identification import Observations
-from blackbox.joints import ComplexJoint, JointModel
+from blackbox.joints import ComplexJoint, JointModel, SimpleJoint
 from solver_adapters.protocol import DofLabel
 
-__all__ = ["multipliers", "hypotheses_by_kind", "refit_schedule", "eliminate", "without", "Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "holdout_worse", "VERDICTS", "verdict",
+__all__ = ["declared_fit", "multipliers", "hypotheses_by_kind", "refit_schedule", "eliminate", "without", "Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "holdout_worse", "VERDICTS", "verdict",
            "refit_candidate", "subsumed_removed", "refine", "round_level", "diagnose", "map_refits", "refits_pay"]
 
 
@@ -613,6 +613,30 @@ printed digits on the rich test deck and on the shell-panel car body of
 coordinate system or a support set differs by 1e-2..1 relative."""
 
 
+def declared_fit(model: AugmentedModel, om: ObsMap, hold: ObsMap | None, x0: np.ndarray) -> Fit:
+    """The declared model's fit, which every addition is judged against: from ``x0`` (the
+    identification's estimate) and once more with each simple joint's springs all at the median
+    of its estimate; the lower chi2 is kept. The identification can end with single springs
+    thrown to 0 or rigid at a local minimum, and a misfit left there would be explained by added
+    effects on data that have nothing wrong (a clean study of the blind benchmark started at
+    reduced chi2 1.53 where the equal start reaches 1.10)."""
+    fit = fit_model(model, om, hold, x0)
+    xs = np.asarray(x0, float).copy()
+    simple = False
+    for j, sl in zip(model.spec.joints, model.spec.joint_slices()):
+        if isinstance(j, SimpleJoint) and sl.stop > sl.start:
+            xs[sl] = float(np.median(x0[sl]))
+            simple = True
+    if simple and not np.array_equal(xs, x0) and np.all(np.isfinite(xs)) and np.all(xs > 0.0):
+        try:
+            alt = fit_model(model, om, hold, xs)
+        except IdentificationError:         # the equal start is singular: the first fit stands
+            return fit
+        if alt.chi2 < fit.chi2:
+            return alt
+    return fit
+
+
 def check_nesting(f_split: np.ndarray, f_declared: np.ndarray, om: ObsMap, labels: Sequence[str],
                   solver_rounding: float = 0.0, condition: float = 1.0) -> tuple[float, str | None]:
     """The largest rigid-state difference in sigma, and a warning when it exceeds
@@ -708,7 +732,7 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         if note:
             warnings.append(note)
     t_fit = time.perf_counter()
-    fit = fit_model(model, om, hold, x0)
+    fit = declared_fit(model, om, hold, x0)
     fit_s = None if always_map_refits else time.perf_counter() - t_fit
     declared = fit
     val = Validation("holdout") if hold is not None else kfold(np.unique(om.case))
