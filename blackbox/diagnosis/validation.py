@@ -112,11 +112,6 @@ def cv_chi2(J: np.ndarray, r: np.ndarray, x: np.ndarray, lo: np.ndarray, hi: np.
             learn &= ~wild
             d[wild] = 0.0
         e = r[out] - Jg @ d
-        import os
-        if os.environ.get("CVDBG"):
-            rel = np.abs(d) / np.maximum(np.abs(x), 1e-300)
-            top = np.argsort(-rel)[:4]
-            print("CV fold", len(fold), "chi2", round(float(e @ e)), "top rel steps", [(int(i), float(f"{rel[i]:.3g}"), float(f"{x[i]:.3g}"), float(f"{hi[i]:.3g}")) for i in top], flush=True)
         total += float(e @ e)
         seen |= learn & (np.linalg.norm(Jg, axis=0) > tiny)
     return total, [bool(seen[sl].any()) for sl in owners]
