@@ -146,16 +146,31 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--defects", nargs="+", choices=DEFECTS, default=list(DEFECTS))
     args = ap.parse_args(argv)
+    run_defects(run_one, table, DEFECTS, args.defects, args.n, args.seed, args.out)
+    return 0
+
+
+def run_defects(run_one, table, all_defects, defects, n: int, seed: int, out: Path, tries: int | None = None) -> list:
+    """``n`` studies per defect (``run_one(index, seed, family, defect, out)``, the tuned
+    families in turn from the defect's place in ``all_defects``; a ``None`` row, a study with no
+    place for the defect, is skipped, at most ``tries`` indices per defect), each row printed as
+    it comes; ``out/results.json`` and the table at the end."""
     rows = []
-    fams = [f for f in TUNED]
-    for defect in args.defects:
-        for i in range(args.n):
-            r = run_one(i, args.seed, fams[(i + DEFECTS.index(defect)) % len(fams)], defect, args.out)
+    fams = list(TUNED)
+    for defect in defects:
+        done = 0
+        for i in range(tries or n):
+            if done == n:
+                break
+            r = run_one(i, seed, fams[(i + all_defects.index(defect)) % len(fams)], defect, out)
+            if r is None:
+                continue
+            done += 1
             rows.append(r)
             print(json.dumps(r, default=str), flush=True)
-    (args.out / "results.json").write_text(json.dumps(rows, indent=1, default=str))
+    (out / "results.json").write_text(json.dumps(rows, indent=1, default=str))
     print(table(rows))
-    return 0
+    return rows
 
 
 def table(rows: list[dict]) -> str:
