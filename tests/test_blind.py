@@ -491,18 +491,25 @@ def test_bus_frames():
         assert np.all(np.isfinite(u)) and np.abs(u).max() > 0
 
 
+def _rig_cases(family, seed: int, n: int):
+    """A frame of ``family`` in the user's systems (some grid with a CD system) with its joints
+    placed, and ``n`` of its own load cases: forces only."""
+    rng = np.random.default_rng(seed)
+    f = family(rng)
+    fr.assign_user_systems(f, rng)
+    gen.place_joints(f, rng)
+    assert any(f.cd.get(g, 0) for g in f.grids)
+    rows = gen.random_loads(f, n, rng, 2, [f"L{c}" for c in range(n)])
+    assert {r[2] for r in rows} <= {1, 2, 3}
+    return f, rows
+
+
 def test_bus_rig_cases_in_the_grids_systems():
     """The bus's load cases are a test rig's, written in each grid's displacement system: turned
     back to basic, every force lies along one body axis (an actuator's line) with 0.3-1 times the
     family's force, on no support and no joint; forces only; over 40 cases all three directions
     occur, and a torsion pair (two opposite equal vertical forces at one end's floor corners)."""
-    rng = np.random.default_rng(3)
-    f = fr.bus(rng)
-    fr.assign_user_systems(f, rng)
-    gen.place_joints(f, rng)
-    assert any(f.cd.get(g, 0) for g in f.grids)
-    rows = gen.random_loads(f, 40, rng, 2, [f"L{c}" for c in range(40)])
-    assert {r[2] for r in rows} <= {1, 2, 3}
+    f, rows = _rig_cases(fr.bus, 3, 40)
     vec: dict[tuple[str, int], np.ndarray] = {}
     for case, g, comp, v in rows:
         vec.setdefault((case, g), np.zeros(3))[comp - 1] = v
@@ -616,13 +623,7 @@ def test_jacket_load_cases_in_the_grids_systems():
     one deck level) or a torsion (horizontal forces at the main deck's leg tops with no net force
     and a net moment about z); forces only, 0.09-1 times the family's force, on no support and no
     joint; over 60 cases every kind occurs."""
-    rng = np.random.default_rng(4)
-    f = fr.jacket(rng)
-    fr.assign_user_systems(f, rng)
-    gen.place_joints(f, rng)
-    assert any(f.cd.get(g, 0) for g in f.grids)
-    rows = gen.random_loads(f, 60, rng, 2, [f"L{c}" for c in range(60)])
-    assert {r[2] for r in rows} <= {1, 2, 3}
+    f, rows = _rig_cases(fr.jacket, 4, 60)
     vec: dict[str, dict[int, np.ndarray]] = {}
     for case, g, comp, v in rows:
         vec.setdefault(case, {}).setdefault(g, np.zeros(3))[comp - 1] = v
