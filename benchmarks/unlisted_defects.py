@@ -118,25 +118,33 @@ def plant(folder: Path, defect: str, rng: np.random.Generator) -> dict:
 STRUCTURE_OF = "structure"
 
 
-def run_one(index: int, seed: int, family: str, defect: str, out: Path) -> dict:
+def diagnosed(st, family: str, defect: str, where) -> tuple[dict | None, dict | None, float]:
+    """``(document, error row, wall s)``: the study's diagnosis (its JSON document) with default
+    settings, or, when it raises, the row that reports the error (reported, not hidden)."""
     from blackbox.commands.diagnose import run
 
-    st = generate_study(index, seed, out / defect, kind=NONE, shape=family, style="plain")
-    where = plant(st.folder, defect, np.random.default_rng([seed, index, DEFECTS.index(defect)]))
     t0 = time.perf_counter()
     try:
         res = run(st.folder, plots=False)
-        doc = json.loads(json.dumps(res.document, default=float))
-    except Exception as exc:                        # reported, not hidden
-        return {"study": st.folder.name, "family": family, "defect": defect, "where": where,
-                "error": f"{type(exc).__name__}: {exc}"[:300]}
+        return json.loads(json.dumps(res.document, default=float)), None, time.perf_counter() - t0
+    except Exception as exc:
+        return None, {"study": st.folder.name, "family": family, "defect": defect, "where": where,
+                      "error": f"{type(exc).__name__}: {exc}"[:300]}, time.perf_counter() - t0
+
+
+def run_one(index: int, seed: int, family: str, defect: str, out: Path) -> dict:
+    st = generate_study(index, seed, out / defect, kind=NONE, shape=family, style="plain")
+    where = plant(st.folder, defect, np.random.default_rng([seed, index, DEFECTS.index(defect)]))
+    doc, error, wall = diagnosed(st, family, defect, where)
+    if error is not None:
+        return error
     added = [(a["effect"], a["where"], a.get("of"), a.get("component"), a.get("pattern")) for a in doc["added"]]
     hot = (doc.get("hotspots") or [None])[0]
     return {"study": st.folder.name, "family": family, "defect": defect, "where": where,
             "verdict": doc["verdict"], "added": added,
             "structural": [a for a in added if a[2] == STRUCTURE_OF],
             "before": doc["before"]["reduced_chi2"], "after": doc["after"]["reduced_chi2"],
-            "hotspot": hot, "wall_s": time.perf_counter() - t0}
+            "hotspot": hot, "wall_s": wall}
 
 
 def main(argv: list[str] | None = None) -> int:
