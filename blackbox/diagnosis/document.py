@@ -46,6 +46,8 @@ def _candidate(c: CandidateScore) -> dict:
            "delta_bic": _num(c.delta_bic),
            "p_value": _num(c.p_value), "log10_p_value": _num(c.log10_p), "score": _num(c.score),
            "df": c.df, "p_value_bonferroni": _num(c.p_adjusted), "delta_bic_method": c.delta_bic_method}
+    if c.screen_drop is not None:
+        out["screen_chi2_drop"] = _num(c.screen_drop)
     if c.refit is not None:
         out.update({"refit": True, "lr": _num(c.lr), "lr_p_value": _num(c.lr_p_value),
                     "lr_p_value_bonferroni": _num(c.lr_p_adjusted), "reduced_chi2": _num(c.refit.reduced_chi2),

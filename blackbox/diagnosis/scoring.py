@@ -51,6 +51,8 @@ class CandidateScore:
     reason: str = ""
     variants: tuple = ()                # search.VariantTrial: richer variants tried after acceptance
     kfold_delta_chi2: float | None = None
+    screen_drop: float | None = None    # the chi2 drop at the effect's screen point, others held
+                                        # (search.screen: a member removed), when evaluated
 
     @property
     def evidence(self) -> float:

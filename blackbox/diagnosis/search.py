@@ -71,7 +71,7 @@ from blackbox.identification import Observations
 from blackbox.joints import ComplexJoint, JointModel, SimpleJoint
 from solver_adapters.protocol import DofLabel
 
-__all__ = ["declared_fit", "multipliers", "hypotheses_by_kind", "refit_schedule", "eliminate", "without", "Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "holdout_worse", "VERDICTS", "verdict",
+__all__ = ["declared_fit", "multipliers", "hypotheses_by_kind", "refit_schedule", "screen", "eliminate", "without", "Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "holdout_worse", "VERDICTS", "verdict",
            "refit_candidate", "subsumed_removed", "refine", "round_level", "diagnose", "map_refits", "refits_pay"]
 
 
@@ -510,8 +510,38 @@ their parameters) use their score as it is, plus ``OUTPUT_MARGIN``."""
 OUTPUT_MARGIN = 10.0
 
 
+def screen(model: AugmentedModel, fit: Fit, om: ObsMap, pool: Sequence[Effect], base: SplitBase, boundary,
+           K_deck, o_dofs, label: str) -> dict:
+    """Effect key -> the chi2 drop of ``fit`` with the candidate added at its
+    :attr:`~blackbox.diagnosis.effects.base.Effect.screen_point`, every other parameter held, for
+    the candidates of ``pool`` that have one (their columns are run once, in one batch, and kept
+    for later rounds). A point where the augmented system is singular (a member whose removal
+    leaves a mechanism) gives no entry. Held parameters make each drop a lower bound of what the
+    candidate's refit reaches (the refit starts there too)."""
+    todo = [e for e in pool if e.screen_point is not None]
+    if not todo:
+        return {}
+    need = [d for e in todo for d in e.refit_columns()]
+    if need:
+        base.ensure_columns(need, label)
+    chi2_0 = float(np.sum(((om.y - model.predict(fit.x, om)) / om.sigma) ** 2))
+    out = {}
+    for e in todo:
+        spec2, x2 = fit.spec.add(e, fit.x)
+        x2[spec2.n_params - e.n_params:] = e.screen_point
+        try:
+            f = AugmentedModel(base, spec2, boundary, K_deck, o_dofs).predict(x2, om)
+        except (np.linalg.LinAlgError, IdentificationError):
+            continue
+        chi2 = float(np.sum(((om.y - f) / om.sigma) ** 2))
+        if np.isfinite(chi2):
+            out[e.key] = chi2_0 - chi2
+    return out
+
+
 def refit_schedule(scored: Sequence[CandidateScore], best_evidence: float, alpha: float,
-                   log_n: float) -> list[CandidateScore]:
+                   log_n: float, screened: dict | None = None,
+                   multiplier: dict | None = None) -> list[CandidateScore]:
     """The candidates (not refitted yet) that could still win on a refit against the best
     accepted evidence so far, ``best_evidence`` (``delta BIC + hold-out chi2``; 0 when none was
     accepted: then every candidate that could be accepted). A candidate's best case is
@@ -520,8 +550,15 @@ def refit_schedule(scored: Sequence[CandidateScore], best_evidence: float, alpha
     score at ``SCREEN`` (structural) or at the round's level (output-side). So a candidate is left
     out only when even that best case cannot beat the evidence in hand or pass the level -- the
     stated guarantee of the search. The cost: the refits the schedule adds are counted in each
-    round's ``candidates`` (``refit``) and measured in docs (benchmarks/diagnose_refits.py)."""
+    round's ``candidates`` (``refit``) and measured in docs (benchmarks/diagnose_refits.py).
+
+    ``screened``: effect key -> the chi2 drop at the candidate's screen point (:func:`screen`),
+    a lower bound of its refit's; a candidate whose drop alone is significant at ``SCREEN``
+    (``multiplier``: its kind's Bonferroni factor) and beats the best evidence is refitted
+    whatever its score. So the guarantee also covers effects that are small to first order
+    and large when complete."""
     out = []
+    screened, multiplier = screened or {}, multiplier or {}
     for c in scored:
         if c.df == 0:
             continue
@@ -529,6 +566,10 @@ def refit_schedule(scored: Sequence[CandidateScore], best_evidence: float, alpha
             ok = c.p_adjusted < alpha and -c.score + c.df * log_n - OUTPUT_MARGIN < best_evidence
         else:
             ok = c.p_adjusted < SCREEN and -SCORE_RATIO * c.score + c.df * log_n < best_evidence
+            d = screened.get(c.effect.key)
+            if not ok and d is not None and d > 0:
+                p = min(1.0, multiplier.get(c.effect.kind, 1.0) * float(stats.chi2.sf(d, c.df)))
+                ok = p < SCREEN and -d + c.df * log_n < best_evidence
         if ok:
             out.append(c)
     return out
@@ -796,8 +837,12 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         run_refits([c for c in scored[:refit_top] if c.df > 0])
         best_ev = min((c.evidence for c in refits if c.refit is not None and c.accepted), default=0.0)
         if complete_refits:
+            screened = screen(model, fit, om, [c.effect for c in scored if c.effect.key not in done_keys],
+                              base, boundary, K_deck, o_dofs, f"member columns for the removal screen (round {it + 1})")
+            scored = [replace(c, screen_drop=screened[c.effect.key]) if c.effect.key in screened else c
+                      for c in scored]
             run_refits(refit_schedule([c for c in scored if c.effect.key not in done_keys], best_ev, alpha,
-                                      math.log(fit.n_obs)))
+                                      math.log(fit.n_obs), screened, mults))
         # the strongest candidates at the variant their data support, before they compete: every
         # refit that lowers BIC, not only the accepted ones (a joint loose about one axis is not
         # significant as one equal spring, but is as one spring per axis)

@@ -319,6 +319,16 @@ class Effect:
         """Unit-load columns of the split run that a refit of this effect needs."""
         return ()
 
+    @property
+    def screen_point(self) -> np.ndarray | None:
+        """Parameters at which the effect is wholly present, where the search evaluates the
+        candidate's chi2 exactly (every other parameter held) before it decides what to refit
+        (:func:`blackbox.diagnosis.search.screen`): a score at the nested point cannot see an
+        effect that is small to first order and large when complete (a stiff brace left out:
+        halving it changes little, removing it everything). ``None`` (default): the score alone.
+        Needs :meth:`refit_columns`."""
+        return None
+
     def refit_starts(self, x2: np.ndarray, step: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                      first: int) -> list[np.ndarray]:
         """Starts of the refit: the nested point ``x2`` and one score step from it (the effect's
