@@ -26,7 +26,8 @@ from blackbox.commands import diagnose as diagnose_command
 from blackbox.diagnosis.effects import MemberStiffness
 from blackbox.diagnosis.effects.member_stiffness import ALPHA_MISSING, MISSING_BELOW
 from blackbox.diagnosis.scoring import CandidateScore
-from blackbox.diagnosis.search import refit_schedule
+from blackbox.diagnosis.model import AugmentedModel, ModelSpec, ObsMap
+from blackbox.diagnosis.search import _nearest_residual_order, declared_fit, refit_schedule, screen
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -91,3 +92,20 @@ def test_a_brace_left_out_is_found_as_missing(tmp_path):
     assert a["parameters"][0]["value"] < MISSING_BELOW
     (c,) = [c for c in run.diagnosis.steps[0].scores if c.effect.kind == "member_stiffness" and c.effect.eid == 90]
     assert c.score < 10 and c.screen_drop > 1000 and c.lr >= c.screen_drop * (1 - 1e-6)
+    assert not any("removal screen left out" in w for w in d["warnings"])
+
+    # a budget of 120 new columns: only members nearest the residual are screened, each with
+    # its own columns within the budget, and the rest are counted as left out
+    (tmp_path / "prep").mkdir()
+    pr2 = diagnose_command.prepare(st.folder, tmp_path / "prep")
+    o = tuple(dict.fromkeys(list(pr2.fit_obs.dofs) + list(pr2.hold_obs.dofs if pr2.hold_obs is not None else ())))
+    om = ObsMap.of(pr2.fit_obs, {x: i for i, x in enumerate(o)})
+    model = AugmentedModel(pr2.base, ModelSpec(tuple(pr2.joints)), pr2.boundary, pr2.K_deck, o)
+    fit = declared_fit(model, om, None, pr2.ident.k)
+    members = [e for e in pr2.candidates if isinstance(e, MemberStiffness)]
+    xyz = {int(g): tuple(v) for g, v in pr2.base.adapter.grid_xyz().items()}
+    have = len(pr2.base.col_of)
+    drops, used, left = screen(model, fit, om, members, pr2.base, pr2.boundary, pr2.K_deck, o, "test", 120, xyz)
+    assert used == len(pr2.base.col_of) - have <= 120 and 0 < len(drops) and len(drops) + left <= len(members)
+    order = [e.key for e in _nearest_residual_order(members, fit, om, xyz)]
+    assert sorted(order.index(k) for k in drops)[-1] < len(drops) + 10    # the nearest, bar shared columns

@@ -71,7 +71,7 @@ from blackbox.identification import Observations
 from blackbox.joints import ComplexJoint, JointModel, SimpleJoint
 from solver_adapters.protocol import DofLabel
 
-__all__ = ["declared_fit", "multipliers", "hypotheses_by_kind", "refit_schedule", "screen", "eliminate", "without", "Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "holdout_worse", "VERDICTS", "verdict",
+__all__ = ["declared_fit", "multipliers", "hypotheses_by_kind", "refit_schedule", "screen", "SCREEN_DOF_COLUMNS", "eliminate", "without", "Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "holdout_worse", "VERDICTS", "verdict",
            "refit_candidate", "subsumed_removed", "refine", "round_level", "diagnose", "map_refits", "refits_pay"]
 
 
@@ -510,23 +510,66 @@ their parameters) use their score as it is, plus ``OUTPUT_MARGIN``."""
 OUTPUT_MARGIN = 10.0
 
 
+SCREEN_DOF_COLUMNS = 2.0e7
+"""What the removal screen may add to the split run, in model DOFs x new unit-load columns
+(:func:`screen`): every member of a study of a few thousand DOFs (a few thousand columns cost
+about a second through the reference solver), about 200 columns at 1e5 DOFs (15 s through
+MYSTRAN, whose every right-hand side costs about 0.15 s there), 20 at 1e6."""
+
+
+def _nearest_residual_order(effects: Sequence[Effect], fit: Fit, om: ObsMap, xyz: dict | None) -> list[Effect]:
+    """``effects`` nearest the fit's residual first: each scores the largest per-grid RMS of the
+    whitened residual discounted by ``exp(-distance / median member length)``, its position the
+    mean of its DOFs' grids (the order of :meth:`CandidateContext.nearest_residual`)."""
+    if not xyz:
+        return list(effects)
+    per: dict[int, list[float]] = {}
+    for g, r in zip(om.grid, fit.residuals):
+        per.setdefault(int(g), []).append(float(r) ** 2)
+    meas = [(np.asarray(xyz[g], float), float(np.sqrt(np.mean(v)))) for g, v in per.items() if g in xyz]
+    if not meas:
+        return list(effects)
+    P = np.array([p for p, _ in meas])
+    w = np.array([v for _, v in meas])
+    pos, ends = [], []
+    for e in effects:
+        pts = [np.asarray(xyz[g], float) for g in dict.fromkeys(int(d[0]) for d in e.refit_columns()) if g in xyz]
+        pos.append(np.mean(pts, axis=0) if pts else np.full(3, np.nan))
+        ends.append(float(np.linalg.norm(pts[0] - pts[-1])) if len(pts) > 1 else 0.0)
+    pos = np.array(pos)
+    ell = float(np.median([x for x in ends if x > 0])) if any(x > 0 for x in ends) else 1.0
+    d = np.linalg.norm(pos[:, None, :] - P[None, :, :], axis=2)
+    score = np.nan_to_num(np.max(w[None, :] * np.exp(-d / ell), axis=1), nan=-1.0)
+    return [effects[i] for i in np.argsort(-score, kind="stable")]
+
+
 def screen(model: AugmentedModel, fit: Fit, om: ObsMap, pool: Sequence[Effect], base: SplitBase, boundary,
-           K_deck, o_dofs, label: str) -> dict:
-    """Effect key -> the chi2 drop of ``fit`` with the candidate added at its
-    :attr:`~blackbox.diagnosis.effects.base.Effect.screen_point`, every other parameter held, for
-    the candidates of ``pool`` that have one (their columns are run once, in one batch, and kept
-    for later rounds). A point where the augmented system is singular (a member whose removal
+           K_deck, o_dofs, label: str, budget: int, xyz: dict | None = None) -> tuple[dict, int, int]:
+    """``(drops, columns added, candidates left out)``: effect key -> the chi2 drop of ``fit``
+    with the candidate added at its :attr:`~blackbox.diagnosis.effects.base.Effect.screen_point`,
+    every other parameter held, for the candidates of ``pool`` that have one. Their columns are
+    run in one batch and kept for later rounds; beyond ``budget`` new columns, only the
+    candidates nearest the fit's residual (whose columns fit in it, and every one whose columns
+    are there already). A point where the augmented system is singular (a member whose removal
     leaves a mechanism) gives no entry. Held parameters make each drop a lower bound of what the
     candidate's refit reaches (the refit starts there too)."""
     todo = [e for e in pool if e.screen_point is not None]
     if not todo:
-        return {}
-    need = [d for e in todo for d in e.refit_columns()]
-    if need:
-        base.ensure_columns(need, label)
+        return {}, 0, 0
+    have = set(base.col_of)
+    chosen, new, left = [], {}, 0
+    for e in _nearest_residual_order(todo, fit, om, xyz):
+        extra = [tuple(d) for d in e.refit_columns() if tuple(d) not in have and tuple(d) not in new]
+        if len(new) + len(extra) > budget:
+            left += 1
+            continue
+        new.update(dict.fromkeys(extra))
+        chosen.append(e)
+    if new:
+        base.ensure_columns(list(new), label)
     chi2_0 = float(np.sum(((om.y - model.predict(fit.x, om)) / om.sigma) ** 2))
     out = {}
-    for e in todo:
+    for e in chosen:
         spec2, x2 = fit.spec.add(e, fit.x)
         x2[spec2.n_params - e.n_params:] = e.screen_point
         try:
@@ -536,7 +579,7 @@ def screen(model: AugmentedModel, fit: Fit, om: ObsMap, pool: Sequence[Effect], 
         chi2 = float(np.sum(((om.y - f) / om.sigma) ** 2))
         if np.isfinite(chi2):
             out[e.key] = chi2_0 - chi2
-    return out
+    return out, len(new), left
 
 
 def refit_schedule(scored: Sequence[CandidateScore], best_evidence: float, alpha: float,
@@ -787,6 +830,8 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
     labels = obs_fit.case_labels
     kept_mult: dict = {}                 # effect key -> the multiplier it was admitted with
     ctx = _Refits(base, om, hold, boundary, K_deck, o_dofs, tuple(joints), declared)
+    n_dof = len(base.adapter.dofs()) if base.adapter is not None else 1
+    screen_budget, screen_left = int(SCREEN_DOF_COLUMNS / max(n_dof, 1)), 0
     for it in range(max_steps):
         runs0 = len(base.log)
         if it:                          # candidates that depend on the current fit, re-listed from it
@@ -837,8 +882,11 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         run_refits([c for c in scored[:refit_top] if c.df > 0])
         best_ev = min((c.evidence for c in refits if c.refit is not None and c.accepted), default=0.0)
         if complete_refits:
-            screened = screen(model, fit, om, [c.effect for c in scored if c.effect.key not in done_keys],
-                              base, boundary, K_deck, o_dofs, f"member columns for the removal screen (round {it + 1})")
+            screened, used, left = screen(model, fit, om, [c.effect for c in scored if c.effect.key not in done_keys],
+                                          base, boundary, K_deck, o_dofs,
+                                          f"member columns for the removal screen (round {it + 1})", screen_budget, xyz)
+            screen_budget -= used
+            screen_left = max(screen_left, left)
             scored = [replace(c, screen_drop=screened[c.effect.key]) if c.effect.key in screened else c
                       for c in scored]
             run_refits(refit_schedule([c for c in scored if c.effect.key not in done_keys], best_ev, alpha,
@@ -902,6 +950,11 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
     if val.kind == "none":
         warnings.append("one fitted case and no hold-out cases: effects were added on the LR test and BIC "
                         "alone, without a check of their prediction")
+    if screen_left:
+        warnings.append(f"the member removal screen left out up to {screen_left} member(s) whose own columns would "
+                        f"exceed its share of the solver's work ({SCREEN_DOF_COLUMNS:g} model DOFs x columns); "
+                        "it took those nearest the residual: a member missing elsewhere is found only if its "
+                        "score shows it")
     if fit.reduced_chi2 > hi:
         warnings.append(f"the final reduced chi2 {fit.reduced_chi2:.4g} is above the {band_level:.0%} "
                         f"band [{lo:.4g}, {hi:.4g}] of the declared noise: the misfit is unexplained")
