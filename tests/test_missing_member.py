@@ -6,7 +6,7 @@ References and tolerances:
   on its screen drop when that drop alone is significant at ``SCREEN`` and beats the best
   evidence in hand (exact comparisons, no tolerance);
 * the screen drop is the chi2 drop of the member removed with every other parameter held, so
-  the refit, which also starts there, reaches at least that drop: ``LR >= drop`` up to the
+  the refit, which also starts there when the drop exceeds the score, reaches at least that drop: ``LR >= drop`` up to the
   optimiser's tolerance on chi2 (1e-6 relative, far below the drop of thousands);
 * the truss of the unlisted-structure benchmark (seed 5, study 1) with its brace 90 left out
   (noncentrality 4,481; its score at factor 1 is 5, the removal drops chi2 by 3,100): found as
@@ -67,9 +67,10 @@ def test_bounds_and_the_missing_report():
     assert e.rejection(np.array([ALPHA_MISSING])) is None
     assert "upper bound 50" in e.rejection(np.array([50.0]))
     assert np.all(e.screen_point == ALPHA_MISSING)
-    starts = e.refit_starts(np.array([1.0, 1.0]), np.array([-0.1]), np.array([0.0, ALPHA_MISSING]),
-                            np.array([10.0, 50.0]), 1)
-    assert any(s[1] == ALPHA_MISSING for s in starts)
+    args = (np.array([1.0, 1.0]), np.array([-0.1]), np.array([0.0, ALPHA_MISSING]), np.array([10.0, 50.0]), 1)
+    assert not any(s[1] == ALPHA_MISSING for s in e.refit_starts(*args))
+    assert any(s[1] == ALPHA_MISSING for s in e.started_at_screen().refit_starts(*args))
+    assert e.started_at_screen().key == e.key
 
 
 @pytest.mark.slow

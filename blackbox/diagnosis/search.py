@@ -887,7 +887,11 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
                                           f"member columns for the removal screen (round {it + 1})", screen_budget, xyz)
             screen_budget -= used
             screen_left = max(screen_left, left)
-            scored = [replace(c, screen_drop=screened[c.effect.key]) if c.effect.key in screened else c
+            # a candidate the screen shows larger than its score is large only when complete:
+            # its refit also starts there
+            scored = [c if c.effect.key not in screened else
+                      replace(c, screen_drop=screened[c.effect.key],
+                              effect=c.effect.started_at_screen() if screened[c.effect.key] > c.score else c.effect)
                       for c in scored]
             run_refits(refit_schedule([c for c in scored if c.effect.key not in done_keys], best_ev, alpha,
                                       math.log(fit.n_obs), screened, mults))

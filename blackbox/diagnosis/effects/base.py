@@ -329,6 +329,12 @@ class Effect:
         Needs :meth:`refit_columns`."""
         return None
 
+    def started_at_screen(self) -> "Effect":
+        """This candidate with its refit also started at :attr:`screen_point` (the search asks
+        when the screen shows more than the score: the effect is large only when complete);
+        default: itself."""
+        return self
+
     def refit_starts(self, x2: np.ndarray, step: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                      first: int) -> list[np.ndarray]:
         """Starts of the refit: the nested point ``x2`` and one score step from it (the effect's

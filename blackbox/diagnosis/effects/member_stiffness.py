@@ -22,13 +22,13 @@ a plausible value, not one "beyond" any (the bound 50 above still is). The score
 cannot see such a member when it is stiff beside its surroundings (halving a brace changes
 little, removing it everything: s0001 of the unlisted-structure benchmark, score 5 against a chi2
 drop of 3,100 at removal), so every candidate's chi2 at removal is evaluated exactly before the
-search decides what to refit (:attr:`MemberStiffness.screen_point`), and each refit also starts
-there.
+search decides what to refit (:attr:`MemberStiffness.screen_point`), and a refit also starts
+there when that drop exceeds the score.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -123,6 +123,7 @@ class MemberStiffness(Effect):
     dofs: tuple[DofLabel, ...] = ()
     K_e: np.ndarray | None = None
     parts: np.ndarray | None = None         # (4, 12, 12) section parts, None: "whole" only
+    start_removed: bool = False             # the refit also starts with the member removed
 
     @property
     def eid(self) -> int:
@@ -196,12 +197,18 @@ class MemberStiffness(Effect):
         """The member removed: every factor at ``ALPHA_MISSING``."""
         return np.full(self.n_params, ALPHA_MISSING)
 
+    def started_at_screen(self) -> "MemberStiffness":
+        return replace(self, start_removed=True)
+
     def refit_starts(self, x2, step, lo, hi, first):
-        """The nested point, the score step, and the member removed (the screen's point)."""
+        """The nested point, the score step, and, when the screen showed more than the score
+        (:attr:`start_removed`), the member removed."""
         starts = super().refit_starts(x2, step, lo, hi, first)
-        xs = x2.copy()
-        xs[first:] = ALPHA_MISSING
-        return starts + [xs]
+        if self.start_removed:
+            xs = x2.copy()
+            xs[first:] = ALPHA_MISSING
+            starts.append(xs)
+        return starts
 
     def findings(self, fit) -> dict:
         """``missing``: which of the factors ended below ``MISSING_BELOW`` (the member, or that
