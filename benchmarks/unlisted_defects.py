@@ -158,13 +158,14 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def run_defects(run_one, table, all_defects, defects, n: int, seed: int, out: Path, tries: int | None = None) -> list:
-    """``n`` studies per defect (``run_one(index, seed, family, defect, out)``, the tuned
-    families in turn from the defect's place in ``all_defects``; a ``None`` row, a study with no
-    place for the defect, is skipped, at most ``tries`` indices per defect), each row printed as
-    it comes; ``out/results.json`` and the table at the end."""
+def run_defects(run_one, table, all_defects, defects, n: int, seed: int, out: Path, tries: int | None = None,
+                families: tuple[str, ...] = TUNED) -> list:
+    """``n`` studies per defect (``run_one(index, seed, family, defect, out)``, ``families`` (the
+    tuned ones by default) in turn from the defect's place in ``all_defects``; a ``None`` row, a
+    study with no place for the defect, is skipped, at most ``tries`` indices per defect), each
+    row printed as it comes; ``out/results.json`` and the table at the end."""
     rows = []
-    fams = list(TUNED)
+    fams = list(families)
     for defect in defects:
         done = 0
         for i in range(tries or n):
