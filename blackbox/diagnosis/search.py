@@ -5,7 +5,9 @@ exactly); test the standardized residuals against the declared noise (chi-square
 per case / grid / component); score every candidate effect against the residual
 (:mod:`blackbox.diagnosis.scoring`; each candidate at its family's simplest variant); refit the
 ``refit_top`` best by ``p`` (bounded Levenberg-Marquardt from the starts each effect offers;
-parameters that end at their nested bound are dropped). A candidate is *accepted* when its
+parameters that end at their nested bound are dropped), then every other candidate that could
+still win (:func:`refit_schedule`), judged on its score or, for an effect large only when
+complete (a member removed), on its exact chi2 there (:func:`screen`). A candidate is *accepted* when its
 likelihood-ratio p-value passes the round's multiplicity-controlled level, BIC improves, and it
 passes the check against data it was not fitted to (:mod:`blackbox.diagnosis.validation`): with
 hold-out cases, ``delta BIC + hold-out chi2 change < 0`` (the hold-out's evidence weighed with the
@@ -552,7 +554,7 @@ def screen(model: AugmentedModel, fit: Fit, om: ObsMap, pool: Sequence[Effect], 
     candidates nearest the fit's residual (whose columns fit in it, and every one whose columns
     are there already). A point where the augmented system is singular (a member whose removal
     leaves a mechanism) gives no entry. Held parameters make each drop a lower bound of what the
-    candidate's refit reaches (the refit starts there too)."""
+    candidate's refit reaches when it starts there (it does when the drop exceeds its score)."""
     todo = [e for e in pool if e.screen_point is not None]
     if not todo:
         return {}, 0, 0
