@@ -152,11 +152,14 @@ class Mat1:
 @dataclass(frozen=True)
 class Spc1:
     """SPC1: SID, C (component digits), grids (THRU already expanded). An SPC card (enforced
-    value zero) is held the same way, one entry per grid and component field."""
+    value zero) is held the same way, one entry per grid and component field, and so are the
+    SUPORT/SUPORT1 reference DOFs (``card``), which a linear static solution holds as NASTRAN
+    does: ``sid`` is then a set ID of no other constraint set of the deck."""
     sid: int
     components: str
     grids: tuple[int, ...]
     src: str = ""
+    card: str = "SPC1"
 
 
 @dataclass(frozen=True)

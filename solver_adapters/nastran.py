@@ -217,9 +217,11 @@ class RawCard:
 WRITTEN = frozenset({"GRID", "GRDSET", "CBAR", "CBEAM", "BAROR", "PBAR", "PBARL", "PBEAM", "PBEAML",
                      "CROD", "PROD", "CONROD", "CTUBE", "PTUBE", "MAT1", "SPC1", "SPC", "SPCADD",
                      "RBE2", "RBAR", "PELAS", "CELAS1", "CELAS2", "CELAS3", "CELAS4", "SPOINT",
-                     "MPC", "MPCADD", "CORD1R", "CORD1C", "CORD1S", "CORD2R", "CORD2C", "CORD2S"})
+                     "MPC", "MPCADD", "CORD1R", "CORD1C", "CORD1S", "CORD2R", "CORD2C", "CORD2S",
+                     "SUPORT", "SUPORT1"})
 """Cards :func:`model_cards` writes back from the parsed model: GRDSET and BAROR through the
-GRIDs and CBARs they complete, SPC as SPC1, RBAR as the RBE2 it is (all six independent
+GRIDs and CBARs they complete, SPC as SPC1, SUPORT/SUPORT1 as the SPC1 that a static solution
+without inertia relief makes of them (a study's loads are already balanced: docs/import.md), RBAR as the RBE2 it is (all six independent
 components at one grid), CTUBE/PTUBE as the CROD/PROD of the tube's A and J (MYSTRAN 18 has no
 CTUBE), every coordinate system as a CORD2x in basic, scalar points (SPOINT) with component 1
 on them in CELAS1/CELAS2 and MPC, the form MYSTRAN 18 requires (it refuses a blank or 0
@@ -628,7 +630,7 @@ MYSTRAN_CARDS = frozenset({
 })
 """The cards the reader keeps for an external solver (``unmodelled="pass"``) that MYSTRAN 18
 runs: the entries its bulk-data reader (LOADB) processes, less those a run deck must not carry
-(loads, SUPORT; MPC and MPCADD are modelled, and written back from the model with the run deck's MPC =). MYSTRAN matches entry names on a prefix, so it would read a CBARAO as a
+(loads; SUPORT is written back as the constraint it is in a static solution; MPC and MPCADD are modelled, and written back from the model with the run deck's MPC =). MYSTRAN matches entry names on a prefix, so it would read a CBARAO as a
 CBAR, a CBEAM3 as a CBEAM, a CQUAD8 not at all (a warning only): every kept card outside this
 set is refused by the mystran adapter before it runs (:attr:`NastranDialect.runs_cards`)."""
 

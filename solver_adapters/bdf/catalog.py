@@ -60,7 +60,7 @@ KNOWN_UNMODELLED = frozenset({
     # rigid elements other than RBE2, RBE3
     "RBAR1", "RBE1", "RROD", "RTRPLT", "RTRPLT1", "RSPLINE", "RJOINT",
     # degree-of-freedom sets, scalar points, sequencing
-    "SUPORT", "SUPORT1", "QSET", "QSET1", "BSET", "BSET1",
+    "QSET", "QSET1", "BSET", "BSET1",
     "CSET", "CSET1", "USET", "USET1", "SEQGP", "EPOINT",
     # other coordinate systems, direct matrix input, tables, functions
     "CORD3G", "CORD3R", "DTI", "DMI", "DMIG", "DMIJ", "DMIK", "DEQATN", "BEAMOR",

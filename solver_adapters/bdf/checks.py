@@ -227,7 +227,7 @@ def _problems(deck: Deck, bulk_checked: bool) -> list[str]:
         if b.cid is not None and b.cid != 0 and b.cid not in deck.coords:
             bad(b, "CBUSH", b.eid, f"CID {b.cid}: coordinate system not defined")
     for s in deck.spc1s:
-        need_grids(s, "SPC1", s.sid, s.grids, "grid(s)")
+        need_grids(s, s.card, s.sid if s.card == "SPC1" else "(reference DOFs)", s.grids, "grid(s)")
     spc_sets = {s.sid for s in deck.spc1s}
     for a in deck.spcadds.values():
         if a.sid in spc_sets:

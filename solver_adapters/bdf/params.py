@@ -2,13 +2,29 @@
 
 from __future__ import annotations
 
-from solver_adapters.bdf.fields import _real
+from solver_adapters.bdf.fields import _int, _real
+
+INREL_IN_STUDY = ("(inertia relief) balances the applied loads by the inertia loads of the "
+                  "structure's rigid-body acceleration; a study's loads.csv holds the loads its "
+                  "solvers apply, so `blackbox import` writes the balanced loads there and leaves "
+                  "this card out of model.bdf (docs/import.md, inertia relief): import the deck, "
+                  "or remove the card")
+"""Why a study's model refuses PARAM,INREL,-1/-2 (the solvers would hold the SUPORT DOFs with
+the loads unbalanced)."""
+
+
+def inrel_value(c) -> int:
+    """PARAM,INREL's value: 0 (none), -1 (inertia relief on the SUPORT DOFs), -2 (automatic)."""
+    value = _int(c, 3, minimum=None)
+    if value not in (0, -1, -2):
+        raise c.error(3, "PARAM,INREL must be 0, -1 or -2")
+    return value
 
 
 def _param(r, c) -> None:
     """PARAM,AUTOSPC (YES/NO; the last one of the deck wins; without one AUTOSPC is on, NASTRAN's
-    SOL 101 default) and PARAM,EPZERO (its singularity ratio) are read; every other PARAM has no
-    effect on the reference solver."""
+    SOL 101 default) and PARAM,EPZERO (its singularity ratio) are read; PARAM,INREL,-1/-2 is
+    refused (:data:`INREL_IN_STUDY`); every other PARAM has no effect on the reference solver."""
     name = c.text(2)
     if name == "AUTOSPC":
         value = c.text(3)
@@ -21,6 +37,8 @@ def _param(r, c) -> None:
         if not 0.0 < value < 1.0:
             raise c.error(3, "PARAM,EPZERO must be in (0, 1)")
         r.deck.epzero = value
+    elif name == "INREL" and inrel_value(c):
+        raise c.error(3, f"PARAM,INREL,{inrel_value(c)} {INREL_IN_STUDY}")
 
 
 NO_EFFECT = frozenset({

@@ -482,7 +482,7 @@ def constraint_map(deck: Deck, grid_ids: np.ndarray, pos: dict[int, int] | None 
         p = _grid_pos(grid_ids, [gid for gid, c in ps if c == comps], "GRID PS")
         fixed[(6 * p[:, None] + np.array([int(c) - 1 for c in comps])).ravel()] = True
     for s in deck.spc1s:
-        p = _grid_pos(grid_ids, list(s.grids), f"{s.src}: SPC1 {s.sid}")
+        p = _grid_pos(grid_ids, list(s.grids), f"{s.src}: {s.card}" + (f" {s.sid}" if s.card == "SPC1" else ""))
         comps = np.array([int(c) - 1 for c in s.components], dtype=np.int64)
         fixed[(6 * p[:, None] + comps).ravel()] = True
 
