@@ -237,6 +237,7 @@ card of its own in the model, and MYSTRAN reads it with the same meaning."""
 _KNOWN_FIELDS = frozenset({"grids", "cbars", "pbars", "mat1s", "spc1s", "rbe2s", "rbe3s", "bushes",
                            "mpcs", "mpcadds",
                            "pbushes", "pelas", "springs", "spcadds", "prods", "rods", "coords", "files",
+                           "gaps", "pgaps",
                            "no_effect", "unmodelled", "notes"})
 """The parsed deck's collections of cards the run deck accounts for; a model with another non-empty
 collection cannot be written faithfully (a card the reader learnt after this writer): an error,
@@ -251,6 +252,12 @@ def check_writable(model) -> None:
     if unknown:
         raise DeckFormatError(f"the MYSTRAN run deck cannot write the model's {', '.join(unknown)} "
                               f"(cards the reader models but solver_adapters.nastran does not write yet)")
+    for e in sorted(getattr(model, "gaps", {}).values(), key=lambda e: e.eid)[:1]:
+        file, _, line = e.src.rpartition(":")
+        raise DeckFormatError(f"the mystran adapter cannot run CGAP {e.eid}: MYSTRAN 18 has no gap "
+                              f"element (CGAP/PGAP); the reference adapter models its linear "
+                              f"stiffness", file=file or None, line=int(line) if line.isdigit() else None,
+                              card="CGAP")
     for p in getattr(model, "pbars", {}).values():
         if getattr(p, "n1", 0.0) or getattr(p, "n2", 0.0):
             file, _, line = p.src.rpartition(":")
@@ -277,6 +284,9 @@ def passthrough_cards(path: str | os.PathLike) -> list[RawCard]:
             continue
         if c.name in _not_passable():
             raise c.error(1, f"{c.name} cannot be handed to MYSTRAN: {_not_passable()[c.name]}")
+        if c.name in ("CGAP", "PGAP"):
+            raise c.error(1, f"the mystran adapter cannot run {c.name}: MYSTRAN 18 has no gap "
+                             f"element; the reference adapter models its linear stiffness")
         if c.name in bdf.SUPPORTED and c.name not in RAW_MODELLED:
             raise c.error(1, f"the MYSTRAN run deck does not write {c.name} yet (the reader models it; "
                              f"passing it as written could duplicate what the model holds)")

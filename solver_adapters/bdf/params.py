@@ -37,6 +37,11 @@ def _param(r, c) -> None:
         if not 0.0 < value < 1.0:
             raise c.error(3, "PARAM,EPZERO must be in (0, 1)")
         r.deck.epzero = value
+    elif name == "CDITER" and _int(c, 3, 0, minimum=None) > 0:
+        raise c.error(3, "PARAM,CDITER > 0 asks for NASTRAN's constrained displacement iteration "
+                         "(linear gaps made of SUPORT scalar points and MPCs, opened and closed by "
+                         "iterating): a nonlinear solution, not modelled; remove the PARAM to solve "
+                         "the deck as the linear model it writes")
     elif name == "INREL" and inrel_value(c):
         raise c.error(3, f"PARAM,INREL,{inrel_value(c)} {INREL_IN_STUDY}")
 
@@ -58,8 +63,9 @@ NO_EFFECT = frozenset({
     "PBUSHT",
     # static condensation sets: the reduction of a linear static solution to them is exact
     "ASET", "ASET1", "OMIT", "OMIT1",
-    # output only: plot elements and monitor points
-    "PLOTEL", "MONPNT1", "MONPNT3",
+    # output only: plot elements, monitor points, bar output stations (CBARAO: where a CBAR's
+    # forces and stresses are printed)
+    "PLOTEL", "MONPNT1", "MONPNT3", "CBARAO",
     # design optimisation (SOL 200): a static solution uses the properties as written
     "DESVAR", "DVPREL1", "DVPREL2", "DVMREL1", "DVMREL2", "DVCREL1", "DVCREL2", "DLINK",
     "DRESP1", "DRESP2", "DRESP3", "DCONSTR", "DCONADD", "DSCREEN", "DTABLE",
