@@ -123,7 +123,7 @@ def _check_joints(joints, deck: Deck) -> None:
     check_joints(config, deck, Path("--joint"))
 
 
-def _relieved(applied: list, deck: Deck, cards, param, path: Path, notes: list[str]) -> list:
+def _relieved(applied: list, deck: Deck, cards, param, notes: list[str]) -> list:
     """The cases' loads balanced by inertia relief on the model's SUPORT DOFs (PARAM,INREL,-1
     at ``param``; :func:`solver_adapters.reference.inertia.relieve`), with a note."""
     from solver_adapters.elementloads import MassReader
@@ -338,7 +338,7 @@ def _suport1_selection(cc: CaseControl, sets: dict[int, list], path: Path, notes
     return [c for sid in dropped for c in sets[sid]]
 
 
-def _inertia_relief(cards, path: Path) -> tuple[int, list]:
+def _inertia_relief(cards) -> tuple[int, list]:
     """PARAM,INREL of the deck: its value (0 without one; the last card wins) and its cards.
     -2 (automatic inertia relief, without SUPORT) is refused at the card: NASTRAN then reports
     the displacements with the mass-weighted rigid-body motion removed (M D)^T u = 0, which a
@@ -515,7 +515,7 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
     suport1_sets = _spc_sets_of(cards, _SUPORT1)
     if cc is not None and (suport1_sets or any(s.suport1 is not None for s in cc.subcases)):
         drop_cards += _suport1_selection(cc, suport1_sets, path, notes)
-    inrel, inrel_cards = _inertia_relief(cards, path)
+    inrel, inrel_cards = _inertia_relief(cards)
     if inrel == -1:
         drop_cards += inrel_cards
     debug = [c for c in cards if c.name in _SOLVER_DEBUG]
@@ -530,6 +530,9 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
         kinds = ", ".join(f"{n} x{k}" for n, (k, _) in deck.unmodelled_counts().items())
         notes.append(f"kept {_plural(len(deck.unmodelled), 'card')} the reference solver does not model "
                      f"({kinds}): study.toml names the mystran adapter, which runs them")
+    if inrel != -1 and any(s.card in ("SUPORT", "SUPORT1") for s in deck.spc1s):
+        notes.append("note: SUPORT DOFs without inertia relief (no PARAM,INREL,-1): a linear static "
+                     "solution holds them as it holds an SPC, and so does the study")
     read_seconds = time.perf_counter() - t0
 
     # loads.csv
@@ -551,7 +554,7 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
             continue
         applied.append((label, values))
     if inrel == -1 and applied:
-        applied = _relieved(applied, deck, cards, inrel_cards[-1], path, notes)
+        applied = _relieved(applied, deck, cards, inrel_cards[-1], notes)
     for label, values in applied:
         cases.append(label)
         rows += [f"{label},{g},{comp},{v!r}" for (g, comp), v in sorted(values.items()) if v != 0.0]

@@ -114,4 +114,5 @@ def _suport(r, c) -> None:
         raise c.error(first, f"{c.name} needs at least one grid and its components")
 
 
-PARSERS = {"SUPORT": _suport, "SUPORT1": _suport, "SPC1": _spc1, "SPC": _spc, "SPCADD": _spcadd, "MPC": _mpc, "MPCADD": _mpcadd}
+PARSERS = {"SPC1": _spc1, "SPC": _spc, "SPCADD": _spcadd, "MPC": _mpc, "MPCADD": _mpcadd,
+           "SUPORT": _suport, "SUPORT1": _suport}
