@@ -14,13 +14,13 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from solver_adapters.deck import (Bush, CBar, Deck, Grid, Mat1, PBar, PBush, Pelas, Prod, Rbe2, Rbe3, Rod, Spc1,
+from solver_adapters.deck import (Bush, CBar, Deck, Gap, Grid, Mat1, PBar, PBush, Pelas, Prod, Rbe2, Rbe3, Rod, Spc1,
                                   SpcAdd, Spring, Unmodelled)
 
 __all__ = ["print_int", "print_float_8", "print_float_16", "print_float_free", "print_field",
            "format_card", "write_grid", "write_cbar", "write_pbar", "write_mat1", "write_spc1",
            "write_mpc", "write_rbe2", "write_rbe3", "write_pelas", "write_celas1", "write_celas2", "write_spring",
-           "write_spcadd", "write_prod", "write_rod", "write_coord", "write_cbush", "write_pbush",
+           "write_spcadd", "write_prod", "write_rod", "write_coord", "write_cbush", "write_pbush", "write_cgap", "write_pgap",
            "write_unmodelled", "cbar_in_cd", "write_deck"]
 
 Field = int | float | str | None
@@ -329,6 +329,21 @@ def write_pbush(p: PBush, fmt: str = "small") -> str:
     return format_card("PBUSH", [p.pid, "K", *(float(k) for k in p.k)], fmt)
 
 
+def write_cgap(e: Gap, fmt: str = "small") -> str:
+    """CGAP: EID, PID, GA, GB, GO or X1 X2 X3 (as given, in GA's CD), CID."""
+    orient: list[Field] = ([e.g0, None, None] if e.g0 is not None
+                           else list(e.x) if e.x is not None else [None, None, None])
+    return format_card("CGAP", [e.eid, e.pid, e.ga, e.gb, *orient, e.cid], fmt)
+
+
+def write_pgap(p, fmt: str = "small") -> str:
+    """PGAP: PID, U0, F0, KA, KB, KT, MU1, MU2 (blanks kept: their defaults depend on KA)."""
+    return format_card("PGAP", [p.pid, float(p.u0), float(p.f0), float(p.ka),
+                                None if p.kb is None else float(p.kb),
+                                None if p.kt is None else float(p.kt), float(p.mu1),
+                                None if p.mu2 is None else float(p.mu2)], fmt)
+
+
 def write_unmodelled(u: Unmodelled, fmt: str = "small") -> str:
     """A card the reader keeps without modelling it (a shell, a solid, their properties) with
     its fields as read: integers and words as they are, reals in the format's own precision
@@ -346,7 +361,7 @@ def write_deck(deck: Deck, fmt: str = "small") -> str:
     deck holds, cards sorted by ID, so that reading it back gives the same model: grids (in
     basic, CD kept), coordinate systems (as CORD2R/C/S in basic), CBAR/CBEAM as CBAR with
     PBAR/PBARL/PBEAM/PBEAML as the PBAR they are, rods, MAT1, SPC1, SPCADD, RBE2, RBE3, CBUSH,
-    PBUSH, PELAS, CELAS1/2, PARAM,AUTOSPC,NO and PARAM,EPZERO when they differ from NASTRAN's
+    PBUSH, PELAS, CELAS1/2, CGAP, PGAP, PARAM,AUTOSPC,NO and PARAM,EPZERO when they differ from NASTRAN's
     defaults, and the cards the reader keeps without modelling them (``Deck.unmodelled``: shells,
     solids, for an external solver) field by field. Cards accepted with no effect on a static
     solve (masses, other PARAMs) are left out. Diagnose writes its edited decks with it."""
@@ -377,6 +392,9 @@ def write_deck(deck: Deck, fmt: str = "small") -> str:
     out += [write_rbe3(deck.rbe3s[i], fmt) for i in sorted(deck.rbe3s)]
     out += [write_cbush(deck.bushes[i], fmt) for i in sorted(deck.bushes)]
     out += [write_pbush(deck.pbushes[i], fmt) for i in sorted(deck.pbushes)]
+    gaps, pgaps = getattr(deck, "gaps", {}), getattr(deck, "pgaps", {})
+    out += [write_cgap(gaps[i], fmt) for i in sorted(gaps)]
+    out += [write_pgap(pgaps[i], fmt) for i in sorted(pgaps)]
     out += [write_pelas(a, b, fmt) for a, b in _pairs([deck.pelas[i] for i in sorted(deck.pelas)])]
     out += [write_spring(deck.springs[i], fmt) for i in sorted(deck.springs)]
     out += [write_unmodelled(u, fmt) for u in getattr(deck, "unmodelled", ())]

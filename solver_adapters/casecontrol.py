@@ -6,8 +6,8 @@ data:
 
 * ``SUBCASE n`` starts a subcase; commands above the first SUBCASE are the defaults every subcase
   inherits (a deck without SUBCASE has one case, numbered 1);
-* ``LOAD = n``, ``SPC = n`` and ``MPC = n`` select the load set, the constraint set and the
-  multipoint-constraint set of a subcase;
+* ``LOAD = n``, ``SPC = n``, ``MPC = n`` and ``SUPORT1 = n`` select the load set, the constraint
+  set, the multipoint-constraint set and the SUPORT1 set (reference DOFs) of a subcase;
 * ``TEMPERATURE(LOAD) = n`` selects its thermal load, ``TEMPERATURE(MATERIAL) = n`` the
   temperatures of temperature-dependent materials, ``TEMPERATURE(INITIAL) = n`` the initial
   temperatures; ``TEMPERATURE = n`` and ``TEMPERATURE(BOTH) = n`` are LOAD and MATERIAL (MSC QRG,
@@ -73,10 +73,10 @@ _NOT_STATIC = {  # selections of other solutions: no effect on the static soluti
     "DESV": "DESVAR", "TRIM": "TRIM", "FLUT": "FLUTTER", "GUST": "GUST", "DIVE": "DIVERG",
     "GENG": "GENGAF", "AESYMXY": "AESYMXY", "AESYMXZ": "AESYMXZ", "AEUX": "AEUXREF",
     "CSSC": "CSSCHD", "MODT": "MODTRAK", "MPFA": "MPFACTOR",
-    "AECO": "AECONFIG",
+    "AECO": "AECONFIG", "BC": "BC",
 }
 _UNSUPPORTED = {  # change the static solution; an imported study cannot carry them
-    "DEFO": "DEFORM (enforced element deformation)", "SUPO": "SUPORT1 (inertia relief)",
+    "DEFO": "DEFORM (enforced element deformation)",
     "K2GG": "K2GG (direct matrix input)", "P2G": "P2G (direct load input)",
     "K2PP": "K2PP (direct matrix input)", "K42G": "K42GG (direct matrix input)",
     "M2GG": "M2GG (direct mass input: changes gravity loads)",
@@ -86,7 +86,7 @@ _UNSUPPORTED = {  # change the static solution; an imported study cannot carry t
     "CLOA": "CLOAD", "INCL": "INCLUDE (in the case control)", "ADAP": "ADAPT",
 }
 _PLOT_PACKETS = {"PLOT", "XYPLOT", "XYOUT", "XYPUNCH", "POST", "CARDS"}
-_OTHER = ("SUBCASE", "SUBCOM", "SUBSEQ", "LOAD", "SPC", "MPC", "OUTPUT", "PARAM", "BEGIN", "AUTOSPC",
+_OTHER = ("SUBCASE", "SUBCOM", "SUBSEQ", "LOAD", "SPC", "MPC", "SUPORT1", "OUTPUT", "PARAM", "BEGIN", "AUTOSPC",
           "SEALL", "SUPER", "TEMPERATURE")
 # TEMPERATURE(option): the kinds of temperature set each option selects (MSC QRG TEMPERATURE:
 # blank and BOTH are LOAD and MATERIAL)
@@ -133,6 +133,8 @@ class Subcase:
     temp_mat_line: int = 0
     temp_init: int | None = None    # TEMPERATURE(INITIAL) = n
     temp_init_line: int = 0
+    suport1: int | None = None      # SUPORT1 = n: the SUPORT1 set of reference DOFs
+    suport1_line: int = 0
 
     @property
     def static(self) -> bool:
@@ -273,6 +275,8 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
             current["SPC"] = (_integer(file, line, "SPC", value.strip()), line)
         elif word == "MPC":
             current["MPC"] = (_integer(file, line, "MPC", value.strip()), line)
+        elif len(word) >= 4 and _is(word, "SUPORT1"):
+            current["SUPORT1"] = (_integer(file, line, "SUPORT1", value.strip()), line)
         elif key == "TEMP" and _is(word, "TEMPERATURE"):
             option = options.strip("() ").upper()
             kinds = _TEMP_OPTIONS.get(option)
@@ -339,10 +343,12 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
         spc, spc_line = merged.get("SPC", (None, 0))
         mpc, mpc_line = merged.get("MPC", (None, 0))
         temps = [v for k in ("TEMP_LOAD", "TEMP_MAT", "TEMP_INIT") for v in merged.get(k, (None, 0))]
+        suport1, suport1_line = merged.get("SUPORT1", (None, 0))
         return Subcase(sid, load, spc, line, load_line, spc_line,
                        str(merged.get("TITLE", ("", 0))[0]), str(merged.get("SUBTITLE", ("", 0))[0]),
                        str(merged.get("LABEL", ("", 0))[0]),
-                       tuple(f"{k} = {v}" if v else k for k, v in others.items()), mpc, mpc_line, *temps)
+                       tuple(f"{k} = {v}" if v else k for k, v in others.items()), mpc, mpc_line, *temps,
+                       suport1, suport1_line)
 
     if subcases:
         cases = tuple(make(sid, line, own) for sid, line, own in subcases)

@@ -152,11 +152,14 @@ class Mat1:
 @dataclass(frozen=True)
 class Spc1:
     """SPC1: SID, C (component digits), grids (THRU already expanded). An SPC card (enforced
-    value zero) is held the same way, one entry per grid and component field."""
+    value zero) is held the same way, one entry per grid and component field, and so are the
+    SUPORT/SUPORT1 reference DOFs (``card``), which a linear static solution holds as NASTRAN
+    does: ``sid`` is then a set ID of no other constraint set of the deck."""
     sid: int
     components: str
     grids: tuple[int, ...]
     src: str = ""
+    card: str = "SPC1"
 
 
 @dataclass(frozen=True)
@@ -254,6 +257,46 @@ class Bush:
 
 
 @dataclass(frozen=True)
+class Gap:
+    """CGAP: EID, PID, GA, GB, the orientation vector ``x`` (GA's CD system) or grid ``g0``, and
+    CID (``None``: blank, the gap axis runs from GA to GB; else that system's T1 direction at GA).
+    The orientation has no effect on a linear solution (the transverse stiffness is the same in y
+    and z)."""
+    eid: int
+    pid: int
+    ga: int
+    gb: int
+    x: tuple[float, float, float] | None = None
+    g0: int | None = None
+    cid: int | None = None
+    src: str = ""
+
+
+@dataclass(frozen=True)
+class PGap:
+    """PGAP: PID, U0 (initial opening), F0 (preload), KA (closed axial), KB (open axial, None:
+    blank), KT (closed transverse, None: blank), MU1, MU2 (friction), as written."""
+    pid: int
+    u0: float
+    f0: float
+    ka: float
+    kb: float | None
+    kt: float | None
+    mu1: float
+    mu2: float | None
+    src: str = ""
+
+    def linear(self) -> tuple[float, float]:
+        """The (axial, transverse) stiffness of a linear solution, which keeps the gap in its
+        initial state (MSC QRG CGAP remark 1: linear with the initial stiffness, which U0 sets):
+        closed (U0 <= 0): KA and KT (blank: MU1 KA); open (U0 > 0): KB (blank: 1e-14 KA) and no
+        transverse stiffness (MSC QRG PGAP: KT acts when the gap is closed)."""
+        if self.u0 > 0.0:
+            return (1e-14 * self.ka if self.kb is None else self.kb), 0.0
+        return self.ka, (self.mu1 * self.ka if self.kt is None else self.kt)
+
+
+@dataclass(frozen=True)
 class PBush:
     """PBUSH: PID and the stiffnesses K1..K6 of the element axes (blank: 0)."""
     pid: int
@@ -314,6 +357,8 @@ class Deck:
     rbe3s: dict[int, Rbe3] = field(default_factory=dict)
     bushes: dict[int, Bush] = field(default_factory=dict)
     pbushes: dict[int, PBush] = field(default_factory=dict)
+    gaps: dict[int, Gap] = field(default_factory=dict)
+    pgaps: dict[int, PGap] = field(default_factory=dict)
     pelas: dict[int, Pelas] = field(default_factory=dict)
     springs: dict[int, Spring] = field(default_factory=dict)
     spcadds: dict[int, SpcAdd] = field(default_factory=dict)

@@ -138,24 +138,27 @@ class MassReader:
         self.cards = cards
         self._masses: Masses | None = None
 
-    def masses(self, grav, deck, sel: str) -> Masses:
+    def masses(self, grav, deck, sel: str, lead: str = "GRAV") -> Masses:
+        """The masses, read at the first call; errors are located at the card ``grav`` (a GRAV,
+        or the PARAM,INREL of an inertia relief: ``lead`` names it)."""
         if self._masses is None:
-            self._masses = self._read(grav, deck, sel)
+            self._masses = self._read(grav, deck, sel, lead)
         return self._masses
 
-    def _read(self, grav, deck, sel: str) -> Masses:
+    def _read(self, grav, deck, sel: str, lead: str) -> Masses:
         def refuse(card, why: str) -> DeckFormatError:
-            return grav.error(1, f"GRAV{sel} acts on the mass of the whole model, and {card.name} at "
+            return grav.error(1, f"{lead}{sel} acts on the mass of the whole model, and {card.name} at "
                                  f"{card.src} {why}")
 
         if deck.unmodelled:
             u = deck.unmodelled[0]
-            raise grav.error(1, f"GRAV{sel} acts on the mass of the whole model, and the model has "
+            raise grav.error(1, f"{lead}{sel} acts on the mass of the whole model, and the model has "
                                 f"elements the reference solver does not model ({u.name} at {u.src}): "
                                 f"their mass is not known here")
         rho: dict[int, float] = {}
         nsm: dict[str, dict[int, float]] = {"bar": {}, "rod": {}, "conrod": {}}
         conm2: list[tuple[int, float, tuple[float, float, float]]] = []
+        inertia: list[tuple[int, np.ndarray]] = []
         conm1: list[tuple[int, np.ndarray]] = []
         scalar_cards: list = []
         pmass: dict[int, float] = {}
@@ -185,7 +188,10 @@ class MassReader:
             elif name == "CONROD":
                 nsm["conrod"][_int(c, 2)] = _real(c, 9, 0.0)
             elif name == "CONM2":
-                conm2.append(self._conm2(c, deck))
+                g, m, x, i33 = self._conm2(c, deck)
+                conm2.append((g, m, x))
+                if i33.any():
+                    inertia.append((g, i33))
             elif name == "CONM1":
                 conm1.append(self._conm1(c, deck))
             elif name in ("CMASS1", "CMASS2"):
@@ -199,7 +205,7 @@ class MassReader:
         conrod = {r.eid: rho.get(r.mid, 0.0) * r.a + nsm["conrod"].get(r.eid, 0.0)
                   for r in deck.rods.values() if r.pid is None}
         scalar = [self._cmass(c, pmass, refuse) for c in scalar_cards]
-        return Masses(bar_pid, rod_pid, conrod, conm2, wtmass, conm1, scalar)
+        return Masses(bar_pid, rod_pid, conrod, conm2, wtmass, conm1, scalar, inertia)
 
     @staticmethod
     def _cmass(c, pmass: dict, refuse) -> tuple[int, int, float]:
@@ -265,15 +271,19 @@ class MassReader:
             raise refuse(c, "has centre-of-gravity offsets M1, M2: its mass is not on the beam's axis")
 
     @staticmethod
-    def _conm2(c, deck) -> tuple[int, float, tuple[float, float, float]]:
-        """CONM2 EID G CID M X1 X2 X3: the mass at the grid moved by the offset X, given in
-        system CID (0: basic; -1: X is the centre of gravity itself, in basic)."""
+    def _conm2(c, deck) -> tuple[int, float, tuple[float, float, float], np.ndarray]:
+        """CONM2 EID G CID M X1 X2 X3 / I11 I21 I22 I31 I32 I33: the mass at the grid moved by
+        the offset X, given in system CID (0: basic; -1: X is the centre of gravity itself, in
+        basic), and its inertia about the centre of gravity in basic (MSC QRG CONM2: the matrix
+        [I11 -I21 -I31; -I21 I22 -I32; -I31 -I32 I33], in system CID; a GRAV does not use it)."""
         g = _int(c, 3)
         cid = _int(c, 4, minimum=-1, default=0)
         m = _real(c, 5, 0.0)
         x = np.array([_real(c, i, 0.0) for i in (6, 7, 8)])
         if g not in deck.grids:
             raise c.error(3, f"grid {g} does not exist (no GRID)")
+        i11, i21, i22, i31, i32, i33 = (_real(c, i, 0.0) for i in range(10, 16))
+        inertia = np.array([[i11, -i21, -i31], [-i21, i22, -i32], [-i31, -i32, i33]])
         if cid == -1:
             x = x - np.array(deck.grids[g].xyz)
         elif cid:
@@ -281,5 +291,7 @@ class MassReader:
             if system is None or system.kind != "R":
                 raise c.error(4, f"CID {cid}: a CONM2 offset needs a rectangular coordinate system "
                                  f"of the deck")
-            x = np.asarray(system.axes).T @ x
-        return g, m, tuple(x.tolist())
+            axes = np.asarray(system.axes)
+            x = axes.T @ x
+            inertia = axes.T @ inertia @ axes
+        return g, m, tuple(x.tolist()), inertia

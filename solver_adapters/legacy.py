@@ -129,6 +129,8 @@ def unsupported_features(m) -> list[tuple[str, str, str]]:
         out.append((f"CBUSH {b.eid}", b.src, "bushes (FRAMESOLVE has scalar springs only)"))
     for c in getattr(m, "mpcs", ()):
         out.append((f"MPC {c.sid}", c.src, "multipoint constraints (FRAMESOLVE ties rigidly only)"))
+    for e in sorted(getattr(m, "gaps", {}).values(), key=lambda e: e.eid):
+        out.append((f"CGAP {e.eid}", e.src, "gap elements (FRAMESOLVE has beams and scalar springs only)"))
     return out
 
 

@@ -217,9 +217,11 @@ class RawCard:
 WRITTEN = frozenset({"GRID", "GRDSET", "CBAR", "CBEAM", "BAROR", "PBAR", "PBARL", "PBEAM", "PBEAML",
                      "CROD", "PROD", "CONROD", "CTUBE", "PTUBE", "MAT1", "SPC1", "SPC", "SPCADD",
                      "RBE2", "RBAR", "PELAS", "CELAS1", "CELAS2", "CELAS3", "CELAS4", "SPOINT",
-                     "MPC", "MPCADD", "CORD1R", "CORD1C", "CORD1S", "CORD2R", "CORD2C", "CORD2S"})
+                     "MPC", "MPCADD", "CORD1R", "CORD1C", "CORD1S", "CORD2R", "CORD2C", "CORD2S",
+                     "SUPORT", "SUPORT1"})
 """Cards :func:`model_cards` writes back from the parsed model: GRDSET and BAROR through the
-GRIDs and CBARs they complete, SPC as SPC1, RBAR as the RBE2 it is (all six independent
+GRIDs and CBARs they complete, SPC as SPC1, SUPORT/SUPORT1 as the SPC1 that a static solution
+without inertia relief makes of them (a study's loads are already balanced: docs/import.md), RBAR as the RBE2 it is (all six independent
 components at one grid), CTUBE/PTUBE as the CROD/PROD of the tube's A and J (MYSTRAN 18 has no
 CTUBE), every coordinate system as a CORD2x in basic, scalar points (SPOINT) with component 1
 on them in CELAS1/CELAS2 and MPC, the form MYSTRAN 18 requires (it refuses a blank or 0
@@ -235,6 +237,7 @@ card of its own in the model, and MYSTRAN reads it with the same meaning."""
 _KNOWN_FIELDS = frozenset({"grids", "cbars", "pbars", "mat1s", "spc1s", "rbe2s", "rbe3s", "bushes",
                            "mpcs", "mpcadds",
                            "pbushes", "pelas", "springs", "spcadds", "prods", "rods", "coords", "files",
+                           "gaps", "pgaps",
                            "no_effect", "unmodelled", "notes"})
 """The parsed deck's collections of cards the run deck accounts for; a model with another non-empty
 collection cannot be written faithfully (a card the reader learnt after this writer): an error,
@@ -249,6 +252,12 @@ def check_writable(model) -> None:
     if unknown:
         raise DeckFormatError(f"the MYSTRAN run deck cannot write the model's {', '.join(unknown)} "
                               f"(cards the reader models but solver_adapters.nastran does not write yet)")
+    for e in sorted(getattr(model, "gaps", {}).values(), key=lambda e: e.eid)[:1]:
+        file, _, line = e.src.rpartition(":")
+        raise DeckFormatError(f"the mystran adapter cannot run CGAP {e.eid}: MYSTRAN 18 has no gap "
+                              f"element (CGAP/PGAP); the reference adapter models its linear "
+                              f"stiffness", file=file or None, line=int(line) if line.isdigit() else None,
+                              card="CGAP")
     for p in getattr(model, "pbars", {}).values():
         if getattr(p, "n1", 0.0) or getattr(p, "n2", 0.0):
             file, _, line = p.src.rpartition(":")
@@ -275,6 +284,9 @@ def passthrough_cards(path: str | os.PathLike) -> list[RawCard]:
             continue
         if c.name in _not_passable():
             raise c.error(1, f"{c.name} cannot be handed to MYSTRAN: {_not_passable()[c.name]}")
+        if c.name in ("CGAP", "PGAP"):
+            raise c.error(1, f"the mystran adapter cannot run {c.name}: MYSTRAN 18 has no gap "
+                             f"element; the reference adapter models its linear stiffness")
         if c.name in bdf.SUPPORTED and c.name not in RAW_MODELLED:
             raise c.error(1, f"the MYSTRAN run deck does not write {c.name} yet (the reader models it; "
                              f"passing it as written could duplicate what the model holds)")
@@ -628,7 +640,7 @@ MYSTRAN_CARDS = frozenset({
 })
 """The cards the reader keeps for an external solver (``unmodelled="pass"``) that MYSTRAN 18
 runs: the entries its bulk-data reader (LOADB) processes, less those a run deck must not carry
-(loads, SUPORT; MPC and MPCADD are modelled, and written back from the model with the run deck's MPC =). MYSTRAN matches entry names on a prefix, so it would read a CBARAO as a
+(loads; SUPORT is written back as the constraint it is in a static solution; MPC and MPCADD are modelled, and written back from the model with the run deck's MPC =). MYSTRAN matches entry names on a prefix, so it would read a CBARAO as a
 CBAR, a CBEAM3 as a CBEAM, a CQUAD8 not at all (a warning only): every kept card outside this
 set is refused by the mystran adapter before it runs (:attr:`NastranDialect.runs_cards`)."""
 

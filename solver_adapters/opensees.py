@@ -178,6 +178,9 @@ class Translation:
                         f"{s.card} {s.eid}", s.src)
         for b in sorted(m.bushes.values(), key=lambda b: b.eid):
             self._bush(b)
+        for e in sorted(getattr(m, "gaps", {}).values(), key=lambda e: e.eid):
+            self.refuse(f"CGAP {e.eid}", e.src, "the OpenSees deck has no gap element (the reference "
+                                                "adapter models its linear stiffness)")
 
     def _supports(self) -> None:
         fixed: dict[int, set[str]] = {}

@@ -26,6 +26,7 @@ import numpy as np
 
 from blackbox.errors import StudyError
 from solver_adapters.bdf import deck_from_cards
+from solver_adapters.bdf.params import inrel_value
 from solver_adapters.bdf.tokens import BEGIN_BULK as _BEGIN_BULK, _INCLUDE, _split, _strip_comment, is_include
 from solver_adapters.casecontrol import CaseControl, bulk_start
 from solver_adapters.deck import Deck
@@ -36,6 +37,7 @@ __all__ = ["ImportResult", "run", "parse_joint", "candidate_joints"]
 
 _SPC_CARDS = ("SPC", "SPC1", "SPCADD")
 _MPC_CARDS = ("MPC", "MPCADD")
+_SUPORT1 = ("SUPORT1",)
 # MYSTRAN's own bulk-data card for debug printout: no effect on the solution, not NASTRAN.
 _SOLVER_DEBUG = ("DEBUG",)
 
@@ -119,6 +121,25 @@ def _check_joints(joints, deck: Deck) -> None:
     if len({n for n, _ in joints}) != len(joints):
         raise StudyError("--joint: two joints have the same name")
     check_joints(config, deck, Path("--joint"))
+
+
+def _relieved(applied: list, deck: Deck, cards, param, notes: list[str]) -> list:
+    """The cases' loads balanced by inertia relief on the model's SUPORT DOFs (PARAM,INREL,-1
+    at ``param``; :func:`solver_adapters.reference.inertia.relieve`), with a note."""
+    from solver_adapters.elementloads import MassReader
+    from solver_adapters.reference.inertia import SUPORT_CARDS, relieve
+    masses = MassReader(cards).masses(param, deck, "", lead="PARAM,INREL,-1 (inertia relief)")
+    balanced, accel, _ = relieve(deck, masses, [v for _, v in applied], param_src=param.src)
+    rset = [f"{g}:{c}" for s in deck.spc1s if s.card in SUPORT_CARDS for g in s.grids for c in s.components]
+    notes.append(f"inertia relief (PARAM,INREL,-1 at {param.src}): every case's loads balanced by "
+                 f"the inertia loads of its rigid-body acceleration on the SUPORT DOFs "
+                 f"({', '.join(rset)}; " + "; ".join(
+                     f"case {label}: " + ", ".join(f"{a:.4g}" for a in acc)
+                     for (label, _), acc in list(zip(applied, accel))[:6])
+                 + (" ..." if len(applied) > 6 else "") + "): loads.csv holds the balanced loads, "
+                 "model.bdf the SUPORT DOFs (held, as NASTRAN holds them) without the PARAM; the "
+                 "displacements are relative to the SUPORT DOFs")
+    return [(label, values) for (label, _), values in zip(applied, balanced)]
 
 
 def _study_toml(name: str, source: Path, cases, joints, deck: Deck) -> str:
@@ -288,6 +309,55 @@ def _mpc_selection(cc: CaseControl, sets: dict[int, list], path: Path, notes: li
     return [c for sid in dropped for c in sets[sid]]
 
 
+def _suport1_selection(cc: CaseControl, sets: dict[int, list], path: Path, notes: list[str]) -> list:
+    """The SUPORT1 cards to drop from model.bdf: every set the subcases do not select (all of
+    them when none selects one: NASTRAN then applies none). The subcases that import a load must
+    select the same set (a study has one model). Bulk SUPORT cards always apply and stay."""
+    chosen = {s.suport1 for s in cc.subcases if s.static}
+    if len(chosen) > 1:
+        detail = ", ".join(f"subcase {s.id}: {'none' if s.suport1 is None else s.suport1}"
+                           for s in cc.subcases if s.static)
+        raise DeckFormatError(f"the subcases select different SUPORT1 sets ({detail}); a study has "
+                              f"one model: give every subcase the same SUPORT1 = set (or import the "
+                              f"deck once per set)", file=str(path))
+    choice = chosen.pop() if chosen else None
+    if choice is None:
+        if sets:
+            notes.append(f"no subcase that imports a load selects a SUPORT1 set (no SUPORT1 =), so "
+                         f"NASTRAN applies none: dropped the SUPORT1 cards of set(s) "
+                         f"{', '.join(map(str, sorted(sets)))}")
+        return [c for cs in sets.values() for c in cs]
+    line = next(s.suport1_line for s in cc.subcases if s.static)
+    if choice not in sets:
+        raise DeckFormatError(f"SUPORT1 = {choice} selects a set the bulk data does not have (no "
+                              f"SUPORT1 with SID {choice})", file=str(path), line=line,
+                              card="SUPORT1", value=str(choice))
+    dropped = sorted(set(sets) - {choice})
+    notes.append(f"SUPORT1 = {choice} selected: kept SUPORT1 set {choice}"
+                 + (f"; dropped set(s) {', '.join(map(str, dropped))} (not selected)" if dropped else ""))
+    return [c for sid in dropped for c in sets[sid]]
+
+
+def _inertia_relief(cards) -> tuple[int, list]:
+    """PARAM,INREL of the deck: its value (0 without one; the last card wins) and its cards.
+    -2 (automatic inertia relief, without SUPORT) is refused at the card: NASTRAN then reports
+    the displacements with the mass-weighted rigid-body motion removed (M D)^T u = 0, which a
+    study whose model holds supports cannot reproduce."""
+    params = [c for c in cards if c.name == "PARAM" and c.text(2) == "INREL"]
+    if not params:
+        return 0, []
+    value = inrel_value(params[-1])
+    if value == -2:
+        raise params[-1].error(3, "PARAM,INREL,-2 (automatic inertia relief) is not imported: "
+                                  "NASTRAN then reports the displacements relative to the "
+                                  "mass-weighted mean rigid-body motion ((M D)^T u = 0), which a "
+                                  "study, whose model holds supports, cannot reproduce. Use "
+                                  "PARAM,INREL,-1 with SUPORT entries on a statically determinate "
+                                  "set of DOFs (six for a free 3-D structure): the displacements "
+                                  "are then relative to them")
+    return value, params
+
+
 _STATIC_SOLS = ("1", "101", "SESTATIC", "SESTATICS", "STATICS")
 _SOL_NAMES = {"3": "normal modes", "103": "normal modes", "SEMODES": "normal modes", "MODES": "normal modes",
               "5": "buckling", "105": "buckling", "SEBUCKL": "buckling", "106": "nonlinear statics",
@@ -442,6 +512,12 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
                          + (f"; dropped set(s) {', '.join(map(str, dropped))} (not selected)" if dropped else ""))
     if cc is not None and (mpc_sets or any(s.mpc is not None for s in cc.subcases)):
         drop_cards += _mpc_selection(cc, mpc_sets, path, notes)
+    suport1_sets = _spc_sets_of(cards, _SUPORT1)
+    if cc is not None and (suport1_sets or any(s.suport1 is not None for s in cc.subcases)):
+        drop_cards += _suport1_selection(cc, suport1_sets, path, notes)
+    inrel, inrel_cards = _inertia_relief(cards)
+    if inrel == -1:
+        drop_cards += inrel_cards
     debug = [c for c in cards if c.name in _SOLVER_DEBUG]
     drop_cards += debug
     dropped_ids = {id(c) for c in drop_cards}
@@ -454,6 +530,9 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
         kinds = ", ".join(f"{n} x{k}" for n, (k, _) in deck.unmodelled_counts().items())
         notes.append(f"kept {_plural(len(deck.unmodelled), 'card')} the reference solver does not model "
                      f"({kinds}): study.toml names the mystran adapter, which runs them")
+    if inrel != -1 and any(s.card in ("SUPORT", "SUPORT1") for s in deck.spc1s):
+        notes.append("note: SUPORT DOFs without inertia relief (no PARAM,INREL,-1): a linear static "
+                     "solution holds them as it holds an SPC, and so does the study")
     read_seconds = time.perf_counter() - t0
 
     # loads.csv
@@ -462,19 +541,23 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
     initial = _initial_temperatures(cc)
     if initial is not None and not any(tsid is not None for _, _, tsid, _ in selected):
         notes.append(f"TEMPERATURE(INITIAL) = {initial}: no effect, no imported case has a thermal load")
+    applied = []
     for label, sid, tsid, where in selected:
         values = loads.resolve(sid, deck, where=where) if sid is not None else {}
         if tsid is not None:
             for dof, v in loads.resolve_thermal(tsid, deck, where=where, initial=initial).items():
                 values[dof] = values.get(dof, 0.0) + v
-        nonzero = sorted((d, v) for d, v in values.items() if v != 0.0)
-        if not nonzero:
+        if not any(v != 0.0 for v in values.values()):
             what = " and ".join(([f"load set {sid}"] if sid is not None else []) +
                                 ([f"temperature set {tsid}"] if tsid is not None else []))
             notes.append(f"case {label}: {what} sums to zero at every DOF: not imported")
             continue
+        applied.append((label, values))
+    if inrel == -1 and applied:
+        applied = _relieved(applied, deck, cards, inrel_cards[-1], notes)
+    for label, values in applied:
         cases.append(label)
-        rows += [f"{label},{g},{comp},{v!r}" for (g, comp), v in nonzero]
+        rows += [f"{label},{g},{comp},{v!r}" for (g, comp), v in sorted(values.items()) if v != 0.0]
     if not cases:
         raise DeckFormatError("every selected load set is zero: nothing to import", file=str(path))
 

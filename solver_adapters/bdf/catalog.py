@@ -7,12 +7,12 @@ from __future__ import annotations
 
 import difflib
 
-from solver_adapters.bdf import bars, beams, constraints, grids, materials, params, rigid, rods, springs
+from solver_adapters.bdf import bars, beams, constraints, gaps, grids, materials, params, rigid, rods, springs
 from solver_adapters.bdf.params import NO_EFFECT
 from solver_adapters.deck import Deck
 from solver_adapters.protocol import DeckFormatError
 
-_FAMILIES = (grids, bars, beams, rods, materials, rigid, springs, constraints, params)
+_FAMILIES = (grids, bars, beams, rods, materials, rigid, springs, gaps, constraints, params)
 
 PARSERS = {name: p for m in _FAMILIES for name, p in m.PARSERS.items()}
 """Card name -> the parser that reads one card into the reader's state."""
@@ -47,11 +47,11 @@ KNOWN_UNMODELLED = frozenset({
     # shells, solids, other elements and their properties
     "CQUAD4", "CQUADR", "CQUAD8", "CQUAD", "CQUADX", "CTRIA3", "CTRIAR", "CTRIA6", "CTRIAX",
     "CTRIAX6", "CSHEAR", "CHEXA", "CPENTA", "CTETRA", "CPYRAM", "CBEND", "CVISC",
-    "CBEAM3", "CBARAO", "CDAMP1", "CDAMP2", "CDAMP3", "CDAMP4", "CDAMP5",
-    "CGAP", "CWELD", "CFAST", "CSEAM", "CBUSH1D", "CBUSH2D", "CRAC2D", "CRAC3D", "GENEL",
+    "CBEAM3", "CDAMP1", "CDAMP2", "CDAMP3", "CDAMP4", "CDAMP5",
+    "CWELD", "CFAST", "CSEAM", "CBUSH1D", "CBUSH2D", "CRAC2D", "CRAC3D", "GENEL",
     "CUSER1", "CUSERIN", "CONV", "CHBDYE", "CHBDYG", "CHBDYP",
     "PSHELL", "PCOMP", "PCOMPG", "PCOMP1", "PSOLID", "PSHEAR", "PBEND", "PVISC",
-    "PBCOMP", "PBEAM3", "PBRSECT", "PBMSECT", "PDAMP", "PDAMP5", "PGAP", "PWELD", "PFAST",
+    "PBCOMP", "PBEAM3", "PBRSECT", "PBMSECT", "PDAMP", "PDAMP5", "PWELD", "PFAST",
     "PBUSH1D", "PBUSH2D", "PELAST", "PLPLANE", "PLSOLID", "PSHLN1", "PSHLN2",
     "PUSER1", "PUSERIN", "PHBDY", "PCONV",
     # materials other than MAT1, and temperature- or stress-dependent material tables
@@ -60,7 +60,7 @@ KNOWN_UNMODELLED = frozenset({
     # rigid elements other than RBE2, RBE3
     "RBAR1", "RBE1", "RROD", "RTRPLT", "RTRPLT1", "RSPLINE", "RJOINT",
     # degree-of-freedom sets, scalar points, sequencing
-    "SUPORT", "SUPORT1", "QSET", "QSET1", "BSET", "BSET1",
+    "QSET", "QSET1", "BSET", "BSET1",
     "CSET", "CSET1", "USET", "USET1", "SEQGP", "EPOINT",
     # other coordinate systems, direct matrix input, tables, functions
     "CORD3G", "CORD3R", "DTI", "DMI", "DMIG", "DMIJ", "DMIK", "DEQATN", "BEAMOR",

@@ -226,8 +226,18 @@ def _problems(deck: Deck, bulk_checked: bool) -> list[str]:
                 bad(b, "CBUSH", b.eid, "GA and GB coincide: the element axes need CID")
         if b.cid is not None and b.cid != 0 and b.cid not in deck.coords:
             bad(b, "CBUSH", b.eid, f"CID {b.cid}: coordinate system not defined")
+    for e in deck.gaps.values():
+        if e.pid not in deck.pgaps:
+            bad(e, "CGAP", e.eid, f"property PID {e.pid} not found (no PGAP)")
+        need_grids(e, "CGAP", e.eid, [g for g in (e.ga, e.gb, e.g0) if g], "grid(s)")
+        if e.ga == e.gb:
+            bad(e, "CGAP", e.eid, f"GA and GB are the same grid {e.ga}")
+        elif e.cid is None and e.gb in deck.grids and e.ga in deck.grids:
+            xa, xb = np.array(deck.grids[e.ga].xyz), np.array(deck.grids[e.gb].xyz)
+            if np.linalg.norm(xb - xa) <= ZERO_LENGTH * max(np.abs(xa).max(), np.abs(xb).max(), 1e-300):
+                bad(e, "CGAP", e.eid, "GA and GB coincide: the gap axis needs CID")
     for s in deck.spc1s:
-        need_grids(s, "SPC1", s.sid, s.grids, "grid(s)")
+        need_grids(s, s.card, s.sid if s.card == "SPC1" else "(reference DOFs)", s.grids, "grid(s)")
     spc_sets = {s.sid for s in deck.spc1s}
     for a in deck.spcadds.values():
         if a.sid in spc_sets:
@@ -254,6 +264,7 @@ def _problems(deck: Deck, bulk_checked: bool) -> list[str]:
         joined = [(b, b.card, b.eid, (b.ga, b.gb, b.g0)) for b in deck.cbars.values()]
         joined += [(r, r.card, r.eid, (r.ga, r.gb)) for r in deck.rods.values()]
         joined += [(b, "CBUSH", b.eid, (b.ga, b.gb, b.g0)) for b in deck.bushes.values()]
+        joined += [(e, "CGAP", e.eid, (e.ga, e.gb, e.g0)) for e in deck.gaps.values()]
         joined += [(e, e.card, e.eid, (e.gn, *e.gm)) for e in deck.rbe2s.values()]
         joined += [(e, "RBE3", e.eid, (e.refgrid, *(g for _, _, gs in e.groups for g in gs)))
                    for e in deck.rbe3s.values()]

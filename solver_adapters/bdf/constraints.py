@@ -1,5 +1,5 @@
 """Single-point constraints: SPC1, SPC (zero enforced value) and SPCADD; multipoint
-constraints: MPC and MPCADD."""
+constraints: MPC and MPCADD; the reference DOFs of a free body: SUPORT and SUPORT1."""
 
 from __future__ import annotations
 
@@ -91,4 +91,28 @@ def _mpcadd(r, c) -> None:
     r.deck.mpcadds[sid] = SpcAdd(sid, tuple(sets), c.src)
 
 
-PARSERS = {"SPC1": _spc1, "SPC": _spc, "SPCADD": _spcadd, "MPC": _mpc, "MPCADD": _mpcadd}
+def _suport(r, c) -> None:
+    """SUPORT ID1 C1 ID2 C2 ID3 C3 ID4 C4 (MSC QRG SUPORT): the reference DOFs (r-set) of a
+    free body; SUPORT1 SID ID1 C1 ID2 C2 ID3 C3 the same, in a set the case control selects
+    (SUPORT1 = SID). A linear static solution without inertia relief holds them as it holds an
+    SPC (MSC Linear Static Analysis User's Guide, inertia relief: the r-set is removed from the
+    a-set and given zero motion); with inertia relief (PARAM,INREL,-1) ``blackbox import``
+    balances the loads first. Held here like SPC1 entries of a set of their own (finish())."""
+    first = 3 if c.name == "SUPORT1" else 2
+    _max_fields(c, first + 5 if c.name == "SUPORT1" else 9)
+    if c.name == "SUPORT1":
+        _int(c, 2)
+    found = False
+    for base in range(first, first + 8 if c.name == "SUPORT" else first + 6, 2):
+        if not (c.text(base) or c.text(base + 1)):
+            continue
+        g = _int(c, base)
+        comps = _point_components(c, base + 1)
+        r.spc1_pending.append((None, comps, [g], c.src, c, base + 1))
+        found = True
+    if not found:
+        raise c.error(first, f"{c.name} needs at least one grid and its components")
+
+
+PARSERS = {"SPC1": _spc1, "SPC": _spc, "SPCADD": _spcadd, "MPC": _mpc, "MPCADD": _mpcadd,
+           "SUPORT": _suport, "SUPORT1": _suport}

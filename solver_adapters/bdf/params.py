@@ -2,13 +2,29 @@
 
 from __future__ import annotations
 
-from solver_adapters.bdf.fields import _real
+from solver_adapters.bdf.fields import _int, _real
+
+INREL_IN_STUDY = ("(inertia relief) balances the applied loads by the inertia loads of the "
+                  "structure's rigid-body acceleration; a study's loads.csv holds the loads its "
+                  "solvers apply, so `blackbox import` writes the balanced loads there and leaves "
+                  "this card out of model.bdf (docs/import.md, inertia relief): import the deck, "
+                  "or remove the card")
+"""Why a study's model refuses PARAM,INREL,-1/-2 (the solvers would hold the SUPORT DOFs with
+the loads unbalanced)."""
+
+
+def inrel_value(c) -> int:
+    """PARAM,INREL's value: 0 (none), -1 (inertia relief on the SUPORT DOFs), -2 (automatic)."""
+    value = _int(c, 3, minimum=None)
+    if value not in (0, -1, -2):
+        raise c.error(3, "PARAM,INREL must be 0, -1 or -2")
+    return value
 
 
 def _param(r, c) -> None:
     """PARAM,AUTOSPC (YES/NO; the last one of the deck wins; without one AUTOSPC is on, NASTRAN's
-    SOL 101 default) and PARAM,EPZERO (its singularity ratio) are read; every other PARAM has no
-    effect on the reference solver."""
+    SOL 101 default) and PARAM,EPZERO (its singularity ratio) are read; PARAM,INREL,-1/-2 is
+    refused (:data:`INREL_IN_STUDY`); every other PARAM has no effect on the reference solver."""
     name = c.text(2)
     if name == "AUTOSPC":
         value = c.text(3)
@@ -21,6 +37,13 @@ def _param(r, c) -> None:
         if not 0.0 < value < 1.0:
             raise c.error(3, "PARAM,EPZERO must be in (0, 1)")
         r.deck.epzero = value
+    elif name == "CDITER" and _int(c, 3, 0, minimum=None) > 0:
+        raise c.error(3, "PARAM,CDITER > 0 asks for NASTRAN's constrained displacement iteration "
+                         "(linear gaps made of SUPORT scalar points and MPCs, opened and closed by "
+                         "iterating): a nonlinear solution, not modelled; remove the PARAM to solve "
+                         "the deck as the linear model it writes")
+    elif name == "INREL" and inrel_value(c):
+        raise c.error(3, f"PARAM,INREL,{inrel_value(c)} {INREL_IN_STUDY}")
 
 
 NO_EFFECT = frozenset({
@@ -40,8 +63,9 @@ NO_EFFECT = frozenset({
     "PBUSHT",
     # static condensation sets: the reduction of a linear static solution to them is exact
     "ASET", "ASET1", "OMIT", "OMIT1",
-    # output only: plot elements and monitor points
-    "PLOTEL", "MONPNT1", "MONPNT3",
+    # output only: plot elements, monitor points, bar output stations (CBARAO: where a CBAR's
+    # forces and stresses are printed)
+    "PLOTEL", "MONPNT1", "MONPNT3", "CBARAO",
     # design optimisation (SOL 200): a static solution uses the properties as written
     "DESVAR", "DVPREL1", "DVPREL2", "DVMREL1", "DVMREL2", "DVCREL1", "DVCREL2", "DLINK",
     "DRESP1", "DRESP2", "DRESP3", "DCONSTR", "DCONADD", "DSCREEN", "DTABLE",

@@ -305,6 +305,9 @@ class _Reader:
             if g in self.deck.grids:              # a missing point: validate() names it
                 _check_point(c, i, g, comp, scalar)
         ordered = None
+        # SUPORT/SUPORT1 entries (sid None) form a constraint set of their own
+        taken = {p[0] for p in self.spc1_pending if p[0] is not None} | set(self.deck.spcadds)
+        suport_sid = max(taken, default=0) + 1
         for sid, comps, items, src, card, field in self.spc1_pending:
             grids: list[int] = []
             for item in items:
@@ -318,12 +321,38 @@ class _Reader:
             if grids and (scalar or comps == "0"):
                 comps = _spc_on_points(card, field, comps, grids, scalar, self.deck.grids)
             if grids:
-                self.deck.spc1s.append(Spc1(sid, comps, tuple(grids), src))
+                self.deck.spc1s.append(Spc1(suport_sid if sid is None else sid, comps, tuple(grids),
+                                            src, "SPC1" if sid is not None else card.name))
+        if any(p[0] is None for p in self.spc1_pending):
+            _suport_apart(self.deck, [p for p in self.spc1_pending if p[0] is None])
         if scalar:
             _to_component_1(self.deck, scalar)
         self.deck.notes = [f"{', '.join(cards[:5])}{f' and {len(cards) - 5} more' if len(cards) > 5 else ''}: "
                            f"{message}" for message, cards in self.notes.items()]
         return self.deck
+
+
+def _suport_apart(deck: Deck, pending) -> None:
+    """A SUPORT/SUPORT1 component may not also be held by an SPC, SPC1 or GRID PS, nor be named
+    by two of them (NASTRAN: a DOF belongs to one of the mutually exclusive sets r and s)."""
+    held: dict[tuple[int, int], str] = {}
+    for s in deck.spc1s:
+        if s.card == "SPC1":
+            for g in s.grids:
+                for k in s.components:
+                    held.setdefault((g, int(k)), f"an SPC/SPC1 of set {s.sid} at {s.src}")
+    for g in deck.grids.values():
+        for k in g.ps or "":
+            held.setdefault((g.id, int(k)), f"GRID {g.id}'s PS at {g.src}")
+    for _, comps, items, _, card, field in pending:
+        for g in items:
+            for k in ("1" if comps == "0" else comps):
+                key = (g, int(k))
+                if key in held:
+                    raise card.error(field, f"grid {g} component {k} is also held by {held[key]}: "
+                                            f"a DOF is a reference (r-set) DOF or a constrained "
+                                            f"(s-set) one, not both (NASTRAN refuses it too)")
+                held[key] = f"{card.name} at {card.src}"
 
 
 def _check_point(c, i: int, g: int, comp: int, scalar: set[int]) -> None:

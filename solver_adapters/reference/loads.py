@@ -220,7 +220,8 @@ def thermal_rod_loads(deck, r, strain: float) -> dict[tuple[int, int], float]:
 class Masses:
     """The mass a GRAV load acts on, from the deck's cards: mass per unit length of each bar
     property and rod (``rho A + NSM``; a CONROD by its EID), the CONM2 masses ``(grid, mass,
-    offset in basic)``, the CONM1 mass matrices ``(grid, 6x6 in basic)``, the scalar masses to
+    offset in basic)`` and their inertia about the centre of gravity (``conm2_inertia``: no part
+    of a GRAV load), the CONM1 mass matrices ``(grid, 6x6 in basic)``, the scalar masses to
     ground ``(grid, component, mass)`` (CMASS1, CMASS2; the component in the grid's CD system)
     and PARAM,WTMASS."""
     bar_pid: dict[int, float]
@@ -230,6 +231,7 @@ class Masses:
     wtmass: float = 1.0
     conm1: list[tuple[int, np.ndarray]] = None
     scalar: list[tuple[int, int, float]] = None
+    conm2_inertia: list[tuple[int, np.ndarray]] = None   # (grid, 3x3 about the CG, basic)
 
 
 def gravity_loads(deck, masses: Masses, accel: np.ndarray) -> dict[tuple[int, int], float]:

@@ -276,6 +276,8 @@ def assemble(deck: Deck, extra_springs: tuple[ScalarSpring, ...] = (),
         K_gg = _assemble_bars(ia, ib, R, L, props, len(grid_ids), pins, offs, bars, nax)
     if deck.bushes:
         K_gg = (K_gg + bush_stiffness(deck, grid_ids, xyz)).tocsr()
+    if getattr(deck, "gaps", None):
+        K_gg = (K_gg + gap_stiffness(deck, grid_ids, xyz)).tocsr()
     D = displacement_transform(deck, grid_ids)
     if D is not None:                 # elements are in basic, the g-set in each grid's CD
         K_gg = (D.T @ K_gg @ D).tocsr()
@@ -440,6 +442,33 @@ def bush_stiffness(deck: Deck, grid_ids: np.ndarray, xyz: np.ndarray) -> sp.csr_
                          shape=(n_g, n_g))
 
 
+def gap_stiffness(deck: Deck, grid_ids: np.ndarray, xyz: np.ndarray) -> sp.csr_matrix:
+    """Sum of the CGAP stiffnesses in basic, as a linear solution has them (MSC QRG CGAP remark
+    1: linear with the stiffness of the gap's initial state, :meth:`PGap.linear`): between the
+    translations of GA and GB, the axial stiffness along the gap axis e (GA -> GB, or CID's T1
+    direction at GA) and the transverse one across it, K = ka e e^T + kt (I - e e^T) (the same
+    in y and z, so the orientation vector has no effect); no rotational stiffness."""
+    n_g = 6 * len(grid_ids)
+    rows, cols, vals = [], [], []
+    for e in sorted(deck.gaps.values(), key=lambda g: g.eid):
+        where = f"{e.src}: CGAP {e.eid}"
+        ia, ib = (int(i) for i in _grid_pos(grid_ids, [e.ga, e.gb], where))
+        if e.cid is not None:
+            axis = np.eye(3)[0] if e.cid == 0 else deck.coords[e.cid].frames_at(xyz[ia][None, :])[0][0]
+        else:
+            axis = xyz[ib] - xyz[ia]
+            axis = axis / np.linalg.norm(axis)
+        ka, kt = deck.pgaps[e.pid].linear()
+        K3 = ka * np.outer(axis, axis) + kt * (np.eye(3) - np.outer(axis, axis))
+        K = np.block([[K3, -K3], [-K3, K3]])
+        idx = np.concatenate([6 * ia + np.arange(3), 6 * ib + np.arange(3)])
+        rows.append(np.repeat(idx, 6))
+        cols.append(np.tile(idx, 6))
+        vals.append(K.ravel())
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(n_g, n_g))
+
+
 def displacement_transform(deck: Deck, grid_ids: np.ndarray) -> sp.csr_matrix | None:
     """``D`` (n_g x n_g) with ``u_basic = D u_cd``: per grid ``blockdiag(F^T, F^T)``, F the
     rows of the grid's CD axes in basic (``Deck.displacement_frames``). ``None`` when every CD
@@ -482,7 +511,7 @@ def constraint_map(deck: Deck, grid_ids: np.ndarray, pos: dict[int, int] | None 
         p = _grid_pos(grid_ids, [gid for gid, c in ps if c == comps], "GRID PS")
         fixed[(6 * p[:, None] + np.array([int(c) - 1 for c in comps])).ravel()] = True
     for s in deck.spc1s:
-        p = _grid_pos(grid_ids, list(s.grids), f"{s.src}: SPC1 {s.sid}")
+        p = _grid_pos(grid_ids, list(s.grids), f"{s.src}: {s.card}" + (f" {s.sid}" if s.card == "SPC1" else ""))
         comps = np.array([int(c) - 1 for c in s.components], dtype=np.int64)
         fixed[(6 * p[:, None] + comps).ravel()] = True
 
