@@ -69,12 +69,18 @@ _NOT_STATIC = {  # selections of other solutions: no effect on the static soluti
     "MODE": "MODES", "ANAL": "ANALYSIS", "STAT": "STATSUB", "RIGI": "RIGID", "MASS": "MASS",
     "RMET": "RMETHOD", "FMET": "FMETHOD", "SMET": "SMETHOD", "TSTEPNL": "TSTEPNL",
     "NONL": "NONLINEAR", "B2GG": "B2GG", "B2PP": "B2PP", "TFL": "TFL", "RGYR": "RGYRO",
-    "DESO": "DESOBJ", "DESS": "DESSUB", "DESG": "DESGLB", "DSAP": "DSAPRT", "DRSP": "DRSPAN",
-    "DESV": "DESVAR", "TRIM": "TRIM", "FLUT": "FLUTTER", "GUST": "GUST", "DIVE": "DIVERG",
+    "TRIM": "TRIM", "FLUT": "FLUTTER", "GUST": "GUST", "DIVE": "DIVERG",
     "GENG": "GENGAF", "AESYMXY": "AESYMXY", "AESYMXZ": "AESYMXZ", "AEUX": "AEUXREF",
     "CSSC": "CSSCHD", "MODT": "MODTRAK", "MPFA": "MPFACTOR",
     "AECO": "AECONFIG",
 }
+_DESIGN = {  # design optimisation (SOL 200): read by their first four letters, as NASTRAN does
+    "DESO": "DESOBJ", "DESS": "DESSUB", "DESG": "DESGLB", "DSAP": "DSAPRT", "DRSP": "DRSPAN",
+    "DESV": "DESVAR", "DESM": "DESMOD",
+}
+STATIC_ANALYSES = ("STATICS", "STATIC", "NLSTATICS", "NLSTATIC", "NLSTAT")
+"""ANALYSIS values of a static subcase (MSC QRG ANALYSIS: STATICS in SOL 200; NLSTATIC in
+SOL 400); a subcase of any other (MODES, BUCK, DFREQ, SAERO, FLUTTER ...) is not imported."""
 _UNSUPPORTED = {  # change the static solution; an imported study cannot carry them
     "DEFO": "DEFORM (enforced element deformation)", "SUPO": "SUPORT1 (inertia relief)",
     "K2GG": "K2GG (direct matrix input)", "P2G": "P2G (direct load input)",
@@ -107,7 +113,7 @@ def _lookup(table: dict[str, str], word: str) -> str | None:
 def known_commands() -> list[str]:
     """Every case-control command this module reads (for "did you mean")."""
     names = {n.split()[0] for t in (_TITLES, _OUTPUT_REQUESTS, _OUTPUT_CONTROLS, _NOT_STATIC,
-                                    _UNSUPPORTED) for n in t.values()}
+                                    _DESIGN, _UNSUPPORTED) for n in t.values()}
     return sorted(names | set(_OTHER))
 
 
@@ -133,11 +139,19 @@ class Subcase:
     temp_mat_line: int = 0
     temp_init: int | None = None    # TEMPERATURE(INITIAL) = n
     temp_init_line: int = 0
+    analysis: str = ""              # ANALYSIS = ... (SOL 200, SOL 400): the subcase's own analysis
 
     @property
     def static(self) -> bool:
-        """The subcase has a static load: a LOAD set or a thermal load."""
-        return self.load is not None or self.temp_load is not None
+        """The subcase has a static load (a LOAD set or a thermal load) and its ANALYSIS, if it
+        names one, is a static analysis (STATICS; SOL 400's NLSTATIC, whose load steps are
+        imported as linear static cases like SOL 106's)."""
+        return (self.load is not None or self.temp_load is not None) and self.analysis_static
+
+    @property
+    def analysis_static(self) -> bool:
+        """No ANALYSIS command, or one naming a static analysis."""
+        return self.analysis in ("", *STATIC_ANALYSES)
 
 
 @dataclass(frozen=True)
@@ -309,6 +323,13 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
                 raise DeckFormatError("AUTOSPC must be YES or NO", file=file, line=line,
                                       card=word, value=stmt)
             autospc = (flag, line)
+        elif key in _DESIGN:
+            # the design model's selections (objective, constraints, responses, design
+            # variables) do not change the static solution of the initial design; NASTRAN
+            # reads them by their first four letters (DESOPJ is DESOBJ)
+            name = _DESIGN[key]
+            skip("design optimisation", name if _is(word, name) else f"{name} (written {word})")
+            current.setdefault("OTHERS", ({}, line))[0][name] = value.strip()
         elif _lookup(_UNSUPPORTED, word) is not None:
             raise DeckFormatError(f"the case-control command {_lookup(_UNSUPPORTED, word)} changes "
                                   f"the static solution and cannot be imported; remove it from the "
@@ -339,10 +360,12 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
         spc, spc_line = merged.get("SPC", (None, 0))
         mpc, mpc_line = merged.get("MPC", (None, 0))
         temps = [v for k in ("TEMP_LOAD", "TEMP_MAT", "TEMP_INIT") for v in merged.get(k, (None, 0))]
+        analysis = re.sub(r"\s+", "", others.get("ANALYSIS", "")).upper()
         return Subcase(sid, load, spc, line, load_line, spc_line,
                        str(merged.get("TITLE", ("", 0))[0]), str(merged.get("SUBTITLE", ("", 0))[0]),
                        str(merged.get("LABEL", ("", 0))[0]),
-                       tuple(f"{k} = {v}" if v else k for k, v in others.items()), mpc, mpc_line, *temps)
+                       tuple(f"{k} = {v}" if v else k for k, v in others.items()), mpc, mpc_line, *temps,
+                       analysis)
 
     if subcases:
         cases = tuple(make(sid, line, own) for sid, line, own in subcases)

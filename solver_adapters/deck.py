@@ -337,6 +337,10 @@ class Deck:
     # what the reader read but did not model as written (a PBEAM's CW ignored, ends equal to
     # printing precision): one line per kind, naming the cards; not part of the model itself
     notes: list[str] = field(default_factory=list, compare=False)
+    # SOL 200's designed values (bdf.design): (card, ID) -> {field: value at the initial design},
+    # already in the entities above; the loads that read cards (GRAV's RHO and NSM, thermal
+    # loads' MAT1 A and TREF) take the designed values from here
+    designed: dict[tuple[str, int], dict[int, float]] = field(default_factory=dict)
 
     def unmodelled_grids(self) -> dict[int, list[str]]:
         """Grid -> the unmodelled cards joined to it (``"CQUAD4 10"``), for every grid of the

@@ -38,6 +38,8 @@ _SPC_CARDS = ("SPC", "SPC1", "SPCADD")
 _MPC_CARDS = ("MPC", "MPCADD")
 # MYSTRAN's own bulk-data card for debug printout: no effect on the solution, not NASTRAN.
 _SOLVER_DEBUG = ("DEBUG",)
+_DESIGN_CARDS = ("DESVAR", "DLINK", "DVPREL1", "DVMREL1", "DVPREL2", "DVMREL2", "DVCREL1", "DVCREL2")
+_DESIGN_SOLS = ("200", "DESOPT")
 
 
 @dataclass(frozen=True, eq=False)
@@ -339,6 +341,13 @@ def _temperature_selections(cc: CaseControl, cards, path: Path, notes: list[str]
     mat = [s for s in cc.subcases if s.static and s.temp_mat is not None]
     if not mat:
         return
+    init = next((s for s in cc.subcases if s.static and s.temp_init is not None), None)
+    if init is not None:
+        raise DeckFormatError(f"TEMPERATURE(MATERIAL) = {mat[0].temp_mat} (TEMPERATURE = n is LOAD and "
+                              f"MATERIAL) and TEMPERATURE(INITIAL) = {init.temp_init} cannot both be "
+                              f"given (MSC QRG TEMPERATURE, remark 8): select the thermal load with "
+                              f"TEMPERATURE(LOAD)", file=str(path), line=mat[0].temp_mat_line,
+                              card="TEMPERATURE")
     matt = next((c for c in cards if c.name.startswith("MATT")), None)
     if matt is not None:
         raise DeckFormatError(f"TEMPERATURE(MATERIAL) = {mat[0].temp_mat} selects temperatures for "
@@ -400,6 +409,9 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
                                           f"static deck (SOL 101) only", file=str(path), line=line,
                                           card="TEMPERATURE")
         for s in cc.subcases:
+            if not s.analysis_static:
+                notes.append(f"subcase {s.id} is ANALYSIS = {s.analysis}, not a static analysis: not imported")
+                continue
             if not s.static:
                 notes.append(f"subcase {s.id} selects no load set (no LOAD = or TEMPERATURE(LOAD) =): not imported")
                 continue
@@ -444,6 +456,12 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
         drop_cards += _mpc_selection(cc, mpc_sets, path, notes)
     debug = [c for c in cards if c.name in _SOLVER_DEBUG]
     drop_cards += debug
+    # the design model: SOL 200 analyses the initial design (the reader applies the relations);
+    # in a deck of another solution NASTRAN does not read it, so it is not carried over
+    design_cards = [c for c in cards if c.name in _DESIGN_CARDS]
+    design_dropped = bool(design_cards) and cc is not None and cc.sol.upper() not in _DESIGN_SOLS
+    if design_dropped:
+        drop_cards += design_cards
     dropped_ids = {id(c) for c in drop_cards}
     kept = [c for c in cards if id(c) not in dropped_ids]
     # cards the reference solver does not model (shells, solids) are kept for an external solver:
@@ -519,6 +537,17 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
                      f"(a card image ends at column 80)")
     if debug:
         notes.append(f"dropped {_plural(len(debug), 'DEBUG card')} (MYSTRAN debug printout, no effect on the solution)")
+    if design_cards:
+        kinds = ", ".join(f"{n} x{k}" for n, k in Counter(c.name for c in design_cards).items())
+        if design_dropped:
+            notes.append(f"dropped the design model ({kinds}) from model.bdf: the deck's solution is "
+                         f"{_sol_text(cc.sol)}, which does not read it (only SOL 200 does)")
+        else:
+            what = ("; designed: " + ", ".join(f"{k[0]} {k[1]}" for k in deck.designed)
+                    if deck.designed else "; it designs no stiffness (masses, damping only)")
+            notes.append(f"read the design model ({kinds}): the study is the deck's analysis at the "
+                         f"initial design, the designed values at the DESVAR initial values (XINIT)"
+                         f"{what}")
     if deck.no_effect:
         notes.append("accepted with no effect on a linear static solution (kept in model.bdf, never "
                      "a reason for another adapter): " + ", ".join(

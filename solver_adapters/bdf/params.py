@@ -42,9 +42,9 @@ NO_EFFECT = frozenset({
     "ASET", "ASET1", "OMIT", "OMIT1",
     # output only: plot elements and monitor points
     "PLOTEL", "MONPNT1", "MONPNT3",
-    # design optimisation (SOL 200): a static solution uses the properties as written
-    "DESVAR", "DVPREL1", "DVPREL2", "DVMREL1", "DVMREL2", "DVCREL1", "DVCREL2", "DLINK",
-    "DRESP1", "DRESP2", "DRESP3", "DCONSTR", "DCONADD", "DSCREEN", "DTABLE",
+    # design optimisation (SOL 200): responses, constraints and their equations and tables
+    # (the relations that design the model's properties are read by bdf.design)
+    "DRESP1", "DRESP2", "DRESP3", "DCONSTR", "DCONADD", "DSCREEN", "DTABLE", "DEQATN", "DDVAL",
     # static aeroelasticity and flutter: the aerodynamic model adds nothing to a SOL 101 solution
     "AERO", "AEROS", "CAERO1", "CAERO2", "CAERO3", "CAERO4", "CAERO5", "PAERO1", "PAERO2",
     "PAERO3", "PAERO4", "PAERO5", "SPLINE1", "SPLINE2", "SPLINE4", "SPLINE5", "SET1", "SET2",

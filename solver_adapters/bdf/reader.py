@@ -18,6 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from solver_adapters.bdf import design
 from solver_adapters.bdf.catalog import (BULK, ELEMENT_GRIDS, NOT_PASSABLE, PARSERS,
                                          _connects_nothing, known, unsupported_error)
 from solver_adapters.bdf.fields import _components, _int, _orientation
@@ -43,7 +44,9 @@ class _Reader:
         # ID -> "CARD at file:line"; elements (CBAR, RBE2, CELASi) share one ID space, as do
         # properties (PBAR, PELAS)
         self.ids: dict[str, dict[int, str]] = {"GRID": {}, "element": {}, "property": {}, "MAT1": {},
-                                               "SPCADD": {}, "MPCADD": {}, "CORD": {}}
+                                               "SPCADD": {}, "MPCADD": {}, "CORD": {},
+                                               **{k: {} for k in design.PARSERS if k != "DLINK"}}
+        self.design = design.DesignState.empty()   # SOL 200's design model, applied in finish()
         self.spc1_pending: list[tuple[int, str, list[int | tuple[int, int]], str, object, int]] = []
         self.spoints: dict[int, object] = {}      # SPOINT ID -> its Grid (scalar), in finish()
         # (card, field, point, component) of every spring end and MPC term (component 0: blank
@@ -91,6 +94,8 @@ class _Reader:
             entry[0] += 1
             return
         parser(self, card)
+        if card.name in design.TARGET_CARDS:
+            design.record_target(self, card)
 
     def bulk(self, collection: str, id_space: str, cards: np.ndarray, keys: list, entities: list) -> None:
         """Entities a bulk converter made from ``cards`` (table indices), for ``collection`` of
@@ -321,6 +326,7 @@ class _Reader:
                 self.deck.spc1s.append(Spc1(sid, comps, tuple(grids), src))
         if scalar:
             _to_component_1(self.deck, scalar)
+        design.apply(self, PARSERS, _Reader)
         self.deck.notes = [f"{', '.join(cards[:5])}{f' and {len(cards) - 5} more' if len(cards) > 5 else ''}: "
                            f"{message}" for message, cards in self.notes.items()]
         return self.deck
