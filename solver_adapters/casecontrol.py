@@ -83,7 +83,7 @@ STATIC_ANALYSES = ("STATICS", "STATIC", "NLSTATICS", "NLSTATIC", "NLSTAT")
 SOL 400); a subcase of any other (MODES, BUCK, DFREQ, SAERO, FLUTTER ...) is not imported."""
 _UNSUPPORTED = {  # change the static solution; an imported study cannot carry them
     "DEFO": "DEFORM (enforced element deformation)", "SUPO": "SUPORT1 (inertia relief)",
-    "K2GG": "K2GG (direct matrix input)", "P2G": "P2G (direct load input)",
+    "P2G": "P2G (direct load input)",
     "K2PP": "K2PP (direct matrix input)", "K42G": "K42GG (direct matrix input)",
     "M2GG": "M2GG (direct mass input: changes gravity loads)",
     "LOADSET": "LOADSET (static load sets from LSEQ cards, not read by blackbox import)",
@@ -92,7 +92,7 @@ _UNSUPPORTED = {  # change the static solution; an imported study cannot carry t
     "CLOA": "CLOAD", "INCL": "INCLUDE (in the case control)", "ADAP": "ADAPT",
 }
 _PLOT_PACKETS = {"PLOT", "XYPLOT", "XYOUT", "XYPUNCH", "POST", "CARDS"}
-_OTHER = ("SUBCASE", "SUBCOM", "SUBSEQ", "LOAD", "SPC", "MPC", "OUTPUT", "PARAM", "BEGIN", "AUTOSPC",
+_OTHER = ("SUBCASE", "SUBCOM", "SUBSEQ", "LOAD", "SPC", "MPC", "K2GG", "OUTPUT", "PARAM", "BEGIN", "AUTOSPC",
           "SEALL", "SUPER", "TEMPERATURE")
 # TEMPERATURE(option): the kinds of temperature set each option selects (MSC QRG TEMPERATURE:
 # blank and BOTH are LOAD and MATERIAL)
@@ -140,6 +140,8 @@ class Subcase:
     temp_init: int | None = None    # TEMPERATURE(INITIAL) = n
     temp_init_line: int = 0
     analysis: str = ""              # ANALYSIS = ... (SOL 200, SOL 400): the subcase's own analysis
+    k2gg: str | None = None         # K2GG = NAME: the DMIG matrix added to the stiffness
+    k2gg_line: int = 0
 
     @property
     def static(self) -> bool:
@@ -287,6 +289,13 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
             current["SPC"] = (_integer(file, line, "SPC", value.strip()), line)
         elif word == "MPC":
             current["MPC"] = (_integer(file, line, "MPC", value.strip()), line)
+        elif word == "K2GG":
+            name = value.strip().upper()
+            if not re.fullmatch(r"[A-Z][A-Z0-9]{0,7}", name):
+                raise DeckFormatError("K2GG is read as one DMIG matrix name (K2GG = NAME); scale "
+                                      "factors and sums of matrices are not read (PARAM,CK2 scales "
+                                      "the matrix)", file=file, line=line, card=word, value=stmt)
+            current["K2GG"] = (name, line)
         elif key == "TEMP" and _is(word, "TEMPERATURE"):
             option = options.strip("() ").upper()
             kinds = _TEMP_OPTIONS.get(option)
@@ -361,11 +370,12 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
         mpc, mpc_line = merged.get("MPC", (None, 0))
         temps = [v for k in ("TEMP_LOAD", "TEMP_MAT", "TEMP_INIT") for v in merged.get(k, (None, 0))]
         analysis = re.sub(r"\s+", "", others.get("ANALYSIS", "")).upper()
+        k2gg, k2gg_line = merged.get("K2GG", (None, 0))
         return Subcase(sid, load, spc, line, load_line, spc_line,
                        str(merged.get("TITLE", ("", 0))[0]), str(merged.get("SUBTITLE", ("", 0))[0]),
                        str(merged.get("LABEL", ("", 0))[0]),
                        tuple(f"{k} = {v}" if v else k for k, v in others.items()), mpc, mpc_line, *temps,
-                       analysis)
+                       analysis, k2gg, k2gg_line)
 
     if subcases:
         cases = tuple(make(sid, line, own) for sid, line, own in subcases)

@@ -129,6 +129,8 @@ def unsupported_features(m) -> list[tuple[str, str, str]]:
         out.append((f"CBUSH {b.eid}", b.src, "bushes (FRAMESOLVE has scalar springs only)"))
     for c in getattr(m, "mpcs", ()):
         out.append((f"MPC {c.sid}", c.src, "multipoint constraints (FRAMESOLVE ties rigidly only)"))
+    for d in getattr(m, "dmigs", {}).values():
+        out.append((f"DMIG {d.name}", d.src, "a direct stiffness matrix (FRAMESOLVE has scalar springs only)"))
     return out
 
 

@@ -197,7 +197,7 @@ def needs_passthrough(model) -> bool:
     unmodelled cards that :func:`read_model` let pass, or any card the reader models that this
     writer does not know (the scan then names it: :func:`passthrough_cards`)."""
     from solver_adapters import bdf
-    if set(bdf.SUPPORTED) - WRITTEN - RAW_MODELLED - DESIGN_MODEL:
+    if set(bdf.SUPPORTED) - WRITTEN - RAW_MODELLED - DESIGN_MODEL - {"DMIG"}:
         return True
     if getattr(model, "no_effect", None) or any(getattr(model, f, None)
                                                 for f in ("rbe3s", "bushes", "pbushes", "mpcs", "mpcadds")):
@@ -241,7 +241,7 @@ card of its own in the model, and MYSTRAN reads it with the same meaning."""
 _KNOWN_FIELDS = frozenset({"grids", "cbars", "pbars", "mat1s", "spc1s", "rbe2s", "rbe3s", "bushes",
                            "mpcs", "mpcadds",
                            "pbushes", "pelas", "springs", "spcadds", "prods", "rods", "coords", "files",
-                           "no_effect", "unmodelled", "notes", "designed"})
+                           "no_effect", "unmodelled", "notes", "designed", "dmigs"})
 """The parsed deck's collections of cards the run deck accounts for; a model with another non-empty
 collection cannot be written faithfully (a card the reader learnt after this writer): an error,
 not a dropped card. Scalar settings (PARAM values the reader keeps) reach MYSTRAN through the
@@ -255,6 +255,13 @@ def check_writable(model) -> None:
     if unknown:
         raise DeckFormatError(f"the MYSTRAN run deck cannot write the model's {', '.join(unknown)} "
                               f"(cards the reader models but solver_adapters.nastran does not write yet)")
+    for m in getattr(model, "dmigs", {}).values():
+        file, _, line = m.src.rpartition(":")
+        raise DeckFormatError(f"the mystran adapter cannot run DMIG {m.name} (a stiffness added by "
+                              f"K2GG): MYSTRAN 18 does not read DMIG (it skips the card with a "
+                              f"warning, so it would solve the structure without it); the reference "
+                              f"adapter models it", file=file or None,
+                              line=int(line) if line.isdigit() else None, card="DMIG")
     for p in getattr(model, "pbars", {}).values():
         if getattr(p, "n1", 0.0) or getattr(p, "n2", 0.0):
             file, _, line = p.src.rpartition(":")

@@ -321,6 +321,38 @@ def _no_static_load(cc: CaseControl | None, path: Path) -> str:
             f"yourself) and import again")
 
 
+def _dmig_selection(cc: CaseControl | None, cards, path: Path, notes: list[str]) -> list:
+    """The DMIG cards to drop: NASTRAN adds to the stiffness the matrix that K2GG = NAME selects
+    (one for every imported subcase) and no other, while a study adds every DMIG of model.bdf;
+    a deck without case control keeps them all."""
+    dmigs = [c for c in cards if c.name == "DMIG"]
+    if cc is None:
+        if dmigs:
+            notes.append("no case control: every DMIG matrix of the deck is added to the stiffness (K2GG)")
+        return []
+    chosen = {s.k2gg for s in cc.subcases if s.static}
+    if len(chosen) > 1:
+        detail = ", ".join(f"subcase {s.id}: {s.k2gg or 'none'}" for s in cc.subcases if s.static)
+        raise DeckFormatError(f"the subcases select different K2GG matrices ({detail}); a study has "
+                              f"one stiffness: give every subcase the same K2GG", file=str(path))
+    name = chosen.pop() if chosen else None
+    names = list(dict.fromkeys(c.text(2) for c in dmigs))
+    if name is not None:
+        line = next(s.k2gg_line for s in cc.subcases if s.static)
+        if name not in names:
+            raise DeckFormatError(f"K2GG = {name} selects a matrix the bulk data does not have (no "
+                                  f"DMIG named {name})", file=str(path), line=line, card="K2GG",
+                                  value=name)
+        notes.append(f"K2GG = {name} at {path}:{line}: DMIG {name} kept in model.bdf, added to the "
+                     f"stiffness in the g-set (times PARAM,CK2)")
+    dropped = [n for n in names if n != name]
+    if dropped:
+        notes.append(f"dropped DMIG matrix(es) {', '.join(dropped)} from model.bdf: "
+                     f"{'not selected by K2GG' if name else 'no K2GG selects them'} (NASTRAN adds none "
+                     f"that the case control does not select)")
+    return [c for c in dmigs if c.text(2) != name]
+
+
 def _initial_temperatures(cc: CaseControl | None) -> int | None:
     """The TEMPERATURE(INITIAL) set of the subcases that import a load (one, else an error)."""
     if cc is None:
@@ -458,6 +490,7 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
     drop_cards += debug
     # the design model: SOL 200 analyses the initial design (the reader applies the relations);
     # in a deck of another solution NASTRAN does not read it, so it is not carried over
+    drop_cards += _dmig_selection(cc, cards, path, notes)
     design_cards = [c for c in cards if c.name in _DESIGN_CARDS]
     design_dropped = bool(design_cards) and cc is not None and cc.sol.upper() not in _DESIGN_SOLS
     if design_dropped:

@@ -16,6 +16,9 @@ def _param(r, c) -> None:
             raise c.error(3, "PARAM,AUTOSPC must be YES or NO")
         r.deck.autospc = value.startswith("Y")
         r.deck.autospc_src = c.src
+    elif name == "CK2":
+        # the scale of the direct stiffness matrices (K2GG, DMIG): MSC QRG PARAM CK2, default 1.0
+        r.deck.ck2 = _real(c, 3)
     elif name == "EPZERO":
         value = _real(c, 3)
         if not 0.0 < value < 1.0:

@@ -18,7 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from solver_adapters.bdf import design
+from solver_adapters.bdf import design, matrices
 from solver_adapters.bdf.catalog import (BULK, ELEMENT_GRIDS, NOT_PASSABLE, PARSERS,
                                          _connects_nothing, known, unsupported_error)
 from solver_adapters.bdf.fields import _components, _int, _orientation
@@ -47,6 +47,8 @@ class _Reader:
                                                "SPCADD": {}, "MPCADD": {}, "CORD": {},
                                                **{k: {} for k in design.PARSERS if k != "DLINK"}}
         self.design = design.DesignState.empty()   # SOL 200's design model, applied in finish()
+        self.dmig_headers: dict[str, object] = {}  # DMIG name -> its header card
+        self.dmig_columns: dict[str, list] = {}    # DMIG name -> (card, GJ, CJ, terms) per column
         self.spc1_pending: list[tuple[int, str, list[int | tuple[int, int]], str, object, int]] = []
         self.spoints: dict[int, object] = {}      # SPOINT ID -> its Grid (scalar), in finish()
         # (card, field, point, component) of every spring end and MPC term (component 0: blank
@@ -326,6 +328,7 @@ class _Reader:
                 self.deck.spc1s.append(Spc1(sid, comps, tuple(grids), src))
         if scalar:
             _to_component_1(self.deck, scalar)
+        matrices.finish(self)
         design.apply(self, PARSERS, _Reader)
         self.deck.notes = [f"{', '.join(cards[:5])}{f' and {len(cards) - 5} more' if len(cards) > 5 else ''}: "
                            f"{message}" for message, cards in self.notes.items()]
