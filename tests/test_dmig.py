@@ -240,3 +240,14 @@ def test_bad_k2gg_is_located(k2gg, why, tmp_path):
     with pytest.raises(DeckFormatError, match=why) as info:
         _import(tmp_path, SPRINGS.replace("K2GG = KS", k2gg).format(springs=DMIG))
     assert (info.value.card, info.value.line) == ("K2GG", 4)
+
+
+@pytest.mark.parametrize("fmt", ["small", "large", "free"])
+def test_written_deck_keeps_the_matrix(fmt, tmp_path):
+    """write_deck (diagnose's edited decks) writes the DMIG and PARAM,CK2 back: the same model."""
+    from solver_adapters.bdf_write import write_deck
+    result = _import(tmp_path, SPRINGS.format(springs=DMIG + "PARAM,CK2,1.5\n"))
+    deck = read_deck_text(result.model_bdf, name="model.bdf")
+    again = read_deck_text(write_deck(deck, fmt), name="written.bdf")
+    assert again.dmigs == {k: type(v)(v.name, v.ifo, v.terms, again.dmigs[k].src) for k, v in deck.dmigs.items()}
+    assert again.ck2 == 1.5
