@@ -269,7 +269,7 @@ def apply(r, card_parsers: dict, scratch_reader) -> None:
     values = _values(r)
     for c in d.others:
         target = c.text(3)
-        if target in NO_STATIC_EFFECT or (c.name.startswith("DVC") and target in NO_STATIC_EFFECT):
+        if target in NO_STATIC_EFFECT:
             continue
         if c.name.startswith("DVC"):
             raise c.error(3, f"{c.name} designs a connectivity value of {target} {c.text(4)} (an "
@@ -289,8 +289,10 @@ def apply(r, card_parsers: dict, scratch_reader) -> None:
             raise c.error(3, f"{target}: only MAT1 materials are modelled (DVMREL1 of another "
                              f"material is not applied)")
         if target in ("PBUSH", "PBEAML"):
-            raise c.error(3, f"a designed {target} is not applied ({'handed to MYSTRAN as written' if target == 'PBUSH' else 'stations of a PBEAML are not designed here'}): "
-                             f"give the designed value on the {target} card")
+            why = ("it is handed to MYSTRAN as written" if target == "PBUSH"
+                   else "the stations of a PBEAML are not designed here")
+            raise c.error(3, f"a designed {target} is not applied ({why}): give the designed value "
+                             f"on the {target} card")
         got = d.targets.get((target, tid))
         if got is None:
             if (target, tid) in {(u.name, u.fields[0]) for u in r.deck.unmodelled}:
