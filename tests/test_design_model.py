@@ -314,3 +314,12 @@ def test_equations_of_responses_are_read_and_have_no_effect(tmp_path):
     path.write_text(result.model_bdf)
     deck = read_deck(path)
     assert deck.no_effect["DEQATN"][0] == 1 and deck.no_effect["DRESP2"][0] == 1
+    from test_reader_paths import assert_same
+    assert_same(result.model_bdf, tmp_path, must_read=True)
+
+
+@pytest.mark.parametrize("deck", ["CANTILEVER", "ROD_SPRING"])
+def test_both_reader_paths_read_the_design_alike(deck, tmp_path):
+    """The bulk path and the card-by-card path give the same designed model."""
+    from test_reader_paths import assert_same
+    assert_same(_import(tmp_path, globals()[deck]).model_bdf, tmp_path, must_read=True)

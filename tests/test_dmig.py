@@ -250,3 +250,9 @@ def test_written_deck_keeps_the_matrix(fmt, tmp_path):
     again = read_deck_text(write_deck(deck, fmt), name="written.bdf")
     assert again.dmigs == {k: type(v)(v.name, v.ifo, v.terms, again.dmigs[k].src) for k, v in deck.dmigs.items()}
     assert again.ck2 == 1.5
+
+
+def test_both_reader_paths_read_the_matrix_alike(tmp_path):
+    from test_reader_paths import assert_same
+    assert_same(_import(tmp_path, SPRINGS.format(springs=DMIG)).model_bdf, tmp_path, must_read=True)
+    assert_same(_import(tmp_path, CANTILEVER.format(last=MATRIX), "c.dat").model_bdf, tmp_path, must_read=True)
