@@ -323,3 +323,16 @@ def test_both_reader_paths_read_the_design_alike(deck, tmp_path):
     """The bulk path and the card-by-card path give the same designed model."""
     from test_reader_paths import assert_same
     assert_same(_import(tmp_path, globals()[deck]).model_bdf, tmp_path, must_read=True)
+
+
+def test_thermal_load_of_the_initial_design(tmp_path):
+    """A SOL 200 static subcase's TEMPERATURE(LOAD) is SOL 101's: the cantilever 50 degrees above
+    TREF stretches by alpha 50 L, alpha the DVMREL1's (2e-5 X1 at X1 = 2, the card says 1.2e-5),
+    with no force: the designed E and A do not enter a free member's thermal stretch."""
+    text = CANTILEVER.replace("  LOAD = 5\nSUBCASE 2", "  TEMP(LOAD) = 8\nSUBCASE 2").replace(
+        "MAT1,1,2.1E11,,0.3", "MAT1,1,2.1E11,,0.3,,1.2E-5,20.").replace(
+        "ENDDATA", "TEMPD,8,70.\nDVMREL1,21,MAT1,1,A\n,1,2.E-5\nENDDATA")
+    result = _import(tmp_path, text)
+    _, report, u = _solve(result)
+    assert u[report.index((2, 1)), 0] == pytest.approx(2.0e-5 * X1 * 50.0 * L, rel=CLOSED)
+    assert abs(u[report.index((2, 3)), 0]) <= 1e-12 * L

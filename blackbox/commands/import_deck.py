@@ -432,13 +432,17 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
     else:
         selected = []
         if cc.sol and cc.sol.upper() not in _STATIC_SOLS:
+            # a SOL 200 subcase whose ANALYSIS is STATICS is SOL 101's linear static analysis
+            # (of the initial design): its TEMPERATURE selections mean what they mean there
+            design = cc.sol.upper() in _DESIGN_SOLS
             for s in cc.subcases:
                 line = s.temp_load_line or s.temp_mat_line or s.temp_init_line
-                if line:
+                if line and not (design and s.analysis_static):
                     raise DeckFormatError(f"the deck's solution is {_sol_text(cc.sol)}, not linear "
                                           f"statics: its TEMPERATURE selections mean what that "
                                           f"solution makes of them, and are imported in a linear "
-                                          f"static deck (SOL 101) only", file=str(path), line=line,
+                                          f"static deck (SOL 101, or a SOL 200 subcase with "
+                                          f"ANALYSIS = STATICS) only", file=str(path), line=line,
                                           card="TEMPERATURE")
         for s in cc.subcases:
             if not s.analysis_static:
