@@ -14,14 +14,18 @@ data:
   TEMPERATURE);
 * ``TITLE``, ``SUBTITLE``, ``LABEL`` are kept as text;
 * output requests (``DISP``, ``STRESS``, ``FORCE`` ...), output controls (``ECHO``, ``SET``,
-  ``LINE`` ...), selections of other solutions (``METHOD``, ``FREQ``, ``DESOBJ``, ``TSTEPNL``,
-  ``TRIM`` ...), case-control ``PARAM`` and the plot/XY-plot packets after ``OUTPUT(PLOT)`` are
+  ``LINE`` ...), selections of other solutions (``METHOD``, ``FREQ``, ``TSTEPNL``, ``TRIM``
+  ...), the design model's (``DESOBJ``, ``DESSUB`` ..., by their first four letters: ``DESOPJ``
+  is DESOBJ), case-control ``PARAM`` and the plot/XY-plot packets after ``OUTPUT(PLOT)`` are
   recognised and listed in :attr:`CaseControl.skipped` by kind, so that a caller can say once what
   it skipped; a subcase's selections of other solutions are kept in :attr:`Subcase.others`
   (to say what a deck without a static load selects instead);
+* ``ANALYSIS = ...`` (SOL 200, 400) is kept in :attr:`Subcase.analysis`: a subcase of another
+  analysis than statics has no static load (:attr:`Subcase.static`);
+* ``K2GG = NAME`` (the DMIG matrix added to the stiffness) is kept in :attr:`Subcase.k2gg`;
 * ``AUTOSPC = YES/NO`` is kept in :attr:`CaseControl.autospc`;
 * commands that change the static solution and that an import cannot carry over
-  (``DEFORM``, ``K2GG``, ``P2G``, ``LOADSET``, ``SYMCOM`` ...) are errors naming the
+  (``DEFORM``, ``P2G``, ``LOADSET``, ``SYMCOM`` ...) are errors naming the
   line; an unknown command is an error naming the line and the known commands closest to it;
 * ``SUBCOM`` (a combination of subcases) is skipped with its ``SUBSEQ``: the subcases it
   combines are imported themselves.

@@ -492,9 +492,9 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
         drop_cards += _mpc_selection(cc, mpc_sets, path, notes)
     debug = [c for c in cards if c.name in _SOLVER_DEBUG]
     drop_cards += debug
+    drop_cards += _dmig_selection(cc, cards, path, notes)
     # the design model: SOL 200 analyses the initial design (the reader applies the relations);
     # in a deck of another solution NASTRAN does not read it, so it is not carried over
-    drop_cards += _dmig_selection(cc, cards, path, notes)
     design_cards = [c for c in cards if c.name in _DESIGN_CARDS]
     design_dropped = bool(design_cards) and cc is not None and cc.sol.upper() not in _DESIGN_SOLS
     if design_dropped:
