@@ -323,7 +323,7 @@ def row(path: Path, use_mystran: bool = True) -> tuple[str, str, str, float | No
     # MYSTRAN 18 skips a DMIG with a warning only (docs/mystran.md): the original deck is then
     # another structure, and the mystran adapter refuses the study
     if cc is not None and cc.sol.upper() in ("1", "101", "SESTATIC", "SESTATICS", "STATICS") \
-            and not result.deck.dmigs:
+            and not getattr(result.deck, "dmigs", None):
         tables = _mystran(path)
         if tables:
             value, source = agreement(cases, report, u, tables, size), "deck"

@@ -229,7 +229,7 @@ PBARL, as the CBAR/PBAR the reference solver makes of them (MYSTRAN 18 has no CB
 WRITTEN"; its own PBARL section constants may differ)."""
 
 DESIGN_MODEL = frozenset({"DESVAR", "DLINK", "DVPREL1", "DVMREL1", "DVPREL2", "DVMREL2", "DVCREL1",
-                          "DVCREL2"})
+                          "DVCREL2", "DEQATN", "DTABLE"})
 """SOL 200's design model: the reader puts the designed values at the initial design into the
 properties and materials (refusing the relations it does not apply), which the run deck writes;
 the cards themselves are never handed to MYSTRAN (which has no SOL 200)."""

@@ -199,8 +199,14 @@ def test_rod_section_and_spring_designs(tmp_path):
     (("DVPREL1,4,PTUBE,6,OD", "DVPREL1,4,PTUBE,6,T"), "DVPREL1", 5,
      "PTUBE 6 with its designed value.*wall thickness"),
     (("DVPREL1,5,PMASS", "DVPREL1,3,PMASS"), "DVPREL1", 2, "duplicate DVPREL1 ID 3"),
-    (("DVPREL1,5,PMASS,33,3\n,1,1.", "DVPREL2,5,PROD,8,A,,,7\n,DESVAR,1\nDEQATN  7       A(X)=X"),
-     "DVPREL2", 1, "DEQATN equation, which the reader does not evaluate"),
+    (("DVPREL1,5,PMASS,33,3\n,1,1.", "DVPREL2,5,PROD,8,J,,,7\n,DESVAR,1\nDEQATN  7       A(X)=FOO(X)"),
+     "DEQATN", 3, "function FOO is not evaluated"),
+    (("DVPREL1,5,PMASS,33,3\n,1,1.", "DVPREL2,5,PROD,8,J,,,7\n,DESVAR,1\nDEQATN  7       A(X,Y)=X"),
+     "DEQATN", 3, "has 2 argument"),
+    (("DVPREL1,5,PMASS,33,3\n,1,1.", "DVPREL2,5,PROD,8,J,,,7\n,DESVAR,1\n,DTABLE,C9\nDEQATN  7       A(X,C)=X"),
+     "DVPREL2", 19, "DTABLE label C9 is not defined"),
+    (("DVPREL1,5,PMASS,33,3\n,1,1.", "DVPREL2,5,PROD,8,J,,,8\n,DESVAR,1"), "DVPREL2", 8,
+     "DEQATN 8 does not exist"),
     (("DVPREL1,5,PMASS,33,3\n,1,1.", "DVCREL1,5,CONROD,2,A\n,1,1."), "DVCREL1", 3,
      "connectivity value of CONROD 2"),
     (("DVPREL1,5,PMASS,33,3\n,1,1.", "DVPREL1,5,PROD,8,4\n,2,1."), "DVPREL1", 5,
@@ -236,7 +242,7 @@ CROD,4,11,4,1
 CBAR,6,8,2,5,1.,0.,0.
 CELAS1,7,12,3,2,4,2
 PBAR,7,1,{a7},{i17},2.E-6,4.E-6
-PBAR,8,2,1.5E-3,1.8E-6,{i28},2.E-6
+PBAR,8,2,{a8},1.8E-6,{i28},2.E-6
 PROD,11,2,{a11},1.E-6
 PELAS,12,{k12}
 MAT1,1,{e1},8.1E10
@@ -263,11 +269,16 @@ DVPREL1,5,PELAS,12,K1
 ,3,2.E5
 DVMREL1,6,MAT1,1,E
 ,1,1.4E11
+DVPREL2,7,PBAR,8,A,,,70
+,DESVAR,1,2
+,DTABLE,CA
+DTABLE,CA,1.E-3
+DEQATN  70      A(T,W,C)=C*T*W**2
 """
 X = {1: 1.5, 2: 0.8}
 X[3] = 0.5 * X[1] + X[2]
 VALUES = {"a7": 5.0e-4 + 1.0e-3 * X[1], "i17": 3.0e-6 * X[1], "i28": 1.0e-7 + 1.0e-6 * X[3] + 5.0e-7 * X[2],
-          "a11": 1.0e-3 * X[2], "k12": 2.0e5 * X[3], "e1": 1.4e11 * X[1]}
+          "a11": 1.0e-3 * X[2], "k12": 2.0e5 * X[3], "e1": 1.4e11 * X[1], "a8": 1.0e-3 * X[1] * X[2]**2}
 
 
 @needs_mystran
@@ -276,7 +287,8 @@ def test_frame_agrees_with_mystran_on_the_sol_101_deck_of_the_initial_design(tmp
     and solved by the reference solver, against MYSTRAN running the SOL 101 deck whose cards hold
     the designed values (printed to the 16 characters of a field, the shortest digits that
     round-trip), every grid and component of both subcases."""
-    plain = {"a7": "3.E-3", "i17": "3.E-6", "i28": "1.E-6", "a11": "1.E-3", "k12": "1.E5", "e1": "2.1E11"}
+    plain = {"a7": "3.E-3", "i17": "3.E-6", "i28": "1.E-6", "a11": "1.E-3", "k12": "1.E5", "e1": "2.1E11",
+             "a8": "1.5E-3"}
     sol200 = FRAME.format(sol=200, design=DESIGN, **plain)
     cases, report, u = _solve(_import(tmp_path, sol200, "frame.dat"))
     sol101 = FRAME.format(sol=101, design="", **{k: print_float_16(v) for k, v in VALUES.items()})
@@ -294,14 +306,16 @@ def test_mystran_run_deck_carries_the_initial_design(tmp_path):
     """The imported SOL 200 study solved by the mystran adapter: its run deck, written from the
     parsed model, holds the designed values (and none of the design cards, which MYSTRAN does
     not read)."""
-    plain = {"a7": "3.E-3", "i17": "3.E-6", "i28": "1.E-6", "a11": "1.E-3", "k12": "1.E5", "e1": "2.1E11"}
+    plain = {"a7": "3.E-3", "i17": "3.E-6", "i28": "1.E-6", "a11": "1.E-3", "k12": "1.E5", "e1": "2.1E11",
+             "a8": "1.5E-3"}
     assert _study_against_mystran(tmp_path, FRAME.format(sol=200, design=DESIGN, **plain), 2) <= RTOL
 
 
 def test_equations_of_responses_are_read_and_have_no_effect(tmp_path):
     """A DEQATN whose equation holds commas (on its first line and on a continuation line, in
     columns 17-72 and 9-72: fixed-field text, not free-field fields), a DRESP2 that uses it, and
-    a DVPREL2 on a PMASS (a mass: no static effect) leave the initial design as it was."""
+    a DVPREL2 on a PMASS (a mass: no static effect; its equation is not evaluated) leave the
+    initial design as it was."""
     extra = ("DEQATN  1       F(A,RL,S) = 1.0-(S+39.274*A*1.0E7/\n"
              "                (RL**2,1.)/ABS(S)\n"
              "DRESP2,101,R,1\n,DESVAR,1,2\n"
@@ -313,7 +327,7 @@ def test_equations_of_responses_are_read_and_have_no_effect(tmp_path):
     path = tmp_path / "model.bdf"
     path.write_text(result.model_bdf)
     deck = read_deck(path)
-    assert deck.no_effect["DEQATN"][0] == 1 and deck.no_effect["DRESP2"][0] == 1
+    assert deck.no_effect["DRESP2"][0] == 1 and deck.pbars[7].a == pytest.approx(A_D, rel=1e-15)
     from test_reader_paths import assert_same
     assert_same(result.model_bdf, tmp_path, must_read=True)
 
@@ -336,3 +350,47 @@ def test_thermal_load_of_the_initial_design(tmp_path):
     _, report, u = _solve(result)
     assert u[report.index((2, 1)), 0] == pytest.approx(2.0e-5 * X1 * 50.0 * L, rel=CLOSED)
     assert abs(u[report.index((2, 3)), 0]) <= 1e-12 * L
+
+
+EQUATION = CANTILEVER.replace("DVPREL1,11,PBAR,7,5\n,2,PVAL\n", "DVPREL2,11,PBAR,7,I1,,,40\n,DESVAR,1,2\n"
+                              ",DTABLE,SCALE\nDTABLE,SCALE,3.E-7,UNUSED,1.\n"
+                              "DEQATN,40,I(W,D,S) = S*(W*D**3)/12.; I2=I+0.0\n")
+"""The cantilever with I1 from an equation of two design variables and a table constant:
+I1 = S W D^3 / 12 = 3e-7 2 4^3 / 12 (a second statement leaves it as it is; the DEQATN in free
+field, its equation's commas kept)."""
+
+
+def test_equation_relation_is_evaluated(tmp_path):
+    """A DVPREL2 (DEQATN of DESVAR values and a DTABLE constant) designs I1: the tip moves as the
+    closed form of the bar with that I1, and the DEQATN and DTABLE stay out of MYSTRAN's deck."""
+    i1 = 3.0e-7 * X1 * X2**3 / 12.0
+    result = _import(tmp_path, EQUATION)
+    deck = read_deck_text(result.model_bdf, name="model.bdf")
+    assert deck.pbars[7].i1 == pytest.approx(i1, rel=1e-15)
+    _, report, u = _solve(result)
+    assert u[report.index((2, 2)), 0] == pytest.approx(P[1] * L**3 / (3 * E_D * i1), rel=CLOSED)
+    from solver_adapters.nastran import passthrough_cards
+    path = tmp_path / "model.bdf"
+    path.write_text(result.model_bdf)
+    assert not {c.name for c in passthrough_cards(path)} & {"DEQATN", "DTABLE", "DVPREL2"}
+
+
+@pytest.mark.parametrize("text, args, value", [
+    ("F(X)=-X**2", [3.0], -9.0), ("F(X,Y)=2.**X**Y", [3.0, 2.0], 512.0),
+    ("F(A,B)=MAX(A,B,7.)-MIN(A,B)+ABS(-A)", [1.0, 2.0], 7.0), ("F(X)=SQRT(X)*1.D1", [4.0], 20.0),
+    ("F(X)=X/4.; G=F*2.; H=G+1.E-1", [2.0], 1.1), ("F(X, Y) = ATAN2(Y, X)", [1.0, 1.0], 0.7853981633974483), ("F(A,B) = 1.-(A+39.274*B*1.0E7/(A**2))/ABS(A)",
+                                                  [2.0, 1e-7], 1.0 - (2.0 + 39.274 * 1e-7 * 1.0e7 / 2.0**2) / 2.0),
+])
+def test_equations_evaluate_as_fortran(text, args, value):
+    """FORTRAN's precedence: ** binds tighter than unary minus and to the right."""
+    from solver_adapters.bdf.equations import evaluate
+    assert evaluate(text, args) == pytest.approx(value, rel=1e-15)
+
+
+@pytest.mark.parametrize("text, why", [("F(X)=X+", "ends too early"), ("F(X)=X)", "unexpected"),
+                                       ("F(X)=__import__", "cannot read"), ("F(X)=Y", "Y has no value"),
+                                       ("F(X)=X/0.", "division by zero"), ("X=1.", "first statement")])
+def test_equations_refuse_what_they_cannot_read(text, why):
+    from solver_adapters.bdf.equations import EquationError, evaluate
+    with pytest.raises(EquationError, match=why):
+        evaluate(text, [1.0])

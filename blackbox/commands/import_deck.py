@@ -38,7 +38,8 @@ _SPC_CARDS = ("SPC", "SPC1", "SPCADD")
 _MPC_CARDS = ("MPC", "MPCADD")
 # MYSTRAN's own bulk-data card for debug printout: no effect on the solution, not NASTRAN.
 _SOLVER_DEBUG = ("DEBUG",)
-_DESIGN_CARDS = ("DESVAR", "DLINK", "DVPREL1", "DVMREL1", "DVPREL2", "DVMREL2", "DVCREL1", "DVCREL2")
+_DESIGN_CARDS = ("DESVAR", "DLINK", "DVPREL1", "DVMREL1", "DVPREL2", "DVMREL2", "DVCREL1", "DVCREL2",
+                 "DEQATN", "DTABLE")
 _DESIGN_SOLS = ("200", "DESOPT")
 
 

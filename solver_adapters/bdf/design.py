@@ -16,7 +16,11 @@ linear static solution of the study:
   (DIMi), PBEAM (end A of a prismatic beam), PROD, PTUBE or PELAS, named (``A``, ``I1`` ...) or
   by its field number (FID > 0, NASTRAN's field numbering, continuation lines counted on);
 * ``DVMREL1 ID TYPE MID MPNAME MPMIN MPMAX C0 / DVID1 COEF1 ...``: a MAT1 value (E, G, NU; RHO,
-  A, TREF, which the import's GRAV and thermal loads use; GE, ST, SC, SS: no effect).
+  A, TREF, which the import's GRAV and thermal loads use; GE, ST, SC, SS: no effect);
+* ``DVPREL2`` / ``DVMREL2 ID TYPE PID PNAME PMIN PMAX EQID / DESVAR DVID1 ... / DTABLE LABL1
+  ...``: the same properties as the value of the DEQATN equation EQID whose arguments are the
+  DVIDs' values and then the DTABLE constants, in that order (MSC QRG DVPREL2), evaluated by
+  :mod:`.equations` (a parser of NASTRAN's expressions, never Python's ``eval``).
 
 The designed value is written into the card's field and the card read again by its own parser,
 so the value is checked as the card's own would be (and a MAT1's blank E, G or NU is completed
@@ -26,9 +30,9 @@ QRG's default limits, 1e-15 for a property that can only be positive, else -1e35
 apply except to a relation of one variable with C0 = 0.0: remark 6).
 
 Relations on mass and damping cards (PMASS, PDAMP, PVISC, CONM2, CMASS*, CDAMP*) have no effect
-on a static solution and are accepted. Refused with a located error naming the card: DVPREL2,
-DVMREL2 and DVCREL2 on a card with stiffness (DEQATN equations are not evaluated), DVCREL1 on an
-element with stiffness, a relation on a card the reader does not model (a PSHELL kept for
+on a static solution and are accepted. Refused with a located error naming the card: DVCREL1 and
+DVCREL2 on an element with stiffness, an equation that cannot be read or evaluated (named
+at its DEQATN), a relation on a card the reader does not model (a PSHELL kept for
 MYSTRAN would reach it undesigned) or on a PBUSH (handed to MYSTRAN as written), a negative FID
 (a word of NASTRAN's element property table), a PBEAM station other than end A.
 """
@@ -37,6 +41,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from solver_adapters.bdf import equations
 from solver_adapters.bdf.fields import _int, _max_fields, _real
 from solver_adapters.bdf.sections import PBARL_DIMS
 from solver_adapters.bdf.tokens import _Card, _Field
@@ -152,13 +157,60 @@ def _relation(r, c) -> None:
 
 
 def _refused(r, c) -> None:
-    """DVPREL2 / DVMREL2 / DVCREL1 / DVCREL2: checked in :func:`apply` against their target."""
+    """DVCREL1 / DVCREL2: checked in :func:`apply` against their target."""
     r.claim(c.name, _int(c, 2), c, 2)
     r.design.others.append(c)
 
 
+def _relation2(r, c) -> None:
+    """DVPREL2 / DVMREL2: ID TYPE PID/MID PNAME/FID PMIN PMAX EQID / "DESVAR" DVID1 ... /
+    "DTABLE" LABL1 ... (MSC QRG): the equation's arguments are the DVIDs' values, then the
+    DTABLE constants, in that order."""
+    r.claim(c.name, _int(c, 2), c, 2)
+    target, tid = c.text(3), _int(c, 4)
+    if not c.text(5):
+        raise c.error(5, "PNAME/FID (the designed property) is required")
+    pmin, pmax = _real(c, 6, None), _real(c, 7, None)
+    eqid = _int(c, 8)
+    if c.text(9):
+        raise c.error(9, "field 9 must be blank")
+    dvids, labels, mode = [], [], None
+    for start in range(10, len(c.fields) + 1, 8):
+        word = c.text(start)
+        if word in ("DESVAR", "DTABLE"):
+            mode = word
+        elif word:
+            raise c.error(start, f"{word}: a continuation starts with DESVAR, DTABLE or a blank field 2")
+        elif mode is None:
+            raise c.error(start, "the first continuation starts with DESVAR or DTABLE")
+        for i in range(start + 1, start + 8):
+            if c.text(i):
+                (dvids if mode == "DESVAR" else labels).append((_int(c, i) if mode == "DESVAR" else c.text(i), i))
+    r.design.relations2.append((c, target, tid, c.text(5), pmin, pmax, eqid, dvids, labels))
+
+
+def _deqatn(r, c) -> None:
+    """DEQATN EQID equation (columns 17-72, then 9-72 of each continuation line): kept as text,
+    evaluated when a DVPREL2/DVMREL2 of a modelled card uses it."""
+    eqid = _int(c, 2)
+    r.claim("DEQATN", eqid, c, 2)
+    r.design.equations[eqid] = ("".join(f.text for f in c.fields[2:]), c)
+
+
+def _dtable(r, c) -> None:
+    """DTABLE LABL1 VALU1 LABL2 VALU2 ... (MSC QRG): constants of the equations."""
+    for i in range(2, len(c.fields) + 1, 2):
+        if not c.text(i) and not c.text(i + 1):
+            continue
+        label = c.text(i)
+        if label in r.design.table:
+            raise c.error(i, f"DTABLE label {label} is defined twice (also at {r.design.table[label][1].src})")
+        r.design.table[label] = (_real(c, i + 1), c)
+
+
 PARSERS = {"DESVAR": _desvar, "DLINK": _dlink, "DVPREL1": _relation, "DVMREL1": _relation,
-           "DVPREL2": _refused, "DVMREL2": _refused, "DVCREL1": _refused, "DVCREL2": _refused}
+           "DVPREL2": _relation2, "DVMREL2": _relation2, "DVCREL1": _refused, "DVCREL2": _refused,
+           "DEQATN": _deqatn, "DTABLE": _dtable}
 
 
 @dataclass
@@ -169,13 +221,16 @@ class DesignState:
     relations: list
     others: list
     targets: dict           # (card name, ID) -> the card that defines it (modelled cards)
+    relations2: list        # DVPREL2 / DVMREL2
+    equations: dict         # DEQATN EQID -> (text, card)
+    table: dict             # DTABLE label -> (value, card)
 
     @classmethod
     def empty(cls) -> "DesignState":
-        return cls({}, {}, [], [], {})
+        return cls({}, {}, [], [], {}, [], {}, {})
 
     def __bool__(self) -> bool:
-        return bool(self.desvars or self.relations or self.others or self.dlinks)
+        return bool(self.desvars or self.relations or self.others or self.dlinks or self.relations2)
 
 
 def record_target(r, c) -> None:
@@ -248,6 +303,21 @@ def _field_of(c, target: str, pname: str, card) -> tuple[int, str]:
     return names[name], name
 
 
+def _equation_value(c, d: DesignState, eqid: int, args: list[float], labels: list) -> float:
+    """A DVPREL2/DVMREL2's value: DEQATN ``eqid`` of the DVIDs' values, then the DTABLE
+    constants of ``labels`` ``[(label, field)]``."""
+    if eqid not in d.equations:
+        raise c.error(8, f"DEQATN {eqid} does not exist")
+    for label, i in labels:
+        if label not in d.table:
+            raise c.error(i, f"DTABLE label {label} is not defined (no DTABLE gives it a value)")
+    text, eq = d.equations[eqid]
+    try:
+        return equations.evaluate(text, [*args, *(d.table[label][0] for label, _ in labels)])
+    except equations.EquationError as exc:
+        raise eq.error(3, f"DEQATN {eqid} (used by {c.name} {c.text(2)}): {exc}") from None
+
+
 def _designed_card(card, i: int, value: float) -> _Card:
     """``card`` with field ``i`` replaced by ``value`` (blank fields added up to it)."""
     fields = list(card.fields)
@@ -271,21 +341,22 @@ def apply(r, card_parsers: dict, scratch_reader) -> None:
         target = c.text(3)
         if target in NO_STATIC_EFFECT:
             continue
-        if c.name.startswith("DVC"):
-            raise c.error(3, f"{c.name} designs a connectivity value of {target} {c.text(4)} (an "
-                             f"element's own stiffness or geometry): not applied by the reader, "
-                             f"so the study would not be the deck's initial design")
-        raise c.error(1, f"{c.name} designs {target} {c.text(4)} through a DEQATN equation, which "
-                         f"the reader does not evaluate: give the designed value on the {target} "
-                         f"card (and remove the {c.name}) to import the initial design")
+        raise c.error(3, f"{c.name} designs a connectivity value of {target} {c.text(4)} (an "
+                         f"element's own stiffness or geometry): not applied by the reader, "
+                         f"so the study would not be the deck's initial design")
     designed: dict[tuple[str, int], dict[int, tuple[float, object]]] = {}
-    for c, target, tid, pname, pmin, pmax, c0, terms in d.relations:
+    work = [(c, target, tid, pname, pmin, pmax, ("linear", c0, terms))
+            for c, target, tid, pname, pmin, pmax, c0, terms in d.relations]
+    work += [(c, target, tid, pname, pmin, pmax, ("equation", eqid, dvids, labels))
+             for c, target, tid, pname, pmin, pmax, eqid, dvids, labels in d.relations2]
+    for c, target, tid, pname, pmin, pmax, how in work:
+        terms = how[2] if how[0] == "linear" else [(dv, None, i) for dv, i in how[2]]
         if target in NO_STATIC_EFFECT:
             for dv, _, i in terms:
                 if dv not in values:
                     raise c.error(i, f"design variable {dv} has no DESVAR")
             continue
-        if c.name == "DVMREL1" and target != "MAT1":
+        if c.name.startswith("DVMREL") and target != "MAT1":
             raise c.error(3, f"{target}: only MAT1 materials are modelled (DVMREL1 of another "
                              f"material is not applied)")
         if target in ("PBUSH", "PBEAML"):
@@ -304,20 +375,29 @@ def apply(r, card_parsers: dict, scratch_reader) -> None:
         i, name = _field_of(c, target, pname, card)
         if target == "PELAS":
             i += base - 2
-        value = c0
-        for dv, coef, k in terms:
+        for dv, _, k in terms:
             if dv not in values:
                 raise c.error(k, f"design variable {dv} has no DESVAR")
-            if coef is None:
-                coef = _real(card, i, 0.0)
-            value += coef * values[dv][0]
-        limited = not (len(terms) == 1 and c0 == 0.0)
-        lo = pmin if pmin is not None else (((-1.0e35) if name in _SIGNED else 1.0e-15) if limited else None)
+        if how[0] == "linear":
+            c0 = how[1]
+            value = c0
+            for dv, coef, k in terms:
+                if coef is None:
+                    coef = _real(card, i, 0.0)
+                value += coef * values[dv][0]
+            limited = not (len(terms) == 1 and c0 == 0.0)
+            tiny = 1.0e-15
+            how_text = "C0 + sum COEFi XINIT"
+        else:
+            value = _equation_value(c, d, how[1], [values[dv][0] for dv, _, _ in terms], how[3])
+            limited, tiny = True, 1.0e-20            # MSC QRG DVPREL2: PMIN default 1e-20
+            how_text = f"DEQATN {how[1]} at XINIT"
+        lo = pmin if pmin is not None else (((-1.0e35) if name in _SIGNED else tiny) if limited else None)
         hi = pmax if pmax is not None else (1.0e20 if limited else None)
         if (lo is not None and value < lo) or (hi is not None and value > hi):
             raise c.error(6 if lo is not None and value < lo else 7,
-                          f"{target} {tid} {name} = {value:.8g} at the initial design (C0 + sum COEFi "
-                          f"XINIT) is outside [PMIN, PMAX] = [{lo if lo is not None else '-inf'}, "
+                          f"{target} {tid} {name} = {value:.8g} at the initial design ({how_text}) "
+                          f"is outside [PMIN, PMAX] = [{lo if lo is not None else '-inf'}, "
                           f"{hi if hi is not None else 'inf'}]: the analysis of a start outside the "
                           f"property's limits is not imported")
         slot = designed.setdefault((target, tid), {})

@@ -45,9 +45,9 @@ NO_EFFECT = frozenset({
     "ASET", "ASET1", "OMIT", "OMIT1",
     # output only: plot elements and monitor points
     "PLOTEL", "MONPNT1", "MONPNT3",
-    # design optimisation (SOL 200): responses, constraints and their equations and tables
-    # (the relations that design the model's properties are read by bdf.design)
-    "DRESP1", "DRESP2", "DRESP3", "DCONSTR", "DCONADD", "DSCREEN", "DTABLE", "DEQATN", "DDVAL",
+    # design optimisation (SOL 200): responses and constraints (the relations that design the
+    # model's properties, their equations DEQATN and constants DTABLE are read by bdf.design)
+    "DRESP1", "DRESP2", "DRESP3", "DCONSTR", "DCONADD", "DSCREEN", "DDVAL",
     # static aeroelasticity and flutter: the aerodynamic model adds nothing to a SOL 101 solution
     "AERO", "AEROS", "CAERO1", "CAERO2", "CAERO3", "CAERO4", "CAERO5", "PAERO1", "PAERO2",
     "PAERO3", "PAERO4", "PAERO5", "SPLINE1", "SPLINE2", "SPLINE4", "SPLINE5", "SET1", "SET2",

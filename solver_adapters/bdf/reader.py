@@ -45,7 +45,7 @@ class _Reader:
         # properties (PBAR, PELAS)
         self.ids: dict[str, dict[int, str]] = {"GRID": {}, "element": {}, "property": {}, "MAT1": {},
                                                "SPCADD": {}, "MPCADD": {}, "CORD": {},
-                                               **{k: {} for k in design.PARSERS if k != "DLINK"}}
+                                               **{k: {} for k in design.PARSERS if k not in ("DLINK", "DTABLE")}}
         self.design = design.DesignState.empty()   # SOL 200's design model, applied in finish()
         self.dmig_headers: dict[str, object] = {}  # DMIG name -> its header card
         self.dmig_columns: dict[str, list] = {}    # DMIG name -> (card, GJ, CJ, terms) per column

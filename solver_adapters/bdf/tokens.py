@@ -112,6 +112,10 @@ def _split(raw: str, file: str, lineno: int) -> _Line:
         return DeckFormatError(message, file=file, line=lineno, value=raw.strip())
 
     if "," in raw:
+        head = raw.split(",", 2)
+        if head[0].strip().upper() == "DEQATN" and len(head) == 3:
+            # free field: DEQATN,EQID,equation (the equation's own commas kept)
+            return _Line(file, lineno, "DEQATN", [head[1].strip(), head[2].strip()] + [""] * 6, "")
         fixed = raw.expandtabs(8).rstrip()
         if fixed[:8].strip().upper() == "DEQATN" or (not fixed[:8].strip() and fixed.strip()[:1] not in ",+*"):
             # a DEQATN's equation (columns 17-72 of its first line, 9-72 of the next) holds
