@@ -23,7 +23,10 @@ its message), the subcases imported, and the largest difference of the reference
 displacements from MYSTRAN's, relative to each subcase's largest translation (rotation):
 
 * ``deck``: MYSTRAN 18 running the original input file (its folder copied), for SOL 1/101 decks
-  it runs (not with PARAM,INREL,-1: MYSTRAN has no inertia relief); the deck's own output requests decide which subcases and grids are compared;
+  it runs (not with PARAM,INREL,-1: MYSTRAN has no inertia relief; not a deck with a DMIG, which
+  MYSTRAN skips with a warning only); the deck's own output requests decide which subcases and
+  grids are compared; a subcase whose MYSTRAN displacements are all zero while ours are not is a
+  disagreement (1.0);
 * ``study``: otherwise (the deck's solution is not static, or MYSTRAN fails on the original), the
   mystran adapter solving the imported study (model.bdf and loads.csv), which checks the reference
   solve but not the import's reading of the load cards;
@@ -280,6 +283,12 @@ def agreement(cases, report, u, tables, size: float) -> float | None:
         ours = np.array([[u[index[(g, c)], j] if (g, c) in index else 0.0 for c in range(1, 7)]
                          for g in grids])
         ref = np.array([table[g] for g in grids])
+        if not np.abs(ref).any():
+            # MYSTRAN's displacements all zero (a card it skipped took the load path away):
+            # a disagreement when ours are not, never an agreement
+            worst = max(worst, 1.0 if np.abs(ours).any() else 0.0)
+            compared += 1
+            continue
         t, r = np.abs(ref[:, :3]).max(), np.abs(ref[:, 3:]).max() * size
         for part, scale, other in ((slice(0, 3), t, r), (slice(3, 6), r, t)):
             if scale > 0.0 and scale > 1e-9 * other:
@@ -313,9 +322,12 @@ def row(path: Path, use_mystran: bool = True) -> tuple[str, str, str, float | No
     from solver_adapters.casecontrol import read_case_control
     cc = read_case_control(path.read_text(errors="replace"), str(path))
     # MYSTRAN has no inertia relief: on a deck with PARAM,INREL,-1 it would solve the loads as
-    # applied with the SUPORT DOFs held, not the balanced loads NASTRAN solves
+    # applied with the SUPORT DOFs held, not the balanced loads NASTRAN solves; and MYSTRAN 18
+    # skips a DMIG with a warning only (docs/mystran.md): the original deck is then another
+    # structure, and the mystran adapter refuses the study
     relieved = any(n.startswith("inertia relief") for n in result.notes)
-    if cc is not None and cc.sol.upper() in ("1", "101", "SESTATIC", "SESTATICS", "STATICS") and not relieved:
+    if cc is not None and cc.sol.upper() in ("1", "101", "SESTATIC", "SESTATICS", "STATICS") and not relieved \
+            and not getattr(result.deck, "dmigs", None):
         tables = _mystran(path)
         if tables:
             value, source = agreement(cases, report, u, tables, size), "deck"

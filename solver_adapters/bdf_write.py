@@ -14,14 +14,14 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from solver_adapters.deck import (Bush, CBar, Deck, Gap, Grid, Mat1, PBar, PBush, Pelas, Prod, Rbe2, Rbe3, Rod, Spc1,
-                                  SpcAdd, Spring, Unmodelled)
+from solver_adapters.deck import (Bush, CBar, Deck, Dmig, Gap, Grid, Mat1, PBar, PBush, Pelas, Prod, Rbe2, Rbe3, Rod,
+                                  Spc1, SpcAdd, Spring, Unmodelled)
 
 __all__ = ["print_int", "print_float_8", "print_float_16", "print_float_free", "print_field",
            "format_card", "write_grid", "write_cbar", "write_pbar", "write_mat1", "write_spc1",
            "write_mpc", "write_rbe2", "write_rbe3", "write_pelas", "write_celas1", "write_celas2", "write_spring",
            "write_spcadd", "write_prod", "write_rod", "write_coord", "write_cbush", "write_pbush", "write_cgap", "write_pgap",
-           "write_unmodelled", "cbar_in_cd", "write_deck"]
+           "write_unmodelled", "write_dmig", "cbar_in_cd", "write_deck"]
 
 Field = int | float | str | None
 _FORMATS = ("small", "large", "free")
@@ -356,13 +356,33 @@ def _pairs(items: list[Pelas]) -> Iterable[tuple[Pelas, Pelas | None]]:
         yield items[i], items[i + 1] if i + 1 < len(items) else None
 
 
+def write_dmig(m: Dmig, scalar: set[int], fmt: str = "small") -> str:
+    """A DMIG matrix: its header (IFO as read, real double input) and one column entry per
+    column (a scalar point's component as 0)."""
+    out = [format_card("DMIG", [m.name, 0, m.ifo, 2], fmt)]
+    columns: dict[tuple[int, int], list] = {}
+    for row, col, a in m.terms:
+        columns.setdefault(col, []).append((row, a))
+
+    def comp(g: int, c: int) -> int:
+        return 0 if g in scalar else c
+
+    for (gj, cj), rows in columns.items():
+        fields: list[Field] = [m.name, gj, comp(gj, cj), None]
+        for (g, c), a in rows:
+            fields += [g, comp(g, c), float(a), None]
+        out.append(format_card("DMIG", fields, fmt))
+    return "".join(out)
+
+
 def write_deck(deck: Deck, fmt: str = "small") -> str:
     """A complete bulk data section (``BEGIN BULK`` ... ``ENDDATA``) of everything the parsed
     deck holds, cards sorted by ID, so that reading it back gives the same model: grids (in
     basic, CD kept), coordinate systems (as CORD2R/C/S in basic), CBAR/CBEAM as CBAR with
     PBAR/PBARL/PBEAM/PBEAML as the PBAR they are, rods, MAT1, SPC1, SPCADD, RBE2, RBE3, CBUSH,
-    PBUSH, PELAS, CELAS1/2, CGAP, PGAP, PARAM,AUTOSPC,NO and PARAM,EPZERO when they differ from NASTRAN's
-    defaults, and the cards the reader keeps without modelling them (``Deck.unmodelled``: shells,
+    PBUSH, PELAS, CELAS1/2, CGAP, PGAP, DMIG (and PARAM,CK2), PARAM,AUTOSPC,NO and PARAM,EPZERO when they
+    differ from NASTRAN's defaults (designed properties with their values at the initial design),
+    and the cards the reader keeps without modelling them (``Deck.unmodelled``: shells,
     solids, for an external solver) field by field. Cards accepted with no effect on a static
     solve (masses, other PARAMs) are left out. Diagnose writes its edited decks with it."""
     if fmt not in _FORMATS:
@@ -397,6 +417,10 @@ def write_deck(deck: Deck, fmt: str = "small") -> str:
     out += [write_pgap(pgaps[i], fmt) for i in sorted(pgaps)]
     out += [write_pelas(a, b, fmt) for a, b in _pairs([deck.pelas[i] for i in sorted(deck.pelas)])]
     out += [write_spring(deck.springs[i], fmt) for i in sorted(deck.springs)]
+    dmigs = getattr(deck, "dmigs", {})
+    if dmigs and getattr(deck, "ck2", 1.0) != 1.0:
+        out.append(format_card("PARAM", ["CK2", float(deck.ck2)], fmt))
+    out += [write_dmig(dmigs[k], deck.scalar_points(), fmt) for k in sorted(dmigs)]
     out += [write_unmodelled(u, fmt) for u in getattr(deck, "unmodelled", ())]
     out.append("ENDDATA\n")
     return "".join(out)

@@ -14,14 +14,18 @@ data:
   TEMPERATURE);
 * ``TITLE``, ``SUBTITLE``, ``LABEL`` are kept as text;
 * output requests (``DISP``, ``STRESS``, ``FORCE`` ...), output controls (``ECHO``, ``SET``,
-  ``LINE`` ...), selections of other solutions (``METHOD``, ``FREQ``, ``DESOBJ``, ``TSTEPNL``,
-  ``TRIM`` ...), case-control ``PARAM`` and the plot/XY-plot packets after ``OUTPUT(PLOT)`` are
+  ``LINE`` ...), selections of other solutions (``METHOD``, ``FREQ``, ``TSTEPNL``, ``TRIM``
+  ...), the design model's (``DESOBJ``, ``DESSUB`` ..., by their first four letters: ``DESOPJ``
+  is DESOBJ), case-control ``PARAM`` and the plot/XY-plot packets after ``OUTPUT(PLOT)`` are
   recognised and listed in :attr:`CaseControl.skipped` by kind, so that a caller can say once what
   it skipped; a subcase's selections of other solutions are kept in :attr:`Subcase.others`
   (to say what a deck without a static load selects instead);
+* ``ANALYSIS = ...`` (SOL 200, 400) is kept in :attr:`Subcase.analysis`: a subcase of another
+  analysis than statics has no static load (:attr:`Subcase.static`);
+* ``K2GG = NAME`` (the DMIG matrix added to the stiffness) is kept in :attr:`Subcase.k2gg`;
 * ``AUTOSPC = YES/NO`` is kept in :attr:`CaseControl.autospc`;
 * commands that change the static solution and that an import cannot carry over
-  (``DEFORM``, ``K2GG``, ``P2G``, ``LOADSET``, ``SYMCOM`` ...) are errors naming the
+  (``DEFORM``, ``P2G``, ``LOADSET``, ``SYMCOM`` ...) are errors naming the
   line; an unknown command is an error naming the line and the known commands closest to it;
 * ``SUBCOM`` (a combination of subcases) is skipped with its ``SUBSEQ``: the subcases it
   combines are imported themselves.
@@ -69,15 +73,21 @@ _NOT_STATIC = {  # selections of other solutions: no effect on the static soluti
     "MODE": "MODES", "ANAL": "ANALYSIS", "STAT": "STATSUB", "RIGI": "RIGID", "MASS": "MASS",
     "RMET": "RMETHOD", "FMET": "FMETHOD", "SMET": "SMETHOD", "TSTEPNL": "TSTEPNL",
     "NONL": "NONLINEAR", "B2GG": "B2GG", "B2PP": "B2PP", "TFL": "TFL", "RGYR": "RGYRO",
-    "DESO": "DESOBJ", "DESS": "DESSUB", "DESG": "DESGLB", "DSAP": "DSAPRT", "DRSP": "DRSPAN",
-    "DESV": "DESVAR", "TRIM": "TRIM", "FLUT": "FLUTTER", "GUST": "GUST", "DIVE": "DIVERG",
+    "TRIM": "TRIM", "FLUT": "FLUTTER", "GUST": "GUST", "DIVE": "DIVERG",
     "GENG": "GENGAF", "AESYMXY": "AESYMXY", "AESYMXZ": "AESYMXZ", "AEUX": "AEUXREF",
     "CSSC": "CSSCHD", "MODT": "MODTRAK", "MPFA": "MPFACTOR",
     "AECO": "AECONFIG", "BC": "BC",
 }
+_DESIGN = {  # design optimisation (SOL 200): read by their first four letters, as NASTRAN does
+    "DESO": "DESOBJ", "DESS": "DESSUB", "DESG": "DESGLB", "DSAP": "DSAPRT", "DRSP": "DRSPAN",
+    "DESV": "DESVAR", "DESM": "DESMOD",
+}
+STATIC_ANALYSES = ("STATICS", "STATIC", "NLSTATICS", "NLSTATIC", "NLSTAT")
+"""ANALYSIS values of a static subcase (MSC QRG ANALYSIS: STATICS in SOL 200; NLSTATIC in
+SOL 400); a subcase of any other (MODES, BUCK, DFREQ, SAERO, FLUTTER ...) is not imported."""
 _UNSUPPORTED = {  # change the static solution; an imported study cannot carry them
     "DEFO": "DEFORM (enforced element deformation)",
-    "K2GG": "K2GG (direct matrix input)", "P2G": "P2G (direct load input)",
+    "P2G": "P2G (direct load input)",
     "K2PP": "K2PP (direct matrix input)", "K42G": "K42GG (direct matrix input)",
     "M2GG": "M2GG (direct mass input: changes gravity loads)",
     "LOADSET": "LOADSET (static load sets from LSEQ cards, not read by blackbox import)",
@@ -86,7 +96,7 @@ _UNSUPPORTED = {  # change the static solution; an imported study cannot carry t
     "CLOA": "CLOAD", "INCL": "INCLUDE (in the case control)", "ADAP": "ADAPT",
 }
 _PLOT_PACKETS = {"PLOT", "XYPLOT", "XYOUT", "XYPUNCH", "POST", "CARDS"}
-_OTHER = ("SUBCASE", "SUBCOM", "SUBSEQ", "LOAD", "SPC", "MPC", "SUPORT1", "OUTPUT", "PARAM", "BEGIN", "AUTOSPC",
+_OTHER = ("SUBCASE", "SUBCOM", "SUBSEQ", "LOAD", "SPC", "MPC", "SUPORT1", "K2GG", "OUTPUT", "PARAM", "BEGIN", "AUTOSPC",
           "SEALL", "SUPER", "TEMPERATURE")
 # TEMPERATURE(option): the kinds of temperature set each option selects (MSC QRG TEMPERATURE:
 # blank and BOTH are LOAD and MATERIAL)
@@ -107,7 +117,7 @@ def _lookup(table: dict[str, str], word: str) -> str | None:
 def known_commands() -> list[str]:
     """Every case-control command this module reads (for "did you mean")."""
     names = {n.split()[0] for t in (_TITLES, _OUTPUT_REQUESTS, _OUTPUT_CONTROLS, _NOT_STATIC,
-                                    _UNSUPPORTED) for n in t.values()}
+                                    _DESIGN, _UNSUPPORTED) for n in t.values()}
     return sorted(names | set(_OTHER))
 
 
@@ -135,11 +145,21 @@ class Subcase:
     temp_init_line: int = 0
     suport1: int | None = None      # SUPORT1 = n: the SUPORT1 set of reference DOFs
     suport1_line: int = 0
+    analysis: str = ""              # ANALYSIS = ... (SOL 200, SOL 400): the subcase's own analysis
+    k2gg: str | None = None         # K2GG = NAME: the DMIG matrix added to the stiffness
+    k2gg_line: int = 0
 
     @property
     def static(self) -> bool:
-        """The subcase has a static load: a LOAD set or a thermal load."""
-        return self.load is not None or self.temp_load is not None
+        """The subcase has a static load (a LOAD set or a thermal load) and its ANALYSIS, if it
+        names one, is a static analysis (STATICS; SOL 400's NLSTATIC, whose load steps are
+        imported as linear static cases like SOL 106's)."""
+        return (self.load is not None or self.temp_load is not None) and self.analysis_static
+
+    @property
+    def analysis_static(self) -> bool:
+        """No ANALYSIS command, or one naming a static analysis."""
+        return self.analysis in ("", *STATIC_ANALYSES)
 
 
 @dataclass(frozen=True)
@@ -277,6 +297,13 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
             current["MPC"] = (_integer(file, line, "MPC", value.strip()), line)
         elif len(word) >= 4 and _is(word, "SUPORT1"):
             current["SUPORT1"] = (_integer(file, line, "SUPORT1", value.strip()), line)
+        elif word == "K2GG":
+            name = value.strip().upper()
+            if not re.fullmatch(r"[A-Z][A-Z0-9]{0,7}", name):
+                raise DeckFormatError("K2GG is read as one DMIG matrix name (K2GG = NAME); scale "
+                                      "factors and sums of matrices are not read (PARAM,CK2 scales "
+                                      "the matrix)", file=file, line=line, card=word, value=stmt)
+            current["K2GG"] = (name, line)
         elif key == "TEMP" and _is(word, "TEMPERATURE"):
             option = options.strip("() ").upper()
             kinds = _TEMP_OPTIONS.get(option)
@@ -313,6 +340,13 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
                 raise DeckFormatError("AUTOSPC must be YES or NO", file=file, line=line,
                                       card=word, value=stmt)
             autospc = (flag, line)
+        elif key in _DESIGN:
+            # the design model's selections (objective, constraints, responses, design
+            # variables) do not change the static solution of the initial design; NASTRAN
+            # reads them by their first four letters (DESOPJ is DESOBJ)
+            name = _DESIGN[key]
+            skip("design optimisation", name if _is(word, name) else f"{name} (written {word})")
+            current.setdefault("OTHERS", ({}, line))[0][name] = value.strip()
         elif _lookup(_UNSUPPORTED, word) is not None:
             raise DeckFormatError(f"the case-control command {_lookup(_UNSUPPORTED, word)} changes "
                                   f"the static solution and cannot be imported; remove it from the "
@@ -344,11 +378,13 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
         mpc, mpc_line = merged.get("MPC", (None, 0))
         temps = [v for k in ("TEMP_LOAD", "TEMP_MAT", "TEMP_INIT") for v in merged.get(k, (None, 0))]
         suport1, suport1_line = merged.get("SUPORT1", (None, 0))
+        analysis = re.sub(r"\s+", "", others.get("ANALYSIS", "")).upper()
+        k2gg, k2gg_line = merged.get("K2GG", (None, 0))
         return Subcase(sid, load, spc, line, load_line, spc_line,
                        str(merged.get("TITLE", ("", 0))[0]), str(merged.get("SUBTITLE", ("", 0))[0]),
                        str(merged.get("LABEL", ("", 0))[0]),
                        tuple(f"{k} = {v}" if v else k for k, v in others.items()), mpc, mpc_line, *temps,
-                       suport1, suport1_line)
+                       suport1, suport1_line, analysis, k2gg, k2gg_line)
 
     if subcases:
         cases = tuple(make(sid, line, own) for sid, line, own in subcases)

@@ -331,6 +331,18 @@ class Spring:
 
 
 @dataclass(frozen=True)
+class Dmig:
+    """DMIG: a matrix of direct input at grid points, added to the stiffness (K2GG): ``terms``
+    ``((row grid, component), (column grid, component), value)`` in the grids' displacement
+    systems; ``ifo`` 6 (symmetric: each off-diagonal term stands for its mirror too) or 1
+    (square, symmetric as read)."""
+    name: str
+    ifo: int
+    terms: tuple[tuple[tuple[int, int], tuple[int, int], float], ...]
+    src: str = ""
+
+
+@dataclass(frozen=True)
 class Unmodelled:
     """A card the reader does not model (a shell, a solid, a property or material of theirs),
     kept as read so that an external solver can be given it: ``name``, ``fields`` (NASTRAN field
@@ -382,6 +394,13 @@ class Deck:
     # what the reader read but did not model as written (a PBEAM's CW ignored, ends equal to
     # printing precision): one line per kind, naming the cards; not part of the model itself
     notes: list[str] = field(default_factory=list, compare=False)
+    # SOL 200's designed values (bdf.design): (card, ID) -> {field: value at the initial design},
+    # already in the entities above; the loads that read cards (GRAV's RHO and NSM, thermal
+    # loads' MAT1 A and TREF) take the designed values from here
+    designed: dict[tuple[str, int], dict[int, float]] = field(default_factory=dict)
+    # DMIG matrices added to the stiffness in the g-set (NASTRAN's K2GG), times PARAM,CK2
+    dmigs: dict[str, Dmig] = field(default_factory=dict)
+    ck2: float = 1.0
 
     def unmodelled_grids(self) -> dict[int, list[str]]:
         """Grid -> the unmodelled cards joined to it (``"CQUAD4 10"``), for every grid of the
@@ -428,7 +447,7 @@ class Deck:
                   "MPC": len(self.mpcs), "MPCADD": len(self.mpcadds),
                   "RBE2": len(self.rbe2s), "RBE3": len(self.rbe3s), "CBUSH": len(self.bushes),
                   "PBUSH": len(self.pbushes), "PELAS": len(self.pelas), "CELAS1/2": len(self.springs),
-                  "CORD1/2": len(self.coords)}
+                  "CORD1/2": len(self.coords), "DMIG matrices": len(self.dmigs)}
         text = ", ".join(f"{n} {k}" for k, n in counts.items() if n)
         if self.autospc:
             why = (f"PARAM,AUTOSPC,YES at {self.autospc_src}" if self.autospc_src

@@ -50,6 +50,13 @@ def _real(c, i: int, default: float | None = None) -> float:
         raise c.error(i, str(exc).split(": ")[-1]) from None
 
 
+def card_value(deck, c, i: int, default: float) -> float:
+    """Field ``i`` of the property or material card ``c`` as the model has it: its value at
+    the initial design when a SOL 200 relation designs it (``Deck.designed``), else the card's."""
+    got = deck.designed.get((c.name, _int(c, 2)), {}) if deck.designed else {}
+    return got[i] if i in got else _real(c, i, default)
+
+
 def _max_fields(c, n: int) -> None:
     for i in range(n + 1, len(c.fields) + 1):
         if c.text(i):
@@ -170,21 +177,22 @@ class MassReader:
                                 "of bar, beam and rod properties, CONM1, CONM2, and CMASS1/CMASS2 "
                                 "to ground)")
             if name == "MAT1":
-                rho[_int(c, 2)] = _real(c, 6, 0.0)
+                rho[_int(c, 2)] = card_value(deck, c, 6, 0.0)
             elif name == "PARAM" and c.text(2) == "WTMASS":
                 wtmass = _real(c, 3)
             elif name == "PARAM" and c.text(2) == "COUPMASS" and _int(c, 3, minimum=-999, default=-1) > 0:
                 raise refuse(c, "asks for the coupled mass matrix; this import applies NASTRAN's "
                                 "default lumped mass only")
             elif name == "PBAR":
-                nsm["bar"][_int(c, 2)] = _real(c, 8, 0.0)
+                nsm["bar"][_int(c, 2)] = card_value(deck, c, 8, 0.0)
             elif name in ("PBARL", "PBEAML"):
                 n = PBARL_DIMS.get(c.text(5), 0)
-                nsm["bar"][_int(c, 2)] = _real(c, 10 + n, 0.0)
+                nsm["bar"][_int(c, 2)] = card_value(deck, c, 10 + n, 0.0)
             elif name == "PBEAM":
                 self._pbeam(c, nsm, refuse)
+                nsm["bar"][_int(c, 2)] = card_value(deck, c, 9, 0.0)
             elif name == "PROD":
-                nsm["rod"][_int(c, 2)] = _real(c, 7, 0.0)
+                nsm["rod"][_int(c, 2)] = card_value(deck, c, 7, 0.0)
             elif name == "CONROD":
                 nsm["conrod"][_int(c, 2)] = _real(c, 9, 0.0)
             elif name == "CONM2":

@@ -197,7 +197,7 @@ def needs_passthrough(model) -> bool:
     unmodelled cards that :func:`read_model` let pass, or any card the reader models that this
     writer does not know (the scan then names it: :func:`passthrough_cards`)."""
     from solver_adapters import bdf
-    if set(bdf.SUPPORTED) - WRITTEN - RAW_MODELLED:
+    if set(bdf.SUPPORTED) - WRITTEN - RAW_MODELLED - DESIGN_MODEL - {"DMIG"}:
         return True
     if getattr(model, "no_effect", None) or any(getattr(model, f, None)
                                                 for f in ("rbe3s", "bushes", "pbushes", "mpcs", "mpcadds")):
@@ -230,6 +230,12 @@ a CBEAM with its PBEAM/PBEAML, or a
 PBARL, as the CBAR/PBAR the reference solver makes of them (MYSTRAN 18 has no CBEAM: "CODE NOT
 WRITTEN"; its own PBARL section constants may differ)."""
 
+DESIGN_MODEL = frozenset({"DESVAR", "DLINK", "DVPREL1", "DVMREL1", "DVPREL2", "DVMREL2", "DVCREL1",
+                          "DVCREL2", "DEQATN", "DTABLE"})
+"""SOL 200's design model: the reader puts the designed values at the initial design into the
+properties and materials (refusing the relations it does not apply), which the run deck writes;
+the cards themselves are never handed to MYSTRAN (which has no SOL 200)."""
+
 RAW_MODELLED = frozenset({"RBE3", "CBUSH", "PBUSH"})
 """Cards the reader models that reach MYSTRAN field by field (:func:`raw_card_text`): each is a
 card of its own in the model, and MYSTRAN reads it with the same meaning."""
@@ -238,7 +244,7 @@ _KNOWN_FIELDS = frozenset({"grids", "cbars", "pbars", "mat1s", "spc1s", "rbe2s",
                            "mpcs", "mpcadds",
                            "pbushes", "pelas", "springs", "spcadds", "prods", "rods", "coords", "files",
                            "gaps", "pgaps",
-                           "no_effect", "unmodelled", "notes"})
+                           "no_effect", "unmodelled", "notes", "designed", "dmigs"})
 """The parsed deck's collections of cards the run deck accounts for; a model with another non-empty
 collection cannot be written faithfully (a card the reader learnt after this writer): an error,
 not a dropped card. Scalar settings (PARAM values the reader keeps) reach MYSTRAN through the
@@ -258,6 +264,13 @@ def check_writable(model) -> None:
                               f"element (CGAP/PGAP); the reference adapter models its linear "
                               f"stiffness", file=file or None, line=int(line) if line.isdigit() else None,
                               card="CGAP")
+    for m in getattr(model, "dmigs", {}).values():
+        file, _, line = m.src.rpartition(":")
+        raise DeckFormatError(f"the mystran adapter cannot run DMIG {m.name} (a stiffness added by "
+                              f"K2GG): MYSTRAN 18 does not read DMIG (it skips the card with a "
+                              f"warning, so it would solve the structure without it); the reference "
+                              f"adapter models it", file=file or None,
+                              line=int(line) if line.isdigit() else None, card="DMIG")
     for p in getattr(model, "pbars", {}).values():
         if getattr(p, "n1", 0.0) or getattr(p, "n2", 0.0):
             file, _, line = p.src.rpartition(":")
@@ -280,7 +293,7 @@ def passthrough_cards(path: str | os.PathLike) -> list[RawCard]:
     cards = _bulk_cards(Path(path))
     out = []
     for c in cards:
-        if c.name in WRITTEN or (c.name in bdf.NO_EFFECT and c.name != "PARAM"):
+        if c.name in WRITTEN or c.name in DESIGN_MODEL or (c.name in bdf.NO_EFFECT and c.name != "PARAM"):
             continue
         if c.name in _not_passable():
             raise c.error(1, f"{c.name} cannot be handed to MYSTRAN: {_not_passable()[c.name]}")

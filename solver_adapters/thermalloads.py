@@ -4,10 +4,14 @@ from the cards of an input file for ``blackbox import``:
 * ``TEMP SID G1 T1 G2 T2 G3 T3``: the temperatures of grids;
 * ``TEMPD SID1 T1 SID2 T2 ...``: the temperature of every grid of set SIDi that no TEMP of the
   set names;
-* ``TEMPRB SID EID TA TB TP1A TP1B TP2A TP2B``: the mean temperatures of a bar's or rod's ends
-  and the bar's effective linear gradients (they replace the grids' temperatures for that
-  element); only the first line: MSC's continuation holds stress-recovery temperatures and then
-  further elements, MYSTRAN's only further elements, so a continuation is an error naming both;
+* ``TEMPRB SID EID1 TA TB TP1A TP1B TP2A TP2B / TCA TDA TEA TFA TCB TDB TEB TFB / EID2 EID3
+  ...`` (MSC QRG TEMPRB): the mean temperatures of a bar's or rod's ends (blank: 0.0) and the
+  bar's effective linear gradients (they replace the grids' temperatures for those elements).
+  The second line's temperatures at the stress-recovery points C, D, E, F of each end are read
+  and do not load the structure ("used for stress recovery only", QRG); the third line on lists
+  further elements that get the same temperatures, ``EIDa THRU EIDb`` meaning every bar and rod
+  of the model in the range. MYSTRAN reads the continuation otherwise (further elements only):
+  the mystran adapter gets the import's nodal loads, never the TEMPRB;
 * ``MAT1`` A (field 7, the expansion coefficient) and TREF (field 8, the stress-free
   temperature, default 0.0).
 
@@ -41,13 +45,15 @@ class ThermalCards:
     TREF (``materials``: MID -> (A, TREF))."""
     grid: dict[int, dict[int, tuple[float, object]]] = field(default_factory=dict)
     default: dict[int, tuple[float, object]] = field(default_factory=dict)
-    element: dict[int, dict[int, tuple[tuple[float, ...], object]]] = field(default_factory=dict)
+    element: dict[int, dict[int, tuple[tuple[float, ...], object, int]]] = field(default_factory=dict)
+    # TEMPRB EIDa THRU EIDb: SID -> (a, b) -> (values, card, field of EIDa)
+    ranges: dict[int, dict[tuple[int, int], tuple[tuple[float, ...], object, int]]] = field(default_factory=dict)
     materials: dict[int, tuple[float, float]] = field(default_factory=dict)
     rigid_alpha: list = field(default_factory=list)   # RBE2/RBAR cards with an ALPHA
 
     @property
     def set_ids(self) -> set[int]:
-        return set(self.grid) | set(self.default) | set(self.element)
+        return set(self.grid) | set(self.default) | set(self.element) | set(self.ranges)
 
     def has(self, sid: int) -> bool:
         return sid in self.set_ids
@@ -56,7 +62,7 @@ class ThermalCards:
         """``{eid: (T mean, TP1A, TP1B, TP2A, TP2B, kind)}`` of every bar and rod of the model
         under set ``sid``; a located error for an element end with no temperature."""
         grids, default = self.grid.get(sid, {}), self.default.get(sid)
-        own = self.element.get(sid, {})
+        own = self.elements(sid, deck)
 
         def at(g: int, what: str) -> float:
             if g in grids:
@@ -68,9 +74,9 @@ class ThermalCards:
                                     f"temperature: no TEMP names it and the set has no TEMPD")
 
         out = {}
-        for eid, (values, card) in own.items():
+        for eid, (values, card, i) in own.items():
             if eid not in deck.cbars and eid not in deck.rods:
-                raise card.error(3, f"element {eid} is not a CBAR, CBEAM, CROD, CONROD or CTUBE of "
+                raise card.error(i, f"element {eid} is not a CBAR, CBEAM, CROD, CONROD or CTUBE of "
                                     f"the model: TEMPRB gives temperatures to bars and rods{sel}")
         for eid, b in deck.cbars.items():
             if eid in own:
@@ -88,16 +94,29 @@ class ThermalCards:
                             0.0, 0.0, 0.0, 0.0, "rod")
         return out
 
+    def elements(self, sid: int, deck) -> dict[int, tuple[tuple[float, ...], object, int]]:
+        """The TEMPRB temperatures of set ``sid`` by element: ``(values, card, field)``, the
+        ``THRU`` ranges as the model's bars and rods in them."""
+        own = dict(self.element.get(sid, {}))
+        for (lo, hi), (values, card, i) in self.ranges.get(sid, {}).items():
+            for eid in [*deck.cbars, *deck.rods]:
+                if lo <= eid <= hi:
+                    if eid in own:
+                        raise card.error(i, f"element {eid} (of {lo} THRU {hi}) has a TEMPRB in set "
+                                            f"{sid} already ({own[eid][1].src})")
+                    own[eid] = (values, card, i)
+        return own
+
     def _first_card(self, sid: int):
-        for table in (self.element.get(sid, {}), self.grid.get(sid, {})):
-            for _, card in table.values():
-                return card
+        for table in (self.element.get(sid, {}), self.ranges.get(sid, {}), self.grid.get(sid, {})):
+            for entry in table.values():
+                return entry[1]
         return self.default[sid][1]
 
     def loads(self, sid: int, deck, sel: str = "", initial: int | None = None) -> dict[tuple[int, int], float]:
         """The nodal loads (basic) of temperature set ``sid`` on the model's bars and rods:
-        strain alpha (T - TREF) of each. ``initial`` (a TEMP(INIT) set) is accepted only where
-        it changes nothing: every loaded element's initial temperature equal to its TREF."""
+        strain alpha (T - TREF) of each, or alpha (T - T0) with ``initial`` (a TEMP(INIT) set:
+        T0 its temperature of the element, its gradients subtracted from the load's)."""
         card = self._first_card(sid)
         if deck.unmodelled:
             u = deck.unmodelled[0]
@@ -116,22 +135,26 @@ class ThermalCards:
             element = deck.cbars[eid] if kind == "bar" else deck.rods[eid]
             mid = deck.pbars[element.pid].mid if kind == "bar" else deck.rod_section(element)[0]
             alpha, tref = self.materials.get(mid, (0.0, 0.0))
+            designed = deck.designed.get(("MAT1", mid), {})     # SOL 200: MAT1 A, TREF designed
+            alpha, tref = designed.get(7, alpha), designed.get(8, tref)
             if alpha == 0.0:
                 continue
-            if init is not None and init[eid][0] != tref:
-                raise card.error(1, f"TEMPERATURE(INITIAL) = {initial} gives {element.card} {eid} the "
-                                    f"initial temperature {init[eid][0]:g}, not its MAT1 {mid} TREF "
-                                    f"{tref:g}: which of the two the thermal strain starts from "
-                                    f"differs between NASTRAN versions, so the thermal load is not "
-                                    f"imported{sel}")
-            strain = alpha * (t - tref)
+            if init is not None:
+                # MSC QRG TEMPERATURE (case), remark 6: in linear statics the TEMPERATURE(INITIAL)
+                # set, when given, is the initial temperature of the thermal strain instead of
+                # TREF; its gradients are the initial state's too
+                t0, g0a, g0b, g0c, g0d, _ = init[eid]
+                strain = alpha * (t - t0)
+                tp1a, tp1b, tp2a, tp2b = tp1a - g0a, tp1b - g0b, tp2a - g0c, tp2b - g0d
+            else:
+                strain = alpha * (t - tref)
             try:
                 if kind == "bar":
                     loads = thermal_bar_loads(deck, element, alpha, strain, (tp1a, tp1b), (tp2a, tp2b))
                 else:
                     loads = thermal_rod_loads(deck, element, strain)
             except LoadError as exc:
-                raise self.element[sid][eid][1].error(exc.args[0], exc.args[1]) from None
+                raise self.elements(sid, deck)[eid][1].error(exc.args[0], exc.args[1]) from None
             for key, v in loads.items():
                 out[key] = out.get(key, 0.0) + v
         return out
@@ -166,17 +189,7 @@ def read_thermal_cards(cards) -> ThermalCards:
                     raise c.error(i, f"set {sid} has a TEMPD already ({out.default[sid][1].src})")
                 out.default[sid] = (t, c)
         elif name == "TEMPRB":
-            if len(c.fields) > 9 and any(c.text(i) for i in range(10, len(c.fields) + 1)):
-                raise c.error(10, "a TEMPRB continuation is read differently by MSC Nastran (stress-"
-                                  "recovery temperatures TCA ... TFB, then further elements) and by "
-                                  "MYSTRAN (further elements only): give each element a TEMPRB of "
-                                  "one line")
-            sid, eid = _int(c, 2), _int(c, 3)
-            values = (_real(c, 4), _real(c, 5), *(_real(c, i, 0.0) for i in range(6, 10)))
-            table = out.element.setdefault(sid, {})
-            if eid in table:
-                raise c.error(3, f"element {eid} has a TEMPRB in set {sid} already ({table[eid][1].src})")
-            table[eid] = (values, c)
+            _read_temprb(c, out)
         elif name == "MAT1":
             out.materials[_int(c, 2)] = (_real(c, 7, 0.0), _real(c, 8, 0.0))
         elif name == "RBAR" and c.text(9):
@@ -189,3 +202,40 @@ def read_thermal_cards(cards) -> ThermalCards:
             if any(c.text(i) == "ALPHA" for i in range(2, len(c.fields) + 1)):
                 out.rigid_alpha.append(c)
     return out
+
+
+def _read_temprb(c, out: ThermalCards) -> None:
+    """TEMPRB SID EID1 TA TB TP1A TP1B TP2A TP2B / TCA ... TFB / EID2 EID3 ... (MSC QRG): the
+    first line's temperatures for EID1 and every element of the third line on (``THRU``
+    between two IDs: the range); the stress-recovery temperatures are read and not used."""
+    sid, eid = _int(c, 2), _int(c, 3)
+    values = tuple(_real(c, i, 0.0) for i in range(4, 10))
+    for i in range(10, 18):                         # TCA TDA TEA TFA TCB TDB TEB TFB
+        _real(c, i, 0.0)
+    table = out.element.setdefault(sid, {})
+    ranges = out.ranges.setdefault(sid, {})
+
+    def claim(e: int, i: int) -> None:
+        if e in table:
+            raise c.error(i, f"element {e} has a TEMPRB in set {sid} already ({table[e][1].src})")
+        table[e] = (values, c, i)
+
+    claim(eid, 3)
+    n = len(c.fields)
+    i = 18
+    while i <= n:
+        if not c.text(i):
+            i += 1
+            continue
+        if c.text(i) == "THRU":
+            raise c.error(i, "THRU needs an element ID before it")
+        e = _int(c, i)
+        if i + 1 <= n and c.text(i + 1) == "THRU":
+            hi = _int(c, i + 2)
+            if hi <= e:
+                raise c.error(i + 2, f"THRU range {e} THRU {hi}: the second ID must be larger")
+            ranges[(e, hi)] = (values, c, i)
+            i += 3
+        else:
+            claim(e, i)
+            i += 1

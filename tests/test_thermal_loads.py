@@ -164,12 +164,8 @@ def test_initial_temperature_equal_to_tref_is_accepted(tmp_path):
 
 
 @pytest.mark.parametrize("case, bulk, card, field, why", [
-    ("TEMP(INIT) = 8\nTEMP(LOAD) = 9\n", "TEMPD,9,70.\nTEMPD,8,25.\n", "TEMPD", 1,
-     "initial temperature 25, not its MAT1 1 TREF 20"),
     ("TEMP(LOAD) = 9\n", "TEMP,9,1,70.,2,70.\n", "TEMP", 2, "gives grid 3 .*no temperature"),
     ("TEMP(LOAD) = 9\n", "TEMPD,9,70.\nTEMPP1,9,1,70.,0.\n", "TEMPP1", 1, "contains TEMPP1"),
-    ("TEMP(LOAD) = 9\n", "TEMPRB,9,1,70.,70.,,,,,+\n+,1.,2.,3.,4.,5.,6.,7.,8.\n", "TEMPRB", 10,
-     "continuation is read differently"),
     ("TEMP(LOAD) = 9\n", "TEMPRB,9,99,70.,70.\n", "TEMPRB", 3, "not a CBAR"),
     ("TEMP(LOAD) = 9\n", "TEMPD,9,70.\nRBE2,50,3,123,4,1.E-5\nGRID,4,,5.,0.,0.\n", "RBE2", 1,
      "rigid elements is not modelled"),

@@ -40,6 +40,9 @@ _MPC_CARDS = ("MPC", "MPCADD")
 _SUPORT1 = ("SUPORT1",)
 # MYSTRAN's own bulk-data card for debug printout: no effect on the solution, not NASTRAN.
 _SOLVER_DEBUG = ("DEBUG",)
+_DESIGN_CARDS = ("DESVAR", "DLINK", "DVPREL1", "DVMREL1", "DVPREL2", "DVMREL2", "DVCREL1", "DVCREL2",
+                 "DEQATN", "DTABLE")
+_DESIGN_SOLS = ("200", "DESOPT")
 
 
 @dataclass(frozen=True, eq=False)
@@ -389,6 +392,38 @@ def _no_static_load(cc: CaseControl | None, path: Path) -> str:
             f"yourself) and import again")
 
 
+def _dmig_selection(cc: CaseControl | None, cards, path: Path, notes: list[str]) -> list:
+    """The DMIG cards to drop: NASTRAN adds to the stiffness the matrix that K2GG = NAME selects
+    (one for every imported subcase) and no other, while a study adds every DMIG of model.bdf;
+    a deck without case control keeps them all."""
+    dmigs = [c for c in cards if c.name == "DMIG"]
+    if cc is None:
+        if dmigs:
+            notes.append("no case control: every DMIG matrix of the deck is added to the stiffness (K2GG)")
+        return []
+    chosen = {s.k2gg for s in cc.subcases if s.static}
+    if len(chosen) > 1:
+        detail = ", ".join(f"subcase {s.id}: {s.k2gg or 'none'}" for s in cc.subcases if s.static)
+        raise DeckFormatError(f"the subcases select different K2GG matrices ({detail}); a study has "
+                              f"one stiffness: give every subcase the same K2GG", file=str(path))
+    name = chosen.pop() if chosen else None
+    names = list(dict.fromkeys(c.text(2) for c in dmigs))
+    if name is not None:
+        line = next(s.k2gg_line for s in cc.subcases if s.static)
+        if name not in names:
+            raise DeckFormatError(f"K2GG = {name} selects a matrix the bulk data does not have (no "
+                                  f"DMIG named {name})", file=str(path), line=line, card="K2GG",
+                                  value=name)
+        notes.append(f"K2GG = {name} at {path}:{line}: DMIG {name} kept in model.bdf, added to the "
+                     f"stiffness in the g-set (times PARAM,CK2)")
+    dropped = [n for n in names if n != name]
+    if dropped:
+        notes.append(f"dropped DMIG matrix(es) {', '.join(dropped)} from model.bdf: "
+                     f"{'not selected by K2GG' if name else 'no K2GG selects them'} (NASTRAN adds none "
+                     f"that the case control does not select)")
+    return [c for c in dmigs if c.text(2) != name]
+
+
 def _initial_temperatures(cc: CaseControl | None) -> int | None:
     """The TEMPERATURE(INITIAL) set of the subcases that import a load (one, else an error)."""
     if cc is None:
@@ -409,6 +444,13 @@ def _temperature_selections(cc: CaseControl, cards, path: Path, notes: list[str]
     mat = [s for s in cc.subcases if s.static and s.temp_mat is not None]
     if not mat:
         return
+    init = next((s for s in cc.subcases if s.static and s.temp_init is not None), None)
+    if init is not None:
+        raise DeckFormatError(f"TEMPERATURE(MATERIAL) = {mat[0].temp_mat} (TEMPERATURE = n is LOAD and "
+                              f"MATERIAL) and TEMPERATURE(INITIAL) = {init.temp_init} cannot both be "
+                              f"given (MSC QRG TEMPERATURE, remark 8): select the thermal load with "
+                              f"TEMPERATURE(LOAD)", file=str(path), line=mat[0].temp_mat_line,
+                              card="TEMPERATURE")
     matt = next((c for c in cards if c.name.startswith("MATT")), None)
     if matt is not None:
         raise DeckFormatError(f"TEMPERATURE(MATERIAL) = {mat[0].temp_mat} selects temperatures for "
@@ -461,15 +503,22 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
     else:
         selected = []
         if cc.sol and cc.sol.upper() not in _STATIC_SOLS:
+            # a SOL 200 subcase whose ANALYSIS is STATICS is SOL 101's linear static analysis
+            # (of the initial design): its TEMPERATURE selections mean what they mean there
+            design = cc.sol.upper() in _DESIGN_SOLS
             for s in cc.subcases:
                 line = s.temp_load_line or s.temp_mat_line or s.temp_init_line
-                if line:
+                if line and not (design and s.analysis_static):
                     raise DeckFormatError(f"the deck's solution is {_sol_text(cc.sol)}, not linear "
                                           f"statics: its TEMPERATURE selections mean what that "
                                           f"solution makes of them, and are imported in a linear "
-                                          f"static deck (SOL 101) only", file=str(path), line=line,
+                                          f"static deck (SOL 101, or a SOL 200 subcase with "
+                                          f"ANALYSIS = STATICS) only", file=str(path), line=line,
                                           card="TEMPERATURE")
         for s in cc.subcases:
+            if not s.analysis_static:
+                notes.append(f"subcase {s.id} is ANALYSIS = {s.analysis}, not a static analysis: not imported")
+                continue
             if not s.static:
                 notes.append(f"subcase {s.id} selects no load set (no LOAD = or TEMPERATURE(LOAD) =): not imported")
                 continue
@@ -520,6 +569,13 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
         drop_cards += inrel_cards
     debug = [c for c in cards if c.name in _SOLVER_DEBUG]
     drop_cards += debug
+    drop_cards += _dmig_selection(cc, cards, path, notes)
+    # the design model: SOL 200 analyses the initial design (the reader applies the relations);
+    # in a deck of another solution NASTRAN does not read it, so it is not carried over
+    design_cards = [c for c in cards if c.name in _DESIGN_CARDS]
+    design_dropped = bool(design_cards) and cc is not None and cc.sol.upper() not in _DESIGN_SOLS
+    if design_dropped:
+        drop_cards += design_cards
     dropped_ids = {id(c) for c in drop_cards}
     kept = [c for c in cards if id(c) not in dropped_ids]
     # cards the reference solver does not model (shells, solids) are kept for an external solver:
@@ -602,6 +658,17 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
                      f"(a card image ends at column 80)")
     if debug:
         notes.append(f"dropped {_plural(len(debug), 'DEBUG card')} (MYSTRAN debug printout, no effect on the solution)")
+    if design_cards:
+        kinds = ", ".join(f"{n} x{k}" for n, k in Counter(c.name for c in design_cards).items())
+        if design_dropped:
+            notes.append(f"dropped the design model ({kinds}) from model.bdf: the deck's solution is "
+                         f"{_sol_text(cc.sol)}, which does not read it (only SOL 200 does)")
+        else:
+            what = ("; designed: " + ", ".join(f"{k[0]} {k[1]}" for k in deck.designed)
+                    if deck.designed else "; it designs no stiffness (masses, damping only)")
+            notes.append(f"read the design model ({kinds}): the study is the deck's analysis at the "
+                         f"initial design, the designed values at the DESVAR initial values (XINIT)"
+                         f"{what}")
     if deck.no_effect:
         notes.append("accepted with no effect on a linear static solution (kept in model.bdf, never "
                      "a reason for another adapter): " + ", ".join(

@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import difflib
 
-from solver_adapters.bdf import bars, beams, constraints, gaps, grids, materials, params, rigid, rods, springs
+from solver_adapters.bdf import (bars, beams, constraints, design, gaps, grids, materials, matrices, params,
+                                 rigid, rods, springs)
 from solver_adapters.bdf.params import NO_EFFECT
 from solver_adapters.deck import Deck
 from solver_adapters.protocol import DeckFormatError
 
-_FAMILIES = (grids, bars, beams, rods, materials, rigid, springs, gaps, constraints, params)
+_FAMILIES = (grids, bars, beams, rods, materials, rigid, springs, gaps, constraints, params, design, matrices)
 
 PARSERS = {name: p for m in _FAMILIES for name, p in m.PARSERS.items()}
 """Card name -> the parser that reads one card into the reader's state."""
@@ -63,7 +64,7 @@ KNOWN_UNMODELLED = frozenset({
     "QSET", "QSET1", "BSET", "BSET1",
     "CSET", "CSET1", "USET", "USET1", "SEQGP", "EPOINT",
     # other coordinate systems, direct matrix input, tables, functions
-    "CORD3G", "CORD3R", "DTI", "DMI", "DMIG", "DMIJ", "DMIK", "DEQATN", "BEAMOR",
+    "CORD3G", "CORD3R", "DTI", "DMI", "DMIJ", "DMIK", "BEAMOR",
 })
 """NASTRAN cards the reader knows and does not model: with ``unmodelled="keep"`` they are kept
 for an external solver (which refuses those it cannot run), otherwise they are errors. A name

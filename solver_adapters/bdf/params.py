@@ -32,6 +32,9 @@ def _param(r, c) -> None:
             raise c.error(3, "PARAM,AUTOSPC must be YES or NO")
         r.deck.autospc = value.startswith("Y")
         r.deck.autospc_src = c.src
+    elif name == "CK2":
+        # the scale of the direct stiffness matrices (K2GG, DMIG): MSC QRG PARAM CK2, default 1.0
+        r.deck.ck2 = _real(c, 3)
     elif name == "EPZERO":
         value = _real(c, 3)
         if not 0.0 < value < 1.0:
@@ -66,9 +69,9 @@ NO_EFFECT = frozenset({
     # output only: plot elements, monitor points, bar output stations (CBARAO: where a CBAR's
     # forces and stresses are printed)
     "PLOTEL", "MONPNT1", "MONPNT3", "CBARAO",
-    # design optimisation (SOL 200): a static solution uses the properties as written
-    "DESVAR", "DVPREL1", "DVPREL2", "DVMREL1", "DVMREL2", "DVCREL1", "DVCREL2", "DLINK",
-    "DRESP1", "DRESP2", "DRESP3", "DCONSTR", "DCONADD", "DSCREEN", "DTABLE",
+    # design optimisation (SOL 200): responses and constraints (the relations that design the
+    # model's properties, their equations DEQATN and constants DTABLE are read by bdf.design)
+    "DRESP1", "DRESP2", "DRESP3", "DCONSTR", "DCONADD", "DSCREEN", "DDVAL",
     # static aeroelasticity and flutter: the aerodynamic model adds nothing to a SOL 101 solution
     "AERO", "AEROS", "CAERO1", "CAERO2", "CAERO3", "CAERO4", "CAERO5", "PAERO1", "PAERO2",
     "PAERO3", "PAERO4", "PAERO5", "SPLINE1", "SPLINE2", "SPLINE4", "SPLINE5", "SET1", "SET2",

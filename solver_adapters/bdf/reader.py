@@ -18,6 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from solver_adapters.bdf import design, matrices
 from solver_adapters.bdf.catalog import (BULK, ELEMENT_GRIDS, NOT_PASSABLE, PARSERS,
                                          _connects_nothing, known, unsupported_error)
 from solver_adapters.bdf.fields import _components, _int, _orientation
@@ -43,7 +44,11 @@ class _Reader:
         # ID -> "CARD at file:line"; elements (CBAR, RBE2, CELASi) share one ID space, as do
         # properties (PBAR, PELAS)
         self.ids: dict[str, dict[int, str]] = {"GRID": {}, "element": {}, "property": {}, "MAT1": {},
-                                               "SPCADD": {}, "MPCADD": {}, "CORD": {}}
+                                               "SPCADD": {}, "MPCADD": {}, "CORD": {},
+                                               **{k: {} for k in design.PARSERS if k not in ("DLINK", "DTABLE")}}
+        self.design = design.DesignState.empty()   # SOL 200's design model, applied in finish()
+        self.dmig_headers: dict[str, object] = {}  # DMIG name -> its header card
+        self.dmig_columns: dict[str, list] = {}    # DMIG name -> (card, GJ, CJ, terms) per column
         self.spc1_pending: list[tuple[int, str, list[int | tuple[int, int]], str, object, int]] = []
         self.spoints: dict[int, object] = {}      # SPOINT ID -> its Grid (scalar), in finish()
         # (card, field, point, component) of every spring end and MPC term (component 0: blank
@@ -91,6 +96,8 @@ class _Reader:
             entry[0] += 1
             return
         parser(self, card)
+        if card.name in design.TARGET_CARDS:
+            design.record_target(self, card)
 
     def bulk(self, collection: str, id_space: str, cards: np.ndarray, keys: list, entities: list) -> None:
         """Entities a bulk converter made from ``cards`` (table indices), for ``collection`` of
@@ -327,6 +334,8 @@ class _Reader:
             _suport_apart(self.deck, [p for p in self.spc1_pending if p[0] is None])
         if scalar:
             _to_component_1(self.deck, scalar)
+        matrices.finish(self)
+        design.apply(self, PARSERS, _Reader)
         self.deck.notes = [f"{', '.join(cards[:5])}{f' and {len(cards) - 5} more' if len(cards) > 5 else ''}: "
                            f"{message}" for message, cards in self.notes.items()]
         return self.deck

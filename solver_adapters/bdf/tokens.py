@@ -112,6 +112,22 @@ def _split(raw: str, file: str, lineno: int) -> _Line:
         return DeckFormatError(message, file=file, line=lineno, value=raw.strip())
 
     if "," in raw:
+        head = raw.split(",", 2)
+        if head[0].strip().upper() == "DEQATN" and len(head) == 3:
+            # free field: DEQATN,EQID,equation (the equation's own commas kept)
+            return _Line(file, lineno, "DEQATN", [head[1].strip(), head[2].strip()] + [""] * 6, "")
+        fixed = raw.expandtabs(8).rstrip()
+        if fixed[:8].strip().upper() == "DEQATN" or (not fixed[:8].strip() and fixed.strip()[:1] not in ",+*"):
+            # a DEQATN's equation (columns 17-72 of its first line, 9-72 of the next) holds
+            # commas as text: a fixed-field card image, the equation one field (a blank field 1
+            # before text with commas is no free-field line, which starts with its card name
+            # or a comma)
+            if len(fixed) > 80:
+                raise fail("text beyond column 80 of a fixed-field line")
+            fixed = fixed.ljust(80)
+            first = fixed[:8].strip().upper()
+            data = [fixed[8:16].strip(), fixed[16:72].strip()] if first else [fixed[8:72].strip()]
+            return _Line(file, lineno, first, data + [""] * (8 - len(data)), fixed[72:80].strip().upper())
         items = [s.strip() for s in raw.replace("\t", " ").split(",")]
         first = items[0].upper()
         large = first.endswith("*") or first.startswith("*")

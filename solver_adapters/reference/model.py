@@ -299,6 +299,8 @@ def assemble(deck: Deck, extra_springs: tuple[ScalarSpring, ...] = (),
                              (np.concatenate([at, b, at, b, a[~two]]),
                               np.concatenate([at, b, b, at, a[~two]]))), shape=(n_g, n_g))
         K_gg = (K_gg + K_s.tocsr()).tocsr()
+    if deck.dmigs:
+        K_gg = (K_gg + dmig_stiffness(deck, grid_ids)).tocsr()
     tm["springs_s"] = time.perf_counter() - t1
 
     t1 = time.perf_counter()
@@ -330,6 +332,29 @@ def assemble(deck: Deck, extra_springs: tuple[ScalarSpring, ...] = (),
     tm["labels_s"] = time.perf_counter() - t1
     tm["assemble_s"] = time.perf_counter() - t0
     return Assembled(grid_ids, g_labels, T, K_gg, K_ff, f_labels, auto_labels, bool(deck.autospc))
+
+
+def dmig_stiffness(deck: Deck, grid_ids: np.ndarray) -> sp.csr_matrix:
+    """The DMIG matrices (K2GG) in the g-set, times PARAM,CK2: a symmetric matrix's (IFO 6)
+    off-diagonal term stands for its mirror too (MSC QRG DMIG)."""
+    rows, cols, vals = [], [], []
+    for m in deck.dmigs.values():
+        for (gi, ci), (gj, cj), a in m.terms:
+            rows.append((gi, ci))
+            cols.append((gj, cj))
+            vals.append(a)
+            if m.ifo == 6 and (gi, ci) != (gj, cj):
+                rows.append((gj, cj))
+                cols.append((gi, ci))
+                vals.append(a)
+    n_g = 6 * len(grid_ids)
+    if not vals:
+        return sp.csr_matrix((n_g, n_g))
+    r = np.array(rows, dtype=np.int64)
+    c = np.array(cols, dtype=np.int64)
+    i = 6 * _grid_pos(grid_ids, r[:, 0], "DMIG") + r[:, 1] - 1
+    j = 6 * _grid_pos(grid_ids, c[:, 0], "DMIG") + c[:, 1] - 1
+    return sp.coo_matrix((deck.ck2 * np.array(vals, float), (i, j)), shape=(n_g, n_g)).tocsr()
 
 
 def autospc(K_ff: sp.spmatrix, f_index: np.ndarray, ratio: float) -> tuple[np.ndarray, np.ndarray]:
