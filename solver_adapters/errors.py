@@ -174,6 +174,11 @@ class UnauthenticEntry(CorruptEntry):
     written by someone else. Never trusted."""
 
 
+class EquationError(ValueError):
+    """A DEQATN equation that cannot be read or evaluated (:mod:`solver_adapters.bdf.equations`);
+    the message says what. The design reader turns it into a located :class:`DeckFormatError`."""
+
+
 class CheckFailure(AssertionError):
     """A conformance check saw the adapter break the protocol (message: what and where)."""
 
@@ -232,7 +237,7 @@ __all__ = ["located", "COMPONENT_NAMES", "SolverError", "DeckFormatError", "Mode
            "UnsupportedFeatureError", "UnstableStructureError",
            "UnknownDofError", "SolverRunError", "SolverTimeoutError", "FactorizationError",
            "RegistryError", "UnknownPluginError", "PluginLoadError", "PluginConflictError",
-           "OptionError", "AdapterNotFound", "CorruptEntry", "UnauthenticEntry", "CheckFailure", "FeatureRefused", "NumberFieldError",
+           "OptionError", "AdapterNotFound", "CorruptEntry", "UnauthenticEntry", "CheckFailure", "FeatureRefused", "NumberFieldError", "EquationError",
            "TableFormatError", "InsecureFileError"]
 
 

@@ -35,7 +35,7 @@ import scipy.sparse as sp
 from solver_adapters.deck import (Bush, CBar, Coord, Deck, Grid, Mat1, PBar, PBush, Pelas, Prod,  # noqa: F401
                                   Rbe2, Rbe3, Rod, Spc1, SpcAdd, Spring, Unmodelled)
 from solver_adapters.errors import (COMPONENT_NAMES, located, AdapterNotFound, CheckFailure, FeatureRefused,  # noqa: F401
-                                    ConsentError, CorruptEntry, DeckFormatError, FactorizationError,
+                                    ConsentError, CorruptEntry, DeckFormatError, EquationError, FactorizationError,
                                     InsecureFileError, ModelError, OptionError, PluginConflictError,
                                     PluginLoadError, RegistryError, SolverError, SolverRunError,
                                     SolverTimeoutError, TableFormatError, UnauthenticEntry,

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import re
+from solver_adapters.errors import EquationError
 
 _TOKEN = re.compile(r"\s*(?:(?P<num>(?:\d+\.?\d*|\.\d+)(?:[EeDd][+-]?\d+)?)|(?P<name>[A-Za-z][A-Za-z0-9_]*)"
                     r"|(?P<op>\*\*|[-+*/(),=]))")
@@ -33,8 +34,6 @@ FUNCTIONS = {
 """Function name -> (number of arguments, -1: one or more; the function)."""
 
 
-class EquationError(ValueError):
-    """An equation that cannot be read or evaluated; the message says what."""
 
 
 def _tokens(text: str) -> list[tuple[str, str]]:
