@@ -59,7 +59,7 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy import special, stats
 
-from blackbox.diagnosis.effects.base import Effect
+from blackbox.diagnosis.effects.base import Effect, proximity
 from blackbox.diagnosis.fit import Fit, chi2_band, fit_model
 from blackbox.diagnosis.model import RIGID_RATIO, AugmentedModel, ModelSpec, ObsMap
 from blackbox.diagnosis.residuals import hotspots, residual_structure
@@ -522,7 +522,8 @@ MYSTRAN, whose every right-hand side costs about 0.15 s there), 20 at 1e6."""
 def _nearest_residual_order(effects: Sequence[Effect], fit: Fit, om: ObsMap, xyz: dict | None) -> list[Effect]:
     """``effects`` nearest the fit's residual first: each scores the largest per-grid RMS of the
     whitened residual discounted by ``exp(-distance / median member length)``, its position the
-    mean of its DOFs' grids (the order of :meth:`CandidateContext.nearest_residual`)."""
+    mean of its DOFs' grids (:func:`~blackbox.diagnosis.effects.base.proximity`, as
+    :meth:`CandidateContext.nearest_residual`)."""
     if not xyz:
         return list(effects)
     per: dict[int, list[float]] = {}
@@ -538,10 +539,8 @@ def _nearest_residual_order(effects: Sequence[Effect], fit: Fit, om: ObsMap, xyz
         pts = [np.asarray(xyz[g], float) for g in dict.fromkeys(int(d[0]) for d in e.refit_columns()) if g in xyz]
         pos.append(np.mean(pts, axis=0) if pts else np.full(3, np.nan))
         ends.append(float(np.linalg.norm(pts[0] - pts[-1])) if len(pts) > 1 else 0.0)
-    pos = np.array(pos)
     ell = float(np.median([x for x in ends if x > 0])) if any(x > 0 for x in ends) else 1.0
-    d = np.linalg.norm(pos[:, None, :] - P[None, :, :], axis=2)
-    score = np.nan_to_num(np.max(w[None, :] * np.exp(-d / ell), axis=1), nan=-1.0)
+    score = np.nan_to_num(proximity(np.array(pos), P, w, ell), nan=-1.0)
     return [effects[i] for i in np.argsort(-score, kind="stable")]
 
 

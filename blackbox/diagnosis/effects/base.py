@@ -53,7 +53,8 @@ if TYPE_CHECKING:
     from blackbox.joints import JointModel
     from solver_adapters.protocol import Deck, LoadMatrix
 
-__all__ = ["CandidateContext", "CandidateLimit", "Effect", "JointCaseEffect", "OnChannel", "SetAsideEffect", "finite_or_none"]
+__all__ = ["CandidateContext", "CandidateLimit", "Effect", "JointCaseEffect", "OnChannel", "SetAsideEffect", "finite_or_none",
+           "proximity"]
 
 
 @dataclass(frozen=True)
@@ -131,12 +132,19 @@ class CandidateContext:
         P = np.array([p for p, _ in meas])
         w = np.array([v for _, v in meas])
         X = np.array([np.asarray(points[k], float) for k in keys])
-        score = np.zeros(len(keys))
-        for a in range(0, len(keys), 4096):           # blocks: (keys x measured grids) distances
-            d = np.linalg.norm(X[a:a + 4096, None, :] - P[None, :, :], axis=2)
-            score[a:a + 4096] = np.max(w[None, :] * np.exp(-d / ell), axis=1)
+        score = proximity(X, P, w, ell)
         chosen = set(np.argsort(-score, kind="stable")[:limit].tolist())
         return [k for i, k in enumerate(keys) if i in chosen]
+
+
+def proximity(X: np.ndarray, P: np.ndarray, w: np.ndarray, ell: float) -> np.ndarray:
+    """Each point of ``X`` (n, 3) scored by how near it is to weighted points ``P`` (m, 3) with
+    weights ``w``: ``max_j w_j exp(-|x - p_j| / ell)`` (the order of "nearest the residual")."""
+    score = np.zeros(len(X))
+    for a in range(0, len(X), 4096):               # blocks: (points x weighted points) distances
+        d = np.linalg.norm(X[a:a + 4096, None, :] - P[None, :, :], axis=2)
+        score[a:a + 4096] = np.max(w[None, :] * np.exp(-d / ell), axis=1)
+    return score
 
 
 def finite_or_none(v) -> float | None:
