@@ -259,26 +259,25 @@ def check_writable(model) -> None:
         raise DeckFormatError(f"the MYSTRAN run deck cannot write the model's {', '.join(unknown)} "
                               f"(cards the reader models but solver_adapters.nastran does not write yet)")
     for e in sorted(getattr(model, "gaps", {}).values(), key=lambda e: e.eid)[:1]:
-        file, _, line = e.src.rpartition(":")
-        raise DeckFormatError(f"the mystran adapter cannot run CGAP {e.eid}: MYSTRAN 18 has no gap "
-                              f"element (CGAP/PGAP); the reference adapter models its linear "
-                              f"stiffness", file=file or None, line=int(line) if line.isdigit() else None,
-                              card="CGAP")
+        _cannot_run(e.src, "CGAP", f"CGAP {e.eid}: MYSTRAN 18 has no gap element (CGAP/PGAP); the reference "
+                                   f"adapter models its linear stiffness")
     for m in getattr(model, "dmigs", {}).values():
-        file, _, line = m.src.rpartition(":")
-        raise DeckFormatError(f"the mystran adapter cannot run DMIG {m.name} (a stiffness added by "
-                              f"K2GG): MYSTRAN 18 does not read DMIG (it skips the card with a "
-                              f"warning, so it would solve the structure without it); the reference "
-                              f"adapter models it", file=file or None,
-                              line=int(line) if line.isdigit() else None, card="DMIG")
+        _cannot_run(m.src, "DMIG", f"DMIG {m.name} (a stiffness added by K2GG): MYSTRAN 18 does not read DMIG "
+                                   f"(it skips the card with a warning, so it would solve the structure "
+                                   f"without it); the reference adapter models it")
     for p in getattr(model, "pbars", {}).values():
         if getattr(p, "n1", 0.0) or getattr(p, "n2", 0.0):
-            file, _, line = p.src.rpartition(":")
-            raise DeckFormatError(f"the mystran adapter cannot run PBEAM {p.pid}: its neutral axis is "
-                                  f"offset (N1, N2), and MYSTRAN 18 has no CBEAM (its CBAR, as which the "
-                                  f"run deck writes a CBEAM, has no neutral axis offset); the reference "
-                                  f"adapter models it", file=file or None,
-                                  line=int(line) if line.isdigit() else None, card="PBEAM")
+            _cannot_run(p.src, "PBEAM", f"PBEAM {p.pid}: its neutral axis is offset (N1, N2), and MYSTRAN 18 "
+                                        f"has no CBEAM (its CBAR, as which the run deck writes a CBEAM, has no "
+                                        f"neutral axis offset); the reference adapter models it")
+
+
+def _cannot_run(src: str, card: str, what: str) -> None:
+    """The mystran adapter's refusal of a card MYSTRAN cannot run, located at ``src``
+    (``file:line``) and naming the card: "the mystran adapter cannot run <what>"."""
+    file, _, line = src.rpartition(":")
+    raise DeckFormatError(f"the mystran adapter cannot run {what}", file=file or None,
+                          line=int(line) if line.isdigit() else None, card=card)
 
 
 def passthrough_cards(path: str | os.PathLike) -> list[RawCard]:
