@@ -214,28 +214,24 @@ def _problems(deck: Deck, bulk_checked: bool) -> list[str]:
         need_grids(e, "RBE3", e.eid, indep, "independent grid(s)")
         if e.refgrid in indep:
             bad(e, "RBE3", e.eid, f"REFGRID {e.refgrid} is also an independent grid")
-    for b in deck.bushes.values():
-        if b.pid not in deck.pbushes:
-            bad(b, "CBUSH", b.eid, f"property PID {b.pid} not found (no PBUSH)")
-        need_grids(b, "CBUSH", b.eid, [g for g in (b.ga, b.gb, b.g0) if g], "grid(s)")
-        if b.ga == b.gb:
-            bad(b, "CBUSH", b.eid, f"GA and GB are the same grid {b.ga}")
-        elif b.cid is None and b.gb in deck.grids and b.ga in deck.grids:
-            xa, xb = np.array(deck.grids[b.ga].xyz), np.array(deck.grids[b.gb].xyz)
-            if np.linalg.norm(xb - xa) <= ZERO_LENGTH * max(np.abs(xa).max(), np.abs(xb).max(), 1e-300):
-                bad(b, "CBUSH", b.eid, "GA and GB coincide: the element axes need CID")
-        if b.cid is not None and b.cid != 0 and b.cid not in deck.coords:
-            bad(b, "CBUSH", b.eid, f"CID {b.cid}: coordinate system not defined")
-    for e in deck.gaps.values():
-        if e.pid not in deck.pgaps:
-            bad(e, "CGAP", e.eid, f"property PID {e.pid} not found (no PGAP)")
-        need_grids(e, "CGAP", e.eid, [g for g in (e.ga, e.gb, e.g0) if g], "grid(s)")
+    def two_grids(e, card: str, props: dict, pcard: str, need_cid: str) -> None:
+        """A two-grid element's property, grids, and an axis from GA to GB or else from CID."""
+        if e.pid not in props:
+            bad(e, card, e.eid, f"property PID {e.pid} not found (no {pcard})")
+        need_grids(e, card, e.eid, [g for g in (e.ga, e.gb, e.g0) if g], "grid(s)")
         if e.ga == e.gb:
-            bad(e, "CGAP", e.eid, f"GA and GB are the same grid {e.ga}")
+            bad(e, card, e.eid, f"GA and GB are the same grid {e.ga}")
         elif e.cid is None and e.gb in deck.grids and e.ga in deck.grids:
             xa, xb = np.array(deck.grids[e.ga].xyz), np.array(deck.grids[e.gb].xyz)
             if np.linalg.norm(xb - xa) <= ZERO_LENGTH * max(np.abs(xa).max(), np.abs(xb).max(), 1e-300):
-                bad(e, "CGAP", e.eid, "GA and GB coincide: the gap axis needs CID")
+                bad(e, card, e.eid, f"GA and GB coincide: {need_cid}")
+
+    for b in deck.bushes.values():
+        two_grids(b, "CBUSH", deck.pbushes, "PBUSH", "the element axes need CID")
+        if b.cid is not None and b.cid != 0 and b.cid not in deck.coords:
+            bad(b, "CBUSH", b.eid, f"CID {b.cid}: coordinate system not defined")
+    for e in deck.gaps.values():
+        two_grids(e, "CGAP", deck.pgaps, "PGAP", "the gap axis needs CID")
     for s in deck.spc1s:
         need_grids(s, s.card, s.sid if s.card == "SPC1" else "(reference DOFs)", s.grids, "grid(s)")
     spc_sets = {s.sid for s in deck.spc1s}
