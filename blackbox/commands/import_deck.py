@@ -284,18 +284,25 @@ def _spc_members(sid: int, sets: dict[int, list], add: str = "SPCADD") -> set[in
     return members
 
 
+def _one_selection(cc: CaseControl, attr: str, name: str, path: Path) -> int | None:
+    """The set the subcases that import a load select with ``name =`` (``attr`` of each
+    subcase; ``None``: none selects one). They must all select the same (a study has one
+    model), else an error listing each subcase's choice."""
+    chosen = {getattr(s, attr) for s in cc.subcases if s.static}
+    if len(chosen) > 1:
+        detail = ", ".join(f"subcase {s.id}: {'none' if getattr(s, attr) is None else getattr(s, attr)}"
+                           for s in cc.subcases if s.static)
+        raise DeckFormatError(f"the subcases select different {name} sets ({detail}); a study has one "
+                              f"model: give every subcase the same {name} = set (or import the deck "
+                              f"once per set)", file=str(path))
+    return chosen.pop() if chosen else None
+
+
 def _mpc_selection(cc: CaseControl, sets: dict[int, list], path: Path, notes: list[str]) -> list:
     """The MPC/MPCADD cards to drop from model.bdf: every set the subcases do not select (all of
     them when none selects one: NASTRAN then applies none). The subcases that import a load must
     select the same MPC set (a study has one model)."""
-    chosen = {s.mpc for s in cc.subcases if s.static}
-    if len(chosen) > 1:
-        detail = ", ".join(f"subcase {s.id}: {'none' if s.mpc is None else s.mpc}"
-                           for s in cc.subcases if s.static)
-        raise DeckFormatError(f"the subcases select different MPC sets ({detail}); a study has one "
-                              f"model: give every subcase the same MPC = set (or import the deck "
-                              f"once per set)", file=str(path))
-    choice = chosen.pop() if chosen else None
+    choice = _one_selection(cc, "mpc", "MPC", path)
     if choice is None:
         notes.append(f"no subcase selects an MPC set (no MPC =), so NASTRAN applies none: dropped "
                      f"the MPC/MPCADD cards of set(s) {', '.join(map(str, sorted(sets)))}")
@@ -316,14 +323,7 @@ def _suport1_selection(cc: CaseControl, sets: dict[int, list], path: Path, notes
     """The SUPORT1 cards to drop from model.bdf: every set the subcases do not select (all of
     them when none selects one: NASTRAN then applies none). The subcases that import a load must
     select the same set (a study has one model). Bulk SUPORT cards always apply and stay."""
-    chosen = {s.suport1 for s in cc.subcases if s.static}
-    if len(chosen) > 1:
-        detail = ", ".join(f"subcase {s.id}: {'none' if s.suport1 is None else s.suport1}"
-                           for s in cc.subcases if s.static)
-        raise DeckFormatError(f"the subcases select different SUPORT1 sets ({detail}); a study has "
-                              f"one model: give every subcase the same SUPORT1 = set (or import the "
-                              f"deck once per set)", file=str(path))
-    choice = chosen.pop() if chosen else None
+    choice = _one_selection(cc, "suport1", "SUPORT1", path)
     if choice is None:
         if sets:
             notes.append(f"no subcase that imports a load selects a SUPORT1 set (no SUPORT1 =), so "
