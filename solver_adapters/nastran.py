@@ -539,7 +539,9 @@ def parse_f06(text: str) -> F06Result:
             continue
         if in_table:
             tok = line.split()
-            if tok and (tok[0].startswith("---") or tok[0].endswith("*")):
+            if tok and not tok[0].isdigit() and tok[0] not in ("GRID", "SYS") and not tok[0].startswith("("):
+                # the table's end: its ---- / MAX* block, or (a table of zeros has none) the
+                # next line of another kind, such as the ABS AUTOSPC FORCES read below
                 in_table = False
             elif len(tok) == 8 and tok[0].isdigit() and tok[1].isdigit():
                 try:
@@ -550,7 +552,8 @@ def parse_f06(text: str) -> F06Result:
                     except ValueError as exc:
                         raise ValueError(f"F06 line {n}: {exc}: {line.strip()!r}") from None
                 res.displacements[subcase][int(tok[0])] = np.array(row)
-            continue
+            if in_table:
+                continue
         m = _EPS.search(line)
         if m:
             res.epsilon[int(m.group(1))] = parse_real(m.group(2))
@@ -636,9 +639,12 @@ def _warn_lost_loads(res: "F06Result", loads: LoadMatrix) -> None:
             if scale > 0.0 and got > LOST_LOAD_RTOL * scale:
                 hit.append(f"case {loads.cases[j]!r}: {kind} {got:.4g} of at most {scale:.4g} applied")
     if hit:
-        warnings.warn(f"MYSTRAN's AUTOSPC took load(s) applied on components it constrained (no stiffness "
-                      f"there): as in NASTRAN such a load is lost; {len(hit)} case(s), {'; '.join(hit[:5])}",
-                      RuntimeWarning, stacklevel=4)
+        warnings.warn(f"MYSTRAN's AUTOSPC took load(s) applied on components it constrained: such a load is "
+                      f"lost; {len(hit)} case(s), {'; '.join(hit[:5])}. MYSTRAN looks for singular components "
+                      f"grid by grid before the SPCs apply (a rod's cross direction at a grid whose other "
+                      f"components are fixed is one), the reference solver after them, so the two can solve "
+                      f"different models; PARAM,AUTOSPC,NO in the deck turns AUTOSPC off "
+                      f"(docs/mystran.md)", RuntimeWarning, stacklevel=4)
 
 
 # --------------------------------------------------------------------------------------------

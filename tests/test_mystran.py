@@ -553,3 +553,35 @@ def test_large_batch_runs_side_by_side_with_the_values_of_one_run():
     assert two.stats.runs == 3 and two.local_processes(99) == 1 and two.local_processes(130) == 2
     with pytest.raises(ValueError, match="processes must be >= 1"):
         MystranAdapter(deck, processes=0)
+
+
+TILTED_ROD = """\
+GRID,1,,0.,0.,0.
+GRID,2,,100.,1.,0.
+CROD,1,1,1,2
+PROD,1,1,.1
+MAT1,1,1.+8
+SPC1,1,123456,1
+SPC1,2,13456,2
+"""
+
+
+@needs_mystran
+def test_grid_level_autospc_loses_a_load_the_reference_solver_carries(tmp_path):
+    """A rod from (0,0,0) to (100,1,0), its far grid free in y only (Vega's nas103prob4a.nas).
+    Its y stiffness is EA/L (1/L)^2 (closed form of a pin-jointed bar): the reference solver,
+    whose AUTOSPC looks after the SPCs, gives -6/k. MYSTRAN's AUTOSPC looks grid by grid before
+    them, takes y for the rod's singular cross direction and loses the load: the adapter must
+    say so (its F06 prints no MAX* block under a table of zeros, so the table has to end at the
+    next line of another kind for the lost-load line to be read)."""
+    from solver_adapters.reference import ReferenceAdapter
+    deck = tmp_path / "rod.bdf"
+    deck.write_text(TILTED_ROD)
+    loads = LoadMatrix.from_dense([(2, 2)], np.array([[-6.0]]), ["1"])
+    L = math.hypot(100.0, 1.0)
+    k = 1e8 * 0.1 / L * (1.0 / L) ** 2
+    ref = ReferenceAdapter(deck).solve(loads, [(2, 2)]).values[0, 0]
+    assert ref == pytest.approx(-6.0 / k, rel=1e-12)      # a direct solve of one DOF: round-off
+    with pytest.warns(RuntimeWarning, match=r"AUTOSPC took load.*case '1': force 6 .*grid by grid"):
+        got = MystranAdapter(deck, workdir_root=tmp_path / "runs").solve(loads, [(2, 2)]).values[0, 0]
+    assert got == 0.0
