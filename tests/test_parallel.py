@@ -49,6 +49,9 @@ def _ident(x):
 def cluster():
     ex = par.DaskExecutor(workers=2)
     try:
+        # both workers up before any test (on a loaded machine the second can come late, and
+        # a test that counts chunked runs would see one worker)
+        ex.client.wait_for_workers(2, timeout=120)
         yield ex
     finally:
         ex.close()
