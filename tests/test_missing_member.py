@@ -106,7 +106,8 @@ def test_a_brace_left_out_is_found_as_missing(tmp_path):
     members = [e for e in pr2.candidates if isinstance(e, MemberStiffness)]
     xyz = {int(g): tuple(v) for g, v in pr2.base.adapter.grid_xyz().items()}
     have = len(pr2.base.col_of)
-    drops, used, left = screen(model, fit, om, members, pr2.base, pr2.boundary, pr2.K_deck, o, "test", 120, xyz)
+    drops, used, left, _ = screen(model, fit, om, members, pr2.base, pr2.boundary, pr2.K_deck, o, "test", 120, xyz)
     assert used == len(pr2.base.col_of) - have <= 120 and 0 < len(drops) and len(drops) + left <= len(members)
     order = [e.key for e in _nearest_residual_order(members, fit, om, xyz)]
     assert sorted(order.index(k) for k in drops)[-1] < len(drops) + 10    # the nearest, bar shared columns
+

@@ -298,7 +298,7 @@ def test_diagnosis_leaves_shell_grids_uncut_and_says_so():
     assert set(skipped) == FLOOR_JOINTS and skipped[7] == ["CQUAD4 1003", "CQUAD4 1005"]
     assert set(joint_candidate_grids(bare, declared)) - set(joint_candidate_grids(deck, declared)) == FLOOR_JOINTS
     notes = unmodelled_notes(deck)
-    assert "member_stiffness candidates are the CBAR members only" in notes[0]
+    assert "member_stiffness candidates are the CBAR and rod members only" in notes[0]
     assert ("undeclared_joint: 9 grid(s) where bars meet CQUAD4 elements are not candidates "
             "(2, 4, 6, 7, 8, 9, 10, 12, 14)") in notes[1]
     assert unmodelled_notes(bare) == []

@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from blackbox.diagnosis.effects.base import CandidateContext, Effect
 
 __all__ = ["members_at", "constrained_grids", "unsplittable_grids", "unmodelled_notes", "element_deck",
-           "cards_at", "member_frames", "in_member_frames", "SplitEditor", "SplitDeck", "split_deck", "prune_spcadds"]
+           "cards_at", "member_ends", "member_frames", "in_member_frames", "SplitEditor", "SplitDeck", "split_deck", "prune_spcadds"]
 
 
 def members_at(deck: Deck) -> dict[int, list[int]]:
@@ -80,7 +80,7 @@ def unmodelled_notes(deck: Deck) -> list[str]:
         return []
     kinds = ", ".join(f"{n} x{k}" for n, (k, _) in deck.unmodelled_counts().items())
     notes = [f"the deck holds cards the diagnosis does not edit ({kinds}): they stay in every edited "
-             f"deck as they are; member_stiffness candidates are the CBAR members only"]
+             f"deck as they are; member_stiffness candidates are the CBAR and rod members only"]
     skipped = unsplittable_grids(deck)
     if skipped:
         cards = sorted({c.split()[0] for cs in skipped.values() for c in cs})
@@ -119,8 +119,8 @@ def cards_at(deck: Deck, grid: int) -> list[str]:
 
 
 def element_deck(deck: Deck) -> tuple[Deck, dict[int, tuple[int, int]], dict[int, np.ndarray]]:
-    """Every CBAR alone (same EID, PID, pin flags and offsets; G0 turned into a vector), end a
-    clamped. Returns the deck, ``{eid: (grid_a, grid_b)}`` in it and ``{eid: k (6,)}``: the
+    """Every CBAR alone (same EID, PID, pin flags and offsets; G0 turned into a vector), and
+    every rod (CROD, CTUBE, CONROD: same EID and section), end a clamped. Returns the deck, ``{eid: (grid_a, grid_b)}`` in it and ``{eid: k (6,)}``: the
     grounded springs at end b of a member with pin flags. Each member has its own two grids and
     nothing else is in the deck but those springs, so the members are separate structures: one
     load case can load every member at once (:func:`blackbox.diagnosis.runs.element_flexibility`).
@@ -131,10 +131,13 @@ def element_deck(deck: Deck) -> tuple[Deck, dict[int, tuple[int, int]], dict[int
     a component of the bar's end from its grid, so a member pinned at either end is a
     mechanism as a cantilever; its end b is then held by grounded springs of known stiffness
     (``E A / L`` along, ``E I / L`` about each axis: the order of the member's own), which the
-    element run subtracts exactly (:func:`blackbox.diagnosis.runs.element_stiffness`)."""
-    e = Deck(pbars=dict(deck.pbars), mat1s=dict(deck.mat1s))
+    element run subtracts exactly (:func:`blackbox.diagnosis.runs.element_stiffness`). A rod
+    carries only axial force and torque, so its end b is always held so: ``E A / L`` on each
+    translation, ``G J / L`` about each axis (``E A L`` when it has no J: then it carries no
+    torque, and any spring there is subtracted exactly)."""
+    e = Deck(pbars=dict(deck.pbars), mat1s=dict(deck.mat1s), prods=dict(deck.prods))
     members, tips = {}, {}
-    eid_spring = max(deck.cbars) + 1 if deck.cbars else 1
+    eid_spring = max([*deck.cbars, *deck.rods]) + 1 if (deck.cbars or deck.rods) else 1
     for i, eid in enumerate(sorted(deck.cbars)):
         b = deck.cbars[eid]
         ga, gb = 2 * i + 1, 2 * i + 2
@@ -154,15 +157,36 @@ def element_deck(deck: Deck) -> tuple[Deck, dict[int, tuple[int, int]], dict[int
             for c in range(1, 7):
                 e.springs[eid_spring] = Spring(eid_spring, gb, c, 0, 0, k=float(tips[eid][c - 1]))
                 eid_spring += 1
+    for i, eid in enumerate(sorted(deck.rods), start=len(deck.cbars)):
+        r = deck.rods[eid]
+        ga, gb = 2 * i + 1, 2 * i + 2
+        xa, xb = deck.grids[r.ga].xyz, deck.grids[r.gb].xyz
+        e.grids[ga] = Grid(ga, xa)
+        e.grids[gb] = Grid(gb, xb)
+        e.rods[eid] = replace(r, ga=ga, gb=gb)
+        members[eid] = (ga, gb)
+        mid, area, j = deck.rod_section(r)
+        mat = deck.mat1s[mid]
+        L = float(np.linalg.norm(np.subtract(xb, xa))) or 1.0
+        k_r = mat.g * j / L if j > 0.0 and mat.g > 0.0 else mat.e * area * L
+        tips[eid] = np.array([mat.e * area / L] * 3 + [k_r] * 3)
+        for c in range(1, 7):
+            e.springs[eid_spring] = Spring(eid_spring, gb, c, 0, 0, k=float(tips[eid][c - 1]))
+            eid_spring += 1
     e.spc1s = [Spc1(1, "123456", tuple(ga for ga, _ in members.values()))]
     return e, members, tips
+
+
+def member_ends(deck: Deck, eid: int) -> tuple[int, int]:
+    """``(grid_a, grid_b)`` of member ``eid``: a CBAR (CBEAM) or a rod."""
+    m = deck.cbars.get(eid) or deck.rods[eid]
+    return m.ga, m.gb
 
 
 def member_frames(deck: Deck, eid: int) -> np.ndarray:
     """``(12, 12)``: the rotation from basic to the displacement components of CBAR ``eid``'s
     grids (its CD systems), ``u_cd = Lambda u_basic`` over ``a1..a6, b1..b6``."""
-    b = deck.cbars[eid]
-    Ra, Rb = deck.displacement_frames([b.ga, b.gb])
+    Ra, Rb = deck.displacement_frames(list(member_ends(deck, eid)))
     L = np.zeros((12, 12))
     L[0:3, 0:3] = L[3:6, 3:6] = Ra
     L[6:9, 6:9] = L[9:12, 9:12] = Rb
@@ -172,8 +196,8 @@ def member_frames(deck: Deck, eid: int) -> np.ndarray:
 def in_member_frames(deck: Deck, eid: int, K: np.ndarray) -> np.ndarray:
     """A member matrix over ``a1..a6, b1..b6`` in basic (``K_e`` of the element run, or its
     parts ``(p, 12, 12)``) in the components of its grids' CD systems: ``Lambda K Lambda^T``."""
-    b = deck.cbars[eid]
-    if not (deck.grids[b.ga].cd or deck.grids[b.gb].cd):
+    ga, gb = member_ends(deck, eid)
+    if not (deck.grids[ga].cd or deck.grids[gb].cd):
         return K
     L = member_frames(deck, eid)
     return L @ K @ L.T
@@ -286,5 +310,5 @@ def split_deck(deck: Deck, K_e: dict[int, np.ndarray], families: Sequence[type["
     d = editor.deck
     prune_spcadds(d)
     member_dofs = {eid: tuple((b.ga, c) for c in range(1, 7)) + tuple((b.gb, c) for c in range(1, 7))
-                   for eid, b in d.cbars.items()}
+                   for eid, b in [*d.cbars.items(), *d.rods.items()]}
     return SplitDeck(d, editor.pairs, connections, member_dofs, editor.split_grids)

@@ -545,18 +545,20 @@ def _nearest_residual_order(effects: Sequence[Effect], fit: Fit, om: ObsMap, xyz
 
 
 def screen(model: AugmentedModel, fit: Fit, om: ObsMap, pool: Sequence[Effect], base: SplitBase, boundary,
-           K_deck, o_dofs, label: str, budget: int, xyz: dict | None = None) -> tuple[dict, int, int]:
-    """``(drops, columns added, candidates left out)``: effect key -> the chi2 drop of ``fit``
-    with the candidate added at its :attr:`~blackbox.diagnosis.effects.base.Effect.screen_point`,
+           K_deck, o_dofs, label: str, budget: int,
+           xyz: dict | None = None) -> tuple[dict, int, int, dict]:
+    """``(drops, columns added, candidates left out, which)``: effect key -> the chi2 drop of
+    ``fit`` with the candidate added at the best of its
+    :meth:`~blackbox.diagnosis.effects.base.Effect.screen_points` (``which``: key -> its index),
     every other parameter held, for the candidates of ``pool`` that have one. Their columns are
     run in one batch and kept for later rounds; beyond ``budget`` new columns, only the
     candidates nearest the fit's residual (whose columns fit in it, and every one whose columns
     are there already). A point where the augmented system is singular (a member whose removal
     leaves a mechanism) gives no entry. Held parameters make each drop a lower bound of what the
     candidate's refit reaches when it starts there (it does when the drop exceeds its score)."""
-    todo = [e for e in pool if e.screen_point is not None]
+    todo = [e for e in pool if e.screen_points()]
     if not todo:
-        return {}, 0, 0
+        return {}, 0, 0, {}
     have = set(base.col_of)
     chosen, new, left = [], {}, 0
     for e in _nearest_residual_order(todo, fit, om, xyz):
@@ -569,18 +571,19 @@ def screen(model: AugmentedModel, fit: Fit, om: ObsMap, pool: Sequence[Effect], 
     if new:
         base.ensure_columns(list(new), label)
     chi2_0 = float(np.sum(((om.y - model.predict(fit.x, om)) / om.sigma) ** 2))
-    out = {}
+    out, which = {}, {}
     for e in chosen:
-        spec2, x2 = fit.spec.add(e, fit.x)
-        x2[spec2.n_params - e.n_params:] = e.screen_point
-        try:
-            f = AugmentedModel(base, spec2, boundary, K_deck, o_dofs).predict(x2, om)
-        except (np.linalg.LinAlgError, IdentificationError):
-            continue
-        chi2 = float(np.sum(((om.y - f) / om.sigma) ** 2))
-        if np.isfinite(chi2):
-            out[e.key] = chi2_0 - chi2
-    return out, len(new), left
+        for k, (alt, point) in enumerate(e.screen_points()):
+            spec2, x2 = fit.spec.add(alt, fit.x)
+            x2[spec2.n_params - alt.n_params:] = point
+            try:
+                f = AugmentedModel(base, spec2, boundary, K_deck, o_dofs).predict(x2, om)
+            except (np.linalg.LinAlgError, IdentificationError):
+                continue
+            chi2 = float(np.sum(((om.y - f) / om.sigma) ** 2))
+            if np.isfinite(chi2) and (e.key not in out or chi2_0 - chi2 > out[e.key]):
+                out[e.key], which[e.key] = chi2_0 - chi2, k
+    return out, len(new), left, which
 
 
 def refit_schedule(scored: Sequence[CandidateScore], best_evidence: float, alpha: float,
@@ -883,19 +886,36 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         run_refits([c for c in scored[:refit_top] if c.df > 0])
         best_ev = min((c.evidence for c in refits if c.refit is not None and c.accepted), default=0.0)
         if complete_refits:
-            screened, used, left = screen(model, fit, om, [c.effect for c in scored if c.effect.key not in done_keys],
-                                          base, boundary, K_deck, o_dofs,
-                                          f"member columns for the removal screen (round {it + 1})", screen_budget, xyz)
+            screened, used, left, which = screen(model, fit, om, [c.effect for c in scored], base, boundary,
+                                                 K_deck, o_dofs,
+                                                 f"member columns for the removal screen (round {it + 1})",
+                                                 screen_budget, xyz)
             screen_budget -= used
             screen_left = max(screen_left, left)
             # a candidate the screen shows larger than its score is large only when complete:
             # its refit also starts there
             scored = [c if c.effect.key not in screened else
                       replace(c, screen_drop=screened[c.effect.key],
-                              effect=c.effect.started_at_screen() if screened[c.effect.key] > c.score else c.effect)
+                              effect=(c.effect.started_at_screen(which[c.effect.key])
+                                      if screened[c.effect.key] > c.score else c.effect))
                       for c in scored]
             run_refits(refit_schedule([c for c in scored if c.effect.key not in done_keys], best_ev, alpha,
                                       math.log(fit.n_obs), screened, mults))
+            # refitted already, but as a variant that cannot reach what another of its screen
+            # points shows (a member refitted as one factor whose section is turned): refitted
+            # again from there, and the better of the two refits kept
+            first_refit = {c.effect.key: c for c in refits if c.refit is not None}
+            again = [replace(c, effect=c.effect.started_at_screen(which[c.effect.key])) for c in scored
+                     if which.get(c.effect.key, 0) != 0 and c.effect.key in first_refit
+                     and screened[c.effect.key] > (first_refit[c.effect.key].lr or 0.0)]
+            if again:
+                n0 = len(refits)
+                run_refits(again)
+                for c2 in refits[n0:]:
+                    c1 = first_refit[c2.effect.key]
+                    worse = c2 if (c2.refit is None or (c1.accepted, -c1.evidence) >= (c2.accepted, -c2.evidence)) \
+                        else c1
+                    refits[:] = [c for c in refits if c is not worse]
         # the strongest candidates at the variant their data support, before they compete: every
         # refit that lowers BIC, not only the accepted ones (a joint loose about one axis is not
         # significant as one equal spring, but is as one spring per axis)

@@ -337,10 +337,18 @@ class Effect:
         Needs :meth:`refit_columns`."""
         return None
 
-    def started_at_screen(self) -> "Effect":
-        """This candidate with its refit also started at :attr:`screen_point` (the search asks
-        when the screen shows more than the score: the effect is large only when complete);
-        default: itself."""
+    def screen_points(self) -> list[tuple["Effect", np.ndarray]]:
+        """``(effect, parameters)``: every way the screen evaluates the candidate wholly present
+        (:func:`blackbox.diagnosis.search.screen` keeps the largest drop). Default: this effect
+        at :attr:`screen_point`, when it has one. An entry may be another variant of the same
+        candidate (same :attr:`key`), one the score of this variant cannot point to (a member's
+        section turned about its axis: its plane-1 and plane-2 changes cancel in one factor)."""
+        return [] if self.screen_point is None else [(self, self.screen_point)]
+
+    def started_at_screen(self, which: int = 0) -> "Effect":
+        """This candidate with its refit also started at entry ``which`` of
+        :meth:`screen_points` (the search asks when the screen shows more than the score: the
+        effect is large only when complete); default: itself."""
         return self
 
     def refit_starts(self, x2: np.ndarray, step: np.ndarray, lo: np.ndarray, hi: np.ndarray,

@@ -5,7 +5,8 @@ element from the element deck's run. Its score at ``alpha = 1`` needs only rows 
 flexibility at the member's DOFs under the unit loads at ``B`` and ``O`` (reciprocity), which the
 split run reports (:meth:`MemberStiffness.batch_columns`: every member scored without a run); its
 refit needs the member's own columns, one batched run for every short-listed member of a round.
-Candidates: every member; beyond ``max_member_candidates`` those nearest the declared fit's
+Candidates: every member, bars and rods (CROD, CTUBE, CONROD: a rod's ``K_e`` is its axial and
+torsion stiffness, one factor on both, "whole" only); beyond ``max_member_candidates`` those nearest the declared fit's
 residual concentration (each considered member adds its 12 end DOFs to the split run's rows), and
 the diagnosis says how many it left out.
 
@@ -32,13 +33,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from blackbox.diagnosis.decks import in_member_frames
+from blackbox.diagnosis.decks import in_member_frames, member_ends
 from blackbox.diagnosis.effects.base import CandidateLimit, Effect
 from blackbox.diagnosis.effects.registry import register
 from solver_adapters.protocol import DofLabel
 
 __all__ = ["MemberStiffness", "section_parts", "stiffness_columns", "SECTIONS", "SPLIT_RTOL", "ALPHA_MISSING",
-           "MISSING_BELOW"]
+           "MISSING_BELOW", "TURN_MIN", "TURNED_WITHIN"]
 
 SECTIONS = ("EA", "EI1", "EI2", "GJ")
 # the element's tip DOFs (u_x u_y u_z th_x th_y th_z, element axes) of each part: plane 1 is the
@@ -46,6 +47,8 @@ SECTIONS = ("EA", "EI1", "EI2", "GJ")
 _GROUPS = ((0,), (1, 5), (2, 4), (3,))
 ALPHA_MISSING = 1e-4        # the lower bound of a member factor: the member is not there
 MISSING_BELOW = 0.02        # a fitted factor below this: reported as missing or disconnected
+TURN_MIN = 1.2             # I2/I1 (or I1/I2) at least this: a turned section is looked for
+TURNED_WITHIN = 1.25        # fitted EI1, EI2 within this factor of I2/I1, I1/I2: reported as turned
 SPLIT_RTOL = 1e-4           # a coupling between parts above this (diagonal-scaled) in the element
                             # axes: K_e is not a plain beam there (offsets, pins, I12, a wrong
                             # orientation: 1e-2..1); below it, the solver's output rounding (a K_e
@@ -124,6 +127,7 @@ class MemberStiffness(Effect):
     K_e: np.ndarray | None = None
     parts: np.ndarray | None = None         # (4, 12, 12) section parts, None: "whole" only
     start_removed: bool = False             # the refit also starts with the member removed
+    start_turned: bool = False              # ("sections") the refit also starts at the turned section
 
     @property
     def eid(self) -> int:
@@ -137,7 +141,7 @@ class MemberStiffness(Effect):
         if len(eids) <= ctx.max_member_candidates:
             return eids
         xyz = {g.id: np.asarray(g.xyz, float) for g in ctx.deck.grids.values()}
-        mid = {e: 0.5 * (xyz[ctx.deck.cbars[e].ga] + xyz[ctx.deck.cbars[e].gb]) for e in eids}
+        mid = {e: 0.5 * sum(xyz[g] for g in member_ends(ctx.deck, e)) for e in eids}
         chosen = ctx.nearest_residual(mid, ctx.max_member_candidates)
         ctx.note_limit(CandidateLimit(cls.kind, len(chosen), len(eids),
                                       "the members nearest the declared fit's residual" if ctx.residual_rms is not None
@@ -197,12 +201,53 @@ class MemberStiffness(Effect):
         """The member removed: every factor at ``ALPHA_MISSING``."""
         return np.full(self.n_params, ALPHA_MISSING)
 
-    def started_at_screen(self) -> "MemberStiffness":
+    @property
+    def bending_ratio(self) -> float | None:
+        """``I2 / I1`` as the section parts hold it (the plane-2 bending part's size over the
+        plane-1 part's: the two have the same pattern, scaled by E I2 and E I1), ``None``
+        without parts."""
+        if self.parts is None:
+            return None
+        n1, n2 = np.linalg.norm(self.parts[1]), np.linalg.norm(self.parts[2])
+        return float(n2 / n1) if n1 > 0.0 and n2 > 0.0 else None
+
+    @property
+    def turned_point(self) -> np.ndarray | None:
+        """("sections") The section turned 90 degrees about the member's axis: I1 and I2
+        exchanged, ``EI1`` at ``I2/I1`` and ``EI2`` at ``I1/I2`` (EA and GJ as they are; the
+        shear terms of a Timoshenko beam are scaled with their plane, close enough for a
+        start). ``None`` for a section whose two moments differ by less than ``TURN_MIN``:
+        turning it changes too little to look for."""
+        r = self.bending_ratio
+        if r is None or abs(np.log(r)) < np.log(TURN_MIN):
+            return None
+        return np.array([1.0, r, 1.0 / r, 1.0])
+
+    def screen_points(self):
+        """The member removed ("whole" at ``ALPHA_MISSING``) and, for a bar whose section has
+        two different bending stiffnesses, the section turned about its axis (the "sections"
+        variant at :attr:`turned_point`): a single factor cannot describe it, since plane 1
+        gets stiffer where plane 2 gets softer, so its score and its "whole" refit miss it."""
+        out = [(self, self.screen_point)]
+        if self.variant == "whole":
+            sec = self.richer(np.ones(1))[0][0] if self.parts is not None else None
+            if sec is not None and sec.turned_point is not None:
+                out.append((sec, sec.turned_point))
+        return out
+
+    def started_at_screen(self, which: int = 0) -> "MemberStiffness":
+        if which == 1 and self.variant == "whole":
+            return replace(self.richer(np.ones(1))[0][0], start_turned=True)
         return replace(self, start_removed=True)
 
     def refit_starts(self, x2, step, lo, hi, first):
-        """The nested point, the score step, and, when the screen showed more than the score
-        (:attr:`start_removed`), the member removed."""
+        """The nested point, the score step, and, when the screen showed more than the score,
+        the member removed (:attr:`start_removed`) or its section turned (:attr:`start_turned`;
+        the score step is then that of the "whole" factor, of another size, and not taken)."""
+        if self.start_turned:
+            xs = x2.copy()
+            xs[first:] = np.clip(self.turned_point, lo[first:], hi[first:])
+            return [x2, xs]
         starts = super().refit_starts(x2, step, lo, hi, first)
         if self.start_removed:
             xs = x2.copy()
@@ -215,8 +260,13 @@ class MemberStiffness(Effect):
         part of its stiffness, is not there: missing, broken or not connected)."""
         i = next(i for i, e in enumerate(fit.spec.effects) if e.key == self.key)
         x = fit.x[fit.spec.effect_slices()[i]]
-        low = [n for n, v in zip(fit.spec.effects[i].names, x) if v < MISSING_BELOW]
-        return {"missing": low} if low else {}
+        e = fit.spec.effects[i]
+        low = [n for n, v in zip(e.names, x) if v < MISSING_BELOW]
+        out = {"missing": low} if low else {}
+        if e.variant == "sections" and e.turned_point is not None \
+                and np.all(np.abs(np.log(x[1:3] / e.turned_point[1:3])) < np.log(TURNED_WITHIN)):
+            out["turned"] = True
+        return out
 
     @property
     def stiffness_dofs(self) -> tuple[DofLabel, ...]:
@@ -239,8 +289,8 @@ class MemberStiffness(Effect):
         return stiffness_columns(model, st, x, om, [(e.dofs, e.K_e) for e in effects])
 
     def marker_points(self, xyz, deck):
-        b = deck.cbars[self.eid]
-        return [(xyz[b.ga] + xyz[b.gb]) / 2]
+        ga, gb = member_ends(deck, self.eid)
+        return [(xyz[ga] + xyz[gb]) / 2]
 
 
 def stiffness_columns(model, st, x, om, terms) -> np.ndarray:

@@ -129,7 +129,7 @@ def axial_forces(base, member_dofs: dict[int, tuple[DofLabel, ...]], K_e: dict[i
         view.U_rigid = V - base._Z @ view.lam
     else:
         view.lam, view.U_rigid = np.zeros((0, 1)), V
-    eids = sorted(e for e in member_dofs if e in K_e)
+    eids = sorted(e for e in member_dofs if e in K_e and e in deck.cbars)   # bars: a rod has no bending
     rows = list(dict.fromkeys(d for e in eids for d in member_dofs[e]))
     U = AugmentedModel(view, ModelSpec(tuple(joints)), boundary, K_deck, rows).state(np.asarray(k, float)).U_O[:, 0]
     at = {d: i for i, d in enumerate(rows)}
@@ -168,7 +168,8 @@ class PDelta(Effect):
         there (the members it reaches are known only after the run)."""
         if ctx.preload is None:
             return ()
-        return tuple(d for e in sorted(split.member_dofs) if e in ctx.K_e for d in split.member_dofs[e])
+        return tuple(d for e in sorted(split.member_dofs) if e in ctx.K_e and e in ctx.deck.cbars
+                     for d in split.member_dofs[e])
 
     @classmethod
     def candidates(cls, ctx, split) -> list["PDelta"]:

@@ -1,0 +1,88 @@
+"""A member mounted turned 90 degrees about its axis: the screen's second point of ``member_stiffness``.
+
+References and tolerances:
+
+* a prismatic Euler-Bernoulli beam's element matrix (``blackbox.joints.frame_element_stiffness``,
+  the textbook 12 x 12 matrix, e.g. Przemieniecki sec. 5.5): its plane-1 and plane-2 bending
+  parts have the same pattern scaled by ``E I1`` and ``E I2``, so the ratio of their sizes is
+  ``I2 / I1`` to round-off (1e-12);
+* the turned section is ``I1`` and ``I2`` exchanged: the "sections" variant at
+  ``(1, I2/I1, I1/I2, 1)`` IS the turned member's matrix (exact: the parts are linear in EI1,
+  EI2), checked against the element built with the orientation vector turned 90 degrees (1e-9 of
+  its largest entry: the parts are split from a matrix with round-off);
+* the unlisted-structure benchmark's box (seed 5, study 5) with its member 44 turned: found as
+  that member's "sections" variant, reported ``turned``; its single factor cannot describe a
+  turn (plane 1 stiffer where plane 2 is softer).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from blackbox.diagnosis.effects import MemberStiffness
+from blackbox.diagnosis.effects.member_stiffness import TURN_MIN, section_parts
+from blackbox.joints import frame_element_stiffness
+
+ROOT = Path(__file__).resolve().parents[1]
+E, G, A, J = 2.1e11, 8.1e10, 4.0e-3, 3.0e-6
+XA, XB, V = (0.0, 0.0, 0.0), (1.5, 0.4, 0.3), (0.0, 0.0, 1.0)
+
+
+def _member(i1: float, i2: float, v=V) -> MemberStiffness:
+    K = frame_element_stiffness(XA, XB, E, G, A, i2, i1, J, v)
+    parts = section_parts(K, np.asarray(v, float))
+    assert parts is not None
+    return MemberStiffness((5,), ("alpha_5",), "whole", dofs=tuple((g, c) for g in (1, 2) for c in range(1, 7)),
+                           K_e=K, parts=parts)
+
+
+def test_bending_ratio_and_the_turned_point():
+    i1, i2 = 8.0e-6, 2.0e-6
+    e = _member(i1, i2)
+    assert e.bending_ratio == pytest.approx(i2 / i1, rel=1e-12)
+    (removed, p0), (turned, p1) = e.screen_points()
+    assert removed is e and np.all(p0 == e.screen_point)
+    assert turned.variant == "sections" and turned.key == e.key
+    np.testing.assert_allclose(p1, [1.0, i2 / i1, i1 / i2, 1.0], rtol=1e-12)
+    # the sections at the turned point are the element turned about its axis
+    r = np.subtract(XB, XA) / np.linalg.norm(np.subtract(XB, XA))
+    v_turned = np.cross(r, V)
+    K_turned = frame_element_stiffness(XA, XB, E, G, A, i2, i1, J, v_turned)
+    got = sum(f * P for f, P in zip(p1, turned.parts))
+    np.testing.assert_allclose(got, K_turned, rtol=0, atol=1e-9 * np.abs(K_turned).max())
+    # started there: the sections variant, two starts (nested, turned), same key
+    s = e.started_at_screen(1)
+    assert s.variant == "sections" and s.start_turned and s.key == e.key
+    x2 = np.array([3.0, 1.0, 1.0, 1.0, 1.0])
+    lo, hi = np.full(5, 1e-4), np.full(5, 50.0)
+    starts = s.refit_starts(x2, np.array([0.3]), lo, hi, 1)
+    assert len(starts) == 2 and np.all(starts[0] == x2)
+    np.testing.assert_allclose(starts[1][1:], p1)
+    assert e.started_at_screen(0).start_removed and e.started_at_screen(0).variant == "whole"
+
+
+def test_a_nearly_square_section_is_not_turned():
+    e = _member(1.0e-5, 1.0e-5 / (0.98 * TURN_MIN))
+    assert e.turned_point is None and len(e.screen_points()) == 1
+    rod = MemberStiffness((6,), ("alpha_6",), "", dofs=(), K_e=np.eye(12))
+    assert rod.turned_point is None and len(rod.screen_points()) == 1
+
+
+@pytest.mark.slow
+def test_a_turned_member_is_found_turned(tmp_path):
+    from blackbox.commands import diagnose as diagnose_command
+    sys.path.insert(0, str(ROOT))
+    from benchmarks import unlisted_structure as us
+    from benchmarks.blind import generate as gen
+
+    st = gen.generate_study(5, 5, tmp_path, kind=gen.NONE, shape="box", style="plain")
+    where = us.plant(st, "rotated_section", np.random.default_rng([5, 5, us.DEFECTS.index("rotated_section")]))
+    assert where is not None and where["place"] == ["cbar", 44]
+    d = diagnose_command.run(st.folder, plots=False).document
+    assert d["verdict"] == "explained", d["verdict_detail"]
+    (a,) = d["added"]
+    assert (a["effect"], a["where"], a["variant"], a.get("turned")) == ("member_stiffness", [44], "sections", True)
