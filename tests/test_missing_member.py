@@ -111,3 +111,13 @@ def test_a_brace_left_out_is_found_as_missing(tmp_path):
     order = [e.key for e in _nearest_residual_order(members, fit, om, xyz)]
     assert sorted(order.index(k) for k in drops)[-1] < len(drops) + 10    # the nearest, bar shared columns
 
+
+def test_an_effect_added_again_is_listed_once():
+    """An effect added, removed as unnecessary by a later addition, and added again is one effect
+    of the final model: ``added`` lists it once, at its last addition (seen on the storey study
+    of the unlisted-structure benchmark, seed 5: member 227 added in rounds 1 and 4)."""
+    from blackbox.diagnosis.document import final_additions
+    a, b, c = ("member_stiffness", (227,)), ("member_stiffness", (219,)), ("support_flexibility", (37,))
+    assert final_additions([a, b, c, a, None], {a}) == [3]
+    assert final_additions([a, b, c], {a, c}) == [0, 2]
+    assert final_additions([None], set()) == []

@@ -22,7 +22,7 @@ from blackbox.diagnosis.fit import Fit, chi2_band
 from blackbox.diagnosis.scoring import CandidateScore
 from blackbox.diagnosis.search import AMBIGUOUS, Diagnosis
 
-__all__ = ["diagnosis_document", "verdict_detail", "misfit_location", "alternatives", "AMBIGUOUS"]
+__all__ = ["diagnosis_document", "final_additions", "verdict_detail", "misfit_location", "alternatives", "AMBIGUOUS"]
 
 
 def _num(v):
@@ -98,6 +98,14 @@ def alternatives(step) -> list[dict]:
     return sorted(out, key=lambda d: d["evidence_gap"])
 
 
+def final_additions(added_keys: list, final_keys) -> list[int]:
+    """The rounds whose added effect (``added_keys[i]``, ``None``: nothing added) is in the
+    final model, each effect once: one removed as unnecessary and added again in a later round
+    is one effect of the final model, listed at the round that added it last."""
+    last = {k: i for i, k in enumerate(added_keys) if k is not None}
+    return [i for i, k in enumerate(added_keys) if k is not None and k in final_keys and last[k] == i]
+
+
 def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: list[str],
                        declared_holdout: bool, ident, limits=()) -> dict:
     """The document (module docstring). ``limits``: the
@@ -106,9 +114,8 @@ def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: li
     first = diag.steps[0].scores if diag.steps else ()
     added = []
     final = {e.key: e for e in diag.final.spec.effects}
-    for i, s in enumerate(diag.steps):
-        if s.added is None or s.added.effect.key not in final:
-            continue
+    for i in final_additions([None if s.added is None else s.added.effect.key for s in diag.steps], final):
+        s = diag.steps[i]
         e = final[s.added.effect.key]
         added.append({"effect": e.kind, "where": e.where_json(), **e.details_json(), **e.findings(diag.final),
                       "of": "data" if e.of_data else "structure",
