@@ -6,12 +6,12 @@ References and tolerances:
   the textbook 12 x 12 matrix, e.g. Przemieniecki sec. 5.5): its plane-1 and plane-2 bending
   parts have the same pattern scaled by ``E I1`` and ``E I2``, so the ratio of their sizes is
   ``I2 / I1`` to round-off (1e-12);
-* the turned section is ``I1`` and ``I2`` exchanged: the "sections" variant at
-  ``(1, I2/I1, I1/I2, 1)`` IS the turned member's matrix (exact: the parts are linear in EI1,
-  EI2), checked against the element built with the orientation vector turned 90 degrees (1e-9 of
-  its largest entry: the parts are split from a matrix with round-off);
+* the turned section is ``I1`` and ``I2`` exchanged: the "bending" variant at ``(I2/I1, I1/I2)``
+  IS the turned member's matrix (exact: the parts are linear in EI1, EI2), checked against the
+  element built with the orientation vector turned 90 degrees (1e-9 of its largest entry: the
+  parts are split from a matrix with round-off);
 * the unlisted-structure benchmark's box (seed 5, study 5) with its member 44 turned: found as
-  that member's "sections" variant, reported ``turned``; its single factor cannot describe a
+  that member with its bending factors, reported ``turned``; its single factor cannot describe a
   turn (plane 1 stiffer where plane 2 is softer).
 """
 
@@ -46,23 +46,47 @@ def test_bending_ratio_and_the_turned_point():
     assert e.bending_ratio == pytest.approx(i2 / i1, rel=1e-12)
     (removed, p0), (turned, p1) = e.screen_points()
     assert removed is e and np.all(p0 == e.screen_point)
-    assert turned.variant == "sections" and turned.key == e.key
-    np.testing.assert_allclose(p1, [1.0, i2 / i1, i1 / i2, 1.0], rtol=1e-12)
-    # the sections at the turned point are the element turned about its axis
+    assert turned.variant == "bending" and turned.key == e.key and turned.names == ("EI1_5", "EI2_5")
+    np.testing.assert_allclose(p1, [i2 / i1, i1 / i2], rtol=1e-12)
+    # the deck's member with the bending parts at the turned point is the element turned about
+    # its axis (EA and GJ as they are)
     r = np.subtract(XB, XA) / np.linalg.norm(np.subtract(XB, XA))
     v_turned = np.cross(r, V)
     K_turned = frame_element_stiffness(XA, XB, E, G, A, i2, i1, J, v_turned)
-    got = sum(f * P for f, P in zip(p1, turned.parts))
+    got = e.K_e + sum((f - 1.0) * P for f, (_, P) in zip(p1, turned.stiffness_terms()))
     np.testing.assert_allclose(got, K_turned, rtol=0, atol=1e-9 * np.abs(K_turned).max())
-    # started there: the sections variant, two starts (nested, turned), same key
+    # started there: the bending variant, two starts (nested, turned), same key; richer: the
+    # four sections with EA and GJ at 1
     s = e.started_at_screen(1)
-    assert s.variant == "sections" and s.start_turned and s.key == e.key
-    x2 = np.array([3.0, 1.0, 1.0, 1.0, 1.0])
-    lo, hi = np.full(5, 1e-4), np.full(5, 50.0)
+    assert s.variant == "bending" and s.start_turned and s.key == e.key
+    x2 = np.array([3.0, 1.0, 1.0])
+    lo, hi = np.full(3, 1e-4), np.full(3, 50.0)
     starts = s.refit_starts(x2, np.array([0.3]), lo, hi, 1)
     assert len(starts) == 2 and np.all(starts[0] == x2)
     np.testing.assert_allclose(starts[1][1:], p1)
+    ((sec, start),) = s.richer(p1)
+    assert sec.variant == "sections" and np.allclose(start, [1.0, p1[0], p1[1], 1.0])
     assert e.started_at_screen(0).start_removed and e.started_at_screen(0).variant == "whole"
+
+
+def test_turned_finding():
+    """``turned`` when the fitted EI1 and EI2 factors each go half to twice the way (in log) to
+    the exchanged moments; not for a member made stiffer or softer in both planes."""
+    from blackbox.diagnosis.effects.member_stiffness import TURNED_SHARE
+    from blackbox.diagnosis.model import ModelSpec
+
+    e = _member(8.0e-6, 2.0e-6)._as("bending")
+    r = e.turned_point
+
+    class _Fit:
+        def __init__(self, x):
+            self.spec, self.x = ModelSpec((), (e,)), np.asarray(x, float)
+
+    assert e.findings(_Fit(r)) == {"turned": True}
+    assert e.findings(_Fit(r ** (0.95 * TURNED_SHARE[0]))) == {}
+    assert e.findings(_Fit(r ** (1.05 * TURNED_SHARE[1]))) == {}
+    assert e.findings(_Fit([0.5, 0.5])) == {}
+    assert e.findings(_Fit([r[0] ** 0.7, r[1] ** 1.3])) == {"turned": True}
 
 
 def test_a_nearly_square_section_is_not_turned():
@@ -85,4 +109,5 @@ def test_a_turned_member_is_found_turned(tmp_path):
     d = diagnose_command.run(st.folder, plots=False).document
     assert d["verdict"] == "explained", d["verdict_detail"]
     (a,) = d["added"]
-    assert (a["effect"], a["where"], a["variant"], a.get("turned")) == ("member_stiffness", [44], "sections", True)
+    assert (a["effect"], a["where"], a.get("turned")) == ("member_stiffness", [44], True)
+    assert a["variant"] in ("bending", "sections")

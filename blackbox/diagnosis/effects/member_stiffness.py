@@ -12,7 +12,10 @@ the diagnosis says how many it left out.
 
 Variants: "whole" (``alpha_E``: one factor on ``K_e``) and, when ``K_e`` splits cleanly,
 "sections" (``EA_E, EI1_E, EI2_E, GJ_E``: one factor on each of its axial, plane-1 bending,
-plane-2 bending and torsion parts; :func:`section_parts`), nested at all four equal to alpha.
+plane-2 bending and torsion parts; :func:`section_parts`), nested at all four equal to alpha;
+"bending" (``EI1_E, EI2_E``, EA and GJ as the deck has them) is where the screen starts a member
+whose section may be turned about its axis (:meth:`MemberStiffness.screen_points`), with
+"sections" richer (EA and GJ at 1).
 
 *A member that is not there.* A brace left out, a weld never made, a member broken or not
 connected: ``alpha`` near 0. Its factors go down to ``ALPHA_MISSING`` (1e-4: the member carries
@@ -39,7 +42,7 @@ from blackbox.diagnosis.effects.registry import register
 from solver_adapters.protocol import DofLabel
 
 __all__ = ["MemberStiffness", "section_parts", "stiffness_columns", "SECTIONS", "SPLIT_RTOL", "ALPHA_MISSING",
-           "MISSING_BELOW", "TURN_MIN", "TURNED_WITHIN"]
+           "MISSING_BELOW", "TURN_MIN", "TURNED_SHARE"]
 
 SECTIONS = ("EA", "EI1", "EI2", "GJ")
 # the element's tip DOFs (u_x u_y u_z th_x th_y th_z, element axes) of each part: plane 1 is the
@@ -48,7 +51,9 @@ _GROUPS = ((0,), (1, 5), (2, 4), (3,))
 ALPHA_MISSING = 1e-4        # the lower bound of a member factor: the member is not there
 MISSING_BELOW = 0.02        # a fitted factor below this: reported as missing or disconnected
 TURN_MIN = 1.2             # I2/I1 (or I1/I2) at least this: a turned section is looked for
-TURNED_WITHIN = 1.25        # fitted EI1, EI2 within this factor of I2/I1, I1/I2: reported as turned
+TURNED_SHARE = (0.5, 2.0)   # fitted EI1, EI2 each this share (in log) of the way to I2/I1, I1/I2:
+                            # reported as turned (a Timoshenko beam's turn is no exact point of the
+                            # factors, and the weak plane's factor is poorly determined)
 SPLIT_RTOL = 1e-4           # a coupling between parts above this (diagonal-scaled) in the element
                             # axes: K_e is not a plain beam there (offsets, pins, I12, a wrong
                             # orientation: 1e-2..1); below it, the solver's output rounding (a K_e
@@ -171,15 +176,22 @@ class MemberStiffness(Effect):
 
     @property
     def variant_tests(self) -> int:
-        return 1 if self.variant == "whole" and self.parts is not None else 0
+        return 1 if self.variant in ("whole", "bending") and self.parts is not None else 0
+
+    def _as(self, variant: str, **kw) -> "MemberStiffness":
+        """This member as ``variant`` ("sections": EA, EI1, EI2, GJ; "bending": EI1, EI2)."""
+        names = {"sections": SECTIONS, "bending": SECTIONS[1:3]}[variant]
+        return MemberStiffness(self.where, tuple(f"{s}_{self.eid}" for s in names), variant,
+                               dofs=self.dofs, K_e=self.K_e, parts=self.parts, **kw)
 
     def richer(self, x_effect):
-        """"whole" -> "sections", all four factors at the whole factor."""
-        if self.variant != "whole" or self.parts is None:
+        """"whole" -> "sections", all four factors at the whole factor; "bending" ->
+        "sections", EA and GJ at 1."""
+        if self.parts is None or self.variant not in ("whole", "bending"):
             return []
-        return [(MemberStiffness(self.where, tuple(f"{s}_{self.eid}" for s in SECTIONS), "sections",
-                                 dofs=self.dofs, K_e=self.K_e, parts=self.parts),
-                 np.full(4, float(np.asarray(x_effect)[0])))]
+        x = np.asarray(x_effect, float)
+        start = np.full(4, float(x[0])) if self.variant == "whole" else np.array([1.0, x[0], x[1], 1.0])
+        return [(self._as("sections"), start)]
 
     @property
     def bounds(self):
@@ -213,31 +225,30 @@ class MemberStiffness(Effect):
 
     @property
     def turned_point(self) -> np.ndarray | None:
-        """("sections") The section turned 90 degrees about the member's axis: I1 and I2
-        exchanged, ``EI1`` at ``I2/I1`` and ``EI2`` at ``I1/I2`` (EA and GJ as they are; the
-        shear terms of a Timoshenko beam are scaled with their plane, close enough for a
-        start). ``None`` for a section whose two moments differ by less than ``TURN_MIN``:
-        turning it changes too little to look for."""
+        """``(EI1, EI2)`` factors of the section turned 90 degrees about the member's axis: I1
+        and I2 exchanged, ``EI1`` at ``I2/I1`` and ``EI2`` at ``I1/I2`` (the shear terms of a
+        Timoshenko beam are scaled with their plane, close enough for a start). ``None`` for a
+        section whose two moments differ by less than ``TURN_MIN``: turning it changes too
+        little to look for."""
         r = self.bending_ratio
         if r is None or abs(np.log(r)) < np.log(TURN_MIN):
             return None
-        return np.array([1.0, r, 1.0 / r, 1.0])
+        return np.array([r, 1.0 / r])
 
     def screen_points(self):
         """The member removed ("whole" at ``ALPHA_MISSING``) and, for a bar whose section has
-        two different bending stiffnesses, the section turned about its axis (the "sections"
-        variant at :attr:`turned_point`): a single factor cannot describe it, since plane 1
-        gets stiffer where plane 2 gets softer, so its score and its "whole" refit miss it."""
+        two different bending stiffnesses, the section turned about its axis (the "bending"
+        variant, EI1 and EI2 factors with EA and GJ as they are, at :attr:`turned_point`): a
+        single factor cannot describe it, since plane 1 gets stiffer where plane 2 gets softer,
+        so its score and its "whole" refit miss it."""
         out = [(self, self.screen_point)]
-        if self.variant == "whole":
-            sec = self.richer(np.ones(1))[0][0] if self.parts is not None else None
-            if sec is not None and sec.turned_point is not None:
-                out.append((sec, sec.turned_point))
+        if self.variant == "whole" and self.turned_point is not None:
+            out.append((self._as("bending"), self.turned_point))
         return out
 
     def started_at_screen(self, which: int = 0) -> "MemberStiffness":
         if which == 1 and self.variant == "whole":
-            return replace(self.richer(np.ones(1))[0][0], start_turned=True)
+            return self._as("bending", start_turned=True)
         return replace(self, start_removed=True)
 
     def refit_starts(self, x2, step, lo, hi, first):
@@ -257,15 +268,19 @@ class MemberStiffness(Effect):
 
     def findings(self, fit) -> dict:
         """``missing``: which of the factors ended below ``MISSING_BELOW`` (the member, or that
-        part of its stiffness, is not there: missing, broken or not connected)."""
+        part of its stiffness, is not there: missing, broken or not connected); ``turned``: the
+        EI1 and EI2 factors each went ``TURNED_SHARE`` of the way (in log) to the exchanged
+        moments (the section mounted turned 90 degrees about the member's axis)."""
         i = next(i for i, e in enumerate(fit.spec.effects) if e.key == self.key)
         x = fit.x[fit.spec.effect_slices()[i]]
         e = fit.spec.effects[i]
         low = [n for n, v in zip(e.names, x) if v < MISSING_BELOW]
         out = {"missing": low} if low else {}
-        if e.variant == "sections" and e.turned_point is not None \
-                and np.all(np.abs(np.log(x[1:3] / e.turned_point[1:3])) < np.log(TURNED_WITHIN)):
-            out["turned"] = True
+        ei = {"sections": x[1:3], "bending": x[0:2]}.get(e.variant)
+        if ei is not None and e.turned_point is not None:
+            share = np.log(ei) / np.log(e.turned_point)
+            if np.all((share >= TURNED_SHARE[0]) & (share <= TURNED_SHARE[1])):
+                out["turned"] = True
         return out
 
     @property
@@ -275,6 +290,8 @@ class MemberStiffness(Effect):
     def stiffness_terms(self):
         if self.variant == "sections":
             return [(q, self.parts[q]) for q in range(4)]
+        if self.variant == "bending":
+            return [(0, self.parts[1]), (1, self.parts[2])]
         return [(0, self.K_e)]
 
     def refit_columns(self) -> tuple[DofLabel, ...]:
@@ -284,7 +301,7 @@ class MemberStiffness(Effect):
     def batch_columns(cls, model, st, x, om, effects):
         """``d prediction / d alpha_e`` at ``alpha_e = 1`` for members NOT in ``model``, by
         reciprocity (:func:`stiffness_columns`): no column of the member's own is needed."""
-        if any(e.variant == "sections" for e in effects):
+        if any(e.variant != "whole" and e.variant != "" for e in effects):
             return None
         return stiffness_columns(model, st, x, om, [(e.dofs, e.K_e) for e in effects])
 
