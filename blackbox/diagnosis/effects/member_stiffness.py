@@ -6,9 +6,9 @@ flexibility at the member's DOFs under the unit loads at ``B`` and ``O`` (recipr
 split run reports (:meth:`MemberStiffness.batch_columns`: every member scored without a run); its
 refit needs the member's own columns, one batched run for every short-listed member of a round.
 Candidates: every member, bars and rods (CROD, CTUBE, CONROD: a rod's ``K_e`` is its axial and
-torsion stiffness, one factor on both, "whole" only); beyond ``max_member_candidates`` those nearest the declared fit's
-residual concentration (each considered member adds its 12 end DOFs to the split run's rows), and
-the diagnosis says how many it left out.
+torsion stiffness, one factor on both); beyond ``max_member_candidates`` those nearest the
+declared fit's residual concentration (each considered member adds its 12 end DOFs to the split
+run's rows), and the diagnosis says how many it left out.
 
 Variants: "whole" (``alpha_E``: one factor on ``K_e``) and, when ``K_e`` splits cleanly,
 "sections" (``EA_E, EI1_E, EI2_E, GJ_E``: one factor on each of its axial, plane-1 bending,
