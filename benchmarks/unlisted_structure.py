@@ -153,9 +153,16 @@ def _touches(a: dict, where: dict, deck) -> bool:
     return any(isinstance(g, int) and g in grids for g in w)
 
 
+def planted_study(index: int, seed: int, family: str, defect: str, out: Path):
+    """``(study, where)``: clean study ``index`` of ``family`` (seed ``seed``) written under
+    ``out``, its readings simulated again with ``defect`` planted (``where`` is ``None`` when the
+    study has no place for it); the draws the benchmark makes, so a test can take one study."""
+    st = gen.generate_study(index, seed, out, kind=gen.NONE, shape=family, style="plain")
+    return st, plant(st, defect, np.random.default_rng([seed, index, DEFECTS.index(defect)]))
+
+
 def run_one(index: int, seed: int, family: str, defect: str, out: Path) -> dict | None:
-    st = gen.generate_study(index, seed, out / defect, kind=gen.NONE, shape=family, style="plain")
-    where = plant(st, defect, np.random.default_rng([seed, index, DEFECTS.index(defect)]))
+    st, where = planted_study(index, seed, family, defect, out / defect)
     if where is None:
         return None
     deck = read_deck(st.folder / "model.bdf")

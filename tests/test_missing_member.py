@@ -80,10 +80,8 @@ def test_a_brace_left_out_is_found_as_missing(tmp_path):
     screen's drop for it is below its refit's likelihood ratio (module docstring)."""
     sys.path.insert(0, str(ROOT))
     from benchmarks import unlisted_structure as us
-    from benchmarks.blind import generate as gen
 
-    st = gen.generate_study(1, 5, tmp_path, kind=gen.NONE, shape="truss", style="plain")
-    where = us.plant(st, "missing_member", np.random.default_rng([5, 1, us.DEFECTS.index("missing_member")]))
+    st, where = us.planted_study(1, 5, "truss", "missing_member", tmp_path)
     assert where is not None and where["place"] == ["cbar", 90]
     run = diagnose_command.run(st.folder, plots=False)
     d = run.document

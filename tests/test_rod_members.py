@@ -99,10 +99,8 @@ def test_a_rod_left_out_is_found_as_missing(tmp_path):
     from blackbox.diagnosis.effects.member_stiffness import MISSING_BELOW
     sys.path.insert(0, str(ROOT))
     from benchmarks import unlisted_structure as us
-    from benchmarks.blind import generate as gen
 
-    st = gen.generate_study(4, 5, tmp_path, kind=gen.NONE, shape="imported", style="plain")
-    where = us.plant(st, "missing_member", np.random.default_rng([5, 4, us.DEFECTS.index("missing_member")]))
+    st, where = us.planted_study(4, 5, "imported", "missing_member", tmp_path)
     assert where is not None and where["place"] == ["rod", 136]
     d = diagnose_command.run(st.folder, plots=False).document
     assert d["verdict"] == "explained", d["verdict_detail"]

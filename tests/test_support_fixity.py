@@ -151,10 +151,8 @@ def test_a_pinned_base_that_is_clamped_is_found_as_a_clamp(tmp_path):
     ends at R_MAX (a clamp) and is accepted, and nothing else is added."""
     sys.path.insert(0, str(ROOT))
     from benchmarks import unlisted_structure as us
-    from benchmarks.blind import generate as gen
 
-    st = gen.generate_study(29, 5, tmp_path, kind=gen.NONE, shape="truss", style="plain")
-    where = us.plant(st, "base_fixity", np.random.default_rng([5, 29, us.DEFECTS.index("base_fixity")]))
+    st, where = us.planted_study(29, 5, "truss", "base_fixity", tmp_path)
     assert where is not None and where["place"] == ["grid", 1]
     d = diagnose_command.run(st.folder, plots=False).document
     assert d["verdict"] == "explained", d["verdict_detail"]

@@ -101,10 +101,8 @@ def test_a_turned_member_is_found_turned(tmp_path):
     from blackbox.commands import diagnose as diagnose_command
     sys.path.insert(0, str(ROOT))
     from benchmarks import unlisted_structure as us
-    from benchmarks.blind import generate as gen
 
-    st = gen.generate_study(5, 5, tmp_path, kind=gen.NONE, shape="box", style="plain")
-    where = us.plant(st, "rotated_section", np.random.default_rng([5, 5, us.DEFECTS.index("rotated_section")]))
+    st, where = us.planted_study(5, 5, "box", "rotated_section", tmp_path)
     assert where is not None and where["place"] == ["cbar", 44]
     d = diagnose_command.run(st.folder, plots=False).document
     assert d["verdict"] == "explained", d["verdict_detail"]
