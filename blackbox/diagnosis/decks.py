@@ -28,7 +28,8 @@ if TYPE_CHECKING:
     from blackbox.diagnosis.effects.base import CandidateContext, Effect
 
 __all__ = ["members_at", "constrained_grids", "unsplittable_grids", "unmodelled_notes", "element_deck",
-           "cards_at", "member_ends", "member_frames", "in_member_frames", "SplitEditor", "SplitDeck", "split_deck", "prune_spcadds"]
+           "cards_at", "member_ends", "member_frames", "in_member_frames", "SplitEditor", "SplitDeck", "split_deck",
+           "prune_spcadds"]
 
 
 def members_at(deck: Deck) -> dict[int, list[int]]:
@@ -120,8 +121,9 @@ def cards_at(deck: Deck, grid: int) -> list[str]:
 
 def element_deck(deck: Deck) -> tuple[Deck, dict[int, tuple[int, int]], dict[int, np.ndarray]]:
     """Every CBAR alone (same EID, PID, pin flags and offsets; G0 turned into a vector), and
-    every rod (CROD, CTUBE, CONROD: same EID and section), end a clamped. Returns the deck, ``{eid: (grid_a, grid_b)}`` in it and ``{eid: k (6,)}``: the
-    grounded springs at end b of a member with pin flags. Each member has its own two grids and
+    every rod (CROD, CTUBE, CONROD: same EID and section), end a clamped. Returns the deck,
+    ``{eid: (grid_a, grid_b)}`` in it and ``{eid: k (6,)}``: the grounded springs at end b of a
+    rod or of a bar with pin flags. Each member has its own two grids and
     nothing else is in the deck but those springs, so the members are separate structures: one
     load case can load every member at once (:func:`blackbox.diagnosis.runs.element_flexibility`).
 
@@ -184,7 +186,7 @@ def member_ends(deck: Deck, eid: int) -> tuple[int, int]:
 
 
 def member_frames(deck: Deck, eid: int) -> np.ndarray:
-    """``(12, 12)``: the rotation from basic to the displacement components of CBAR ``eid``'s
+    """``(12, 12)``: the rotation from basic to the displacement components of member ``eid``'s
     grids (its CD systems), ``u_cd = Lambda u_basic`` over ``a1..a6, b1..b6``."""
     Ra, Rb = deck.displacement_frames(list(member_ends(deck, eid)))
     L = np.zeros((12, 12))
