@@ -107,3 +107,17 @@ def test_a_rod_left_out_is_found_as_missing(tmp_path):
     (a,) = d["added"]
     assert (a["effect"], a["where"]) == ("member_stiffness", [136])
     assert a["parameters"][0]["value"] < MISSING_BELOW and a["missing"] == ["alpha_136"]
+
+
+def test_rods_count_toward_the_member_cap():
+    """The split run waits for the declared fit (whose residual chooses the members considered)
+    when the members, bars and rods, are more than the cap: 3 here (1 CBAR, 2 rods)."""
+    from types import SimpleNamespace
+
+    from blackbox.commands.diagnose import _split_needs_declared_fit
+    from blackbox.diagnosis.effects import MemberStiffness
+
+    deck = read_deck_text(TRUSS)
+    dm = SimpleNamespace(joints=(SimpleNamespace(grids=(1, 2)),))
+    assert _split_needs_declared_fit(deck, dm, [MemberStiffness], 100, 2)
+    assert not _split_needs_declared_fit(deck, dm, [MemberStiffness], 100, 3)

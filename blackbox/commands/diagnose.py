@@ -233,7 +233,7 @@ def _split_needs_declared_fit(deck: Deck, dm: DeclaredModel, fams, max_joint_can
     declared = {g for j in dm.joints for g in j.grids}
     return (((UndeclaredJoint in fams or RigidEndZone in fams)
              and len(joint_candidate_grids(deck, declared)) > max_joint_candidates)
-            or (MemberStiffness in fams and len(deck.cbars) > max_member_candidates))
+            or (MemberStiffness in fams and len(deck.cbars) + len(deck.rods) > max_member_candidates))
 
 
 def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapter], deck_dir: Path, *,
