@@ -12,12 +12,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from solver_adapters.bdf import NO_EFFECT, read_deck, read_deck_text
+from solver_adapters.bdf import NO_EFFECT, read_deck_text
 from solver_adapters.protocol import LoadMatrix
 from solver_adapters.reference import ReferenceAdapter
 
 from conftest import needs_mystran
-from test_deck_tail import CANTILEVER, RTOL, _import
+from test_deck_tail import CANTILEVER, _import, mystran_matches_reference
 
 CBARAO = "CBARAO,1,SCALE,.5\nCBARAO,1,FR,3,.25,.5,.75\n"
 
@@ -52,11 +52,4 @@ def test_cbarao_never_reaches_mystran(tmp_path):
 
 @needs_mystran
 def test_mystran_adapter_runs_a_deck_with_cbarao(tmp_path):
-    from solver_adapters.nastran import MystranAdapter
-    p = tmp_path / "m.bdf"
-    p.write_text(CANTILEVER + CBARAO)
-    loads = LoadMatrix.from_dense([(2, 3)], np.array([[-100.0]]), ["1"])
-    report = [(2, c) for c in range(1, 7)]
-    u_mys = MystranAdapter(p, unmodelled="pass").solve(loads, report).values
-    u_ref = ReferenceAdapter(read_deck(p)).solve(loads, report).values
-    np.testing.assert_allclose(u_mys, u_ref, rtol=0, atol=RTOL * np.abs(u_ref).max())
+    mystran_matches_reference(tmp_path, CBARAO)
