@@ -284,16 +284,18 @@ def _spc_members(sid: int, sets: dict[int, list], add: str = "SPCADD") -> set[in
     return members
 
 
-def _one_selection(cc: CaseControl, attr: str, name: str, path: Path) -> int | None:
+def _one_selection(cc: CaseControl, attr: str, name: str, path: Path, what: str | None = None,
+                   one: str = "model") -> int | None:
     """The set the subcases that import a load select with ``name =`` (``attr`` of each
     subcase; ``None``: none selects one). They must all select the same (a study has one
-    model), else an error listing each subcase's choice."""
+    ``one``), else an error listing each subcase's choice (``what``: the sets' name in it,
+    ``name`` by default)."""
     chosen = {getattr(s, attr) for s in cc.subcases if s.static}
     if len(chosen) > 1:
         detail = ", ".join(f"subcase {s.id}: {'none' if getattr(s, attr) is None else getattr(s, attr)}"
                            for s in cc.subcases if s.static)
-        raise DeckFormatError(f"the subcases select different {name} sets ({detail}); a study has one "
-                              f"model: give every subcase the same {name} = set (or import the deck "
+        raise DeckFormatError(f"the subcases select different {what or name} sets ({detail}); a study has "
+                              f"one {one}: give every subcase the same {name} = set (or import the deck "
                               f"once per set)", file=str(path))
     return chosen.pop() if chosen else None
 
@@ -528,14 +530,7 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
             where = " and ".join(what) + (f", subcase {s.id}" if cc.explicit else "")
             selected.append((str(s.id), s.load, s.temp_load, where))
         _temperature_selections(cc, cards, path, notes)
-        spcs = {s.spc for s in cc.subcases if s.static}
-        if len(spcs) > 1:
-            detail = ", ".join(f"subcase {s.id}: {'none' if s.spc is None else s.spc}"
-                               for s in cc.subcases if s.static)
-            raise DeckFormatError(f"the subcases select different constraint sets ({detail}); a study "
-                                  f"has one set of supports: give every subcase the same SPC = set "
-                                  f"(or import the deck once per set)", file=str(path))
-        spc_choice = spcs.pop() if spcs else None
+        spc_choice = _one_selection(cc, "spc", "SPC", path, what="constraint", one="set of supports")
     if not selected:
         raise DeckFormatError(_no_static_load(cc, path), file=str(path))
 
