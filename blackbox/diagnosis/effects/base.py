@@ -54,7 +54,7 @@ if TYPE_CHECKING:
     from solver_adapters.protocol import Deck, LoadMatrix
 
 __all__ = ["CandidateContext", "CandidateLimit", "Effect", "JointCaseEffect", "OnChannel", "SetAsideEffect", "finite_or_none",
-           "proximity"]
+           "kept_parameters", "proximity"]
 
 
 @dataclass(frozen=True)
@@ -145,6 +145,17 @@ def proximity(X: np.ndarray, P: np.ndarray, w: np.ndarray, ell: float) -> np.nda
         d = np.linalg.norm(X[a:a + 4096, None, :] - P[None, :, :], axis=2)
         score[a:a + 4096] = np.max(w[None, :] * np.exp(-d / ell), axis=1)
     return score
+
+
+def kept_parameters(x_effect, at_nested: float) -> np.ndarray | None:
+    """Which of a refitted effect's per-part parameters stay (:meth:`Effect.trimmed`): those that
+    ended above ``at_nested`` (their nested bound, 0, is where the part has no effect), and at
+    least the largest; ``None`` when every one stays."""
+    x = np.asarray(x_effect)
+    keep = x > at_nested
+    if not np.any(keep):
+        keep[int(np.argmax(x))] = True
+    return None if np.all(keep) else keep
 
 
 def finite_or_none(v) -> float | None:

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from blackbox.diagnosis.effects.base import Effect, finite_or_none
+from blackbox.diagnosis.effects.base import Effect, finite_or_none, kept_parameters
 
 if TYPE_CHECKING:
     from blackbox.diagnosis.fit import Fit
@@ -199,10 +199,8 @@ class Connection(Effect):
         return starts + [xs]
 
     def trimmed(self, x_effect: np.ndarray) -> "Connection | None":
-        keep = np.asarray(x_effect) > AT_BOUND
-        if not np.any(keep):
-            keep[np.argmax(x_effect)] = True
-        if np.all(keep):
+        keep = kept_parameters(x_effect, AT_BOUND)
+        if keep is None:
             return None
         return replace(self, names=tuple(n for n, k in zip(self.names, keep) if k),
                        basis=None if self.basis is None else self.basis[keep],

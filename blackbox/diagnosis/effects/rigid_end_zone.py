@@ -57,7 +57,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from blackbox.diagnosis.decks import member_frames, members_at
-from blackbox.diagnosis.effects.base import CandidateLimit, Effect
+from blackbox.diagnosis.effects.base import CandidateLimit, Effect, kept_parameters
 from blackbox.diagnosis.effects.registry import register
 from blackbox.diagnosis.effects.undeclared_joint import joint_candidate_grids
 from solver_adapters.protocol import DofLabel
@@ -380,10 +380,8 @@ class RigidEndZone(Effect):
         """Per member: the members whose length ended at 0 have no zone (at least one stays)."""
         if self.variant != "per-member":
             return None
-        keep = np.asarray(x_effect) > AT_BOUND
-        if not np.any(keep):
-            keep[int(np.argmax(x_effect))] = True
-        if np.all(keep):
+        keep = kept_parameters(x_effect, AT_BOUND)
+        if keep is None:
             return None
         members = tuple(m for m, k in zip(self.members, keep) if k)
         return replace(self, names=tuple(n for n, k in zip(self.names, keep) if k), members=members,

@@ -36,7 +36,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from blackbox.diagnosis.decks import constrained_grids, in_member_frames, members_at, rbe2_grids
-from blackbox.diagnosis.effects.base import Effect
+from blackbox.diagnosis.effects.base import Effect, kept_parameters
 from blackbox.diagnosis.effects.member_stiffness import stiffness_columns
 from blackbox.diagnosis.effects.registry import register
 from solver_adapters.protocol import DofLabel
@@ -201,10 +201,8 @@ class SupportFixity(Effect):
         """Per axis: the components whose factor ended at 0 stay free (at least one is kept)."""
         if self.variant != "per-axis":
             return None
-        keep = np.asarray(x_effect) > AT_ZERO
-        if not np.any(keep):
-            keep[int(np.argmax(x_effect))] = True
-        if np.all(keep):
+        keep = kept_parameters(x_effect, AT_ZERO)
+        if keep is None:
             return None
         return replace(self, names=tuple(n for n, k in zip(self.names, keep) if k),
                        dofs=tuple(d for d, k in zip(self.dofs, keep) if k),
