@@ -336,10 +336,10 @@ def test_matrix_log_coordinates_of_the_complex_model():
     derivative of scipy.linalg.expm_frechet -- also at K_C = c I (every eigenvalue repeated, the
     start) and with a nearly repeated pair, where the divided differences become derivatives.
     Profiles work on the entries of K_C: ``natural()`` keeps the springs in log k only."""
-    from blackbox.identification import _MatrixLog
+    from blackbox.identification import MatrixLog
 
     joint = ComplexJoint("J", (1, 2, 3))
-    b = _MatrixLog(slice(0, 21), 6)
+    b = MatrixLog(slice(0, 21), 6)
     rng = np.random.default_rng(0)
     A = rng.standard_normal((6, 6))
     lam = np.array([-3.0, -1.0, 2.0, 2.0 + 1e-9, 5.0, 12.0])          # a nearly repeated pair

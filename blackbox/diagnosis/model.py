@@ -41,7 +41,7 @@ from blackbox.diagnosis.effects.base import Effect
 from blackbox.diagnosis.split import SplitBase
 from blackbox.errors import IdentificationError
 from blackbox.identification import Observations
-from blackbox.joints import JointModel, SimpleJoint
+from blackbox.joints import ComplexJoint, JointModel, SimpleJoint
 from solver_adapters.protocol import DofLabel
 
 __all__ = ["ModelSpec", "ObsMap", "State", "AugmentedModel", "RIGID_RATIO"]
@@ -279,14 +279,22 @@ class AugmentedModel:
         and the force through it (``dK u_S``, a difference of nearly equal rotations times ``k``)
         still keeps about ``16 - log10(RIGID_RATIO)`` digits; a spring far beyond (a misfit model's
         flat valley, 1e13-1e20) makes chi2 rounding noise of several units, which a refit would
-        follow instead of the valley."""
+        follow instead of the valley. A complex joint's diagonal entries of ``K_C`` get the same
+        limit (its unit matrix ``B E_ii B^T``); :func:`~blackbox.diagnosis.fit.fit_model` uses it
+        to recognise a rigid mode, never as a bound (a bound on one entry would cut ``K_C``'s
+        positive definiteness)."""
         out = np.full(self.p, np.inf)
         if self._jD is None:
             return out
         for j, sl in zip(self.spec.joints, self.spec.joint_slices()):
-            if not isinstance(j, SimpleJoint):
+            if isinstance(j, SimpleJoint):
+                params = range(sl.start, sl.stop)
+            elif isinstance(j, ComplexJoint):
+                iu = np.triu_indices(j.m)
+                params = sl.start + np.flatnonzero(iu[0] == iu[1])
+            else:
                 continue
-            for i in range(sl.start, sl.stop):
+            for i in params:
                 flex = float(np.trace(self.Gss @ self._jD[i]))
                 if flex > 0.0:
                     out[i] = RIGID_RATIO / flex

@@ -27,7 +27,7 @@ from blackbox.identification.fixed_point import FP_FLOORS as _FP_FLOORS, FP_STAL
 from blackbox.identification.fixed_point import (_admissible_fixed_point, _admissible_on_segment,  # noqa: F401
                                                  _FixedPoint, _relative_step)
 from blackbox.identification.newton import _Fit, _newton  # noqa: F401
-from blackbox.identification.problem import SPRING_FLOOR as _SPRING_FLOOR, _MatrixLog, _Problem  # noqa: F401
+from blackbox.identification.problem import SPRING_FLOOR as _SPRING_FLOOR, MatrixLog, _Problem  # noqa: F401
 from blackbox.identification.uncertainty import _covariance, _profile_ci, _root_through_origin  # noqa: F401
 
 __all__ = ["Observations", "IterationRecord", "HoldoutStats", "FitStatistics", "IdentificationResult",

@@ -12,7 +12,7 @@ Parameter coordinates (:class:`JointCoordinates`)
       below a floor (:data:`SPRING_FLOOR` times the joint's stiffest spring) that bounded step is
       tried first (in log k the bound is infinitely far and the iteration would crawl), and a
       spring at the floor that still wants to decrease is held there.
-    * the complex model is iterated in *matrix-logarithm* coordinates (:class:`_MatrixLog`):
+    * the complex model is iterated in *matrix-logarithm* coordinates (:class:`MatrixLog`):
       ``K_C = expm(S)``, ``S`` symmetric, ``phi`` = the upper triangle of ``S``. Every ``phi``
       gives a positive definite ``K_C``, and a step changes ``K_C`` relatively, as ``log k`` does
       a spring: the response is ~``K^-1``, so in the natural entries the iteration crawls along
@@ -45,7 +45,7 @@ from blackbox.fitting.lm import bounded_gauss_newton_step
 from blackbox.identification.observations import Observations
 from blackbox.joints import ComplexJoint, JointModel, SimpleJoint
 
-__all__ = ["SPRING_FLOOR", "JointCoordinates", "SpringFloor"]
+__all__ = ["SPRING_FLOOR", "JointCoordinates", "MatrixLog", "SpringFloor"]
 
 SPRING_FLOOR = 1e-6                 # a spring below this times its joint's stiffest is held at "0"
 
@@ -53,7 +53,7 @@ SPRING_FLOOR = 1e-6                 # a spring below this times its joint's stif
 # --------------------------------------------------------------------------------------------
 # matrix-logarithm coordinates of a complex joint
 # --------------------------------------------------------------------------------------------
-class _MatrixLog:
+class MatrixLog:
     """``K_C = expm(S)`` with ``S`` symmetric: the coordinates ``phi`` of a complex joint are the
     upper triangle of ``S`` (row then column, the order of the parameters ``k``, the upper
     triangle of ``K_C``). Every ``S`` gives a positive definite ``K_C``, and a step in ``S``
@@ -130,7 +130,7 @@ class JointCoordinates:
         self.spring_slices = [sl for j, sl in zip(joints, slices) if isinstance(j, SimpleJoint)]
         self.others = [(j, sl) for j, sl in zip(joints, slices) if not isinstance(j, SimpleJoint)]
         # complex joints: phi = the upper triangle of S = logm(K_C) (K_C = expm(S))
-        self.mlog = [_MatrixLog(sl, j.m) for j, sl in self.others if isinstance(j, ComplexJoint)]
+        self.mlog = [MatrixLog(sl, j.m) for j, sl in self.others if isinstance(j, ComplexJoint)]
         self.mlog_mask = np.zeros(self.p, dtype=bool)
         for b in self.mlog:
             self.mlog_mask[b.sl] = True
@@ -165,7 +165,7 @@ class JointCoordinates:
     def chain(self, J_k: np.ndarray, k: np.ndarray) -> np.ndarray:
         """``J_k dk/dphi``: a Jacobian in ``k`` (columns) to one in ``phi``. ``dk/dphi`` is
         ``diag(k)`` for springs, the identity for natural parameters and, per complex joint, the
-        Frechet derivative of ``expm`` at ``S`` (:class:`_MatrixLog`)."""
+        Frechet derivative of ``expm`` at ``S`` (:class:`MatrixLog`)."""
         J = J_k * np.where(self.log_mask, k, 1.0)
         for b in self.mlog:
             J[:, b.sl] = J_k[:, b.sl] @ b.dk_dphi(k[b.sl])
