@@ -497,7 +497,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "right-hand sides of the split run)")
     s.add_argument("--max-member-candidates", type=int, default=None, metavar="N",
                    help="members considered at most for member_stiffness, those nearest the declared "
-                        "fit's residual beyond (default 300)")
+                        "fit's residual beyond (default: every member when their end grids are at "
+                        "most 1000, else 300)")
     s.add_argument("--effects", default=None,
                    help="comma-separated effect kinds to consider (default: every kind; docs/commands.md "
                         "lists them, e.g. joint_coupling, undeclared_joint, member_stiffness, rigid_end_zone)")

@@ -521,6 +521,22 @@ def test_candidate_caps_are_reported_and_follow_the_residual(tmp_path):
         "candidates_limited"] == []
 
 
+def test_default_member_cap_counts_end_grids_not_members(monkeypatch):
+    """Without ``max_member_candidates`` every member is considered up to ``MEMBER_GRIDS`` end
+    grids, beyond them ``MAX_MEMBER_CANDIDATES``; a value given is the cap whatever the size.
+    The car (115 members on 65 end grids) is far inside the default."""
+    from blackbox.diagnosis.decks import member_ends
+    from blackbox.study import load_study
+    deck = load_study(FIXTURES / "undeclared_joint").deck
+    members = [*deck.cbars, *deck.rods]
+    grids = {g for e in members for g in member_ends(deck, e)}
+    assert diagnose_command.member_cap(deck, None) == len(members) > 100
+    assert diagnose_command.member_cap(deck, 20) == 20
+    monkeypatch.setattr(diagnose_command, "MEMBER_GRIDS", len(grids) - 1)
+    assert diagnose_command.member_cap(deck, None) == diagnose_command.MAX_MEMBER_CANDIDATES
+    assert diagnose_command.member_cap(deck, 500) == 500
+
+
 def test_without_a_declared_fit_the_cap_keeps_the_grids_nearest_the_sensors():
     """No declared joints, so no residual to follow: the cap keeps the points nearest the
     measured grids (every measured grid weighs 1; a measured grid itself scores the most)."""

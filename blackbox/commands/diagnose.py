@@ -16,8 +16,9 @@ the loop of :mod:`blackbox.diagnosis.search`.
 
 Run 2 has six right-hand sides however many members (:func:`blackbox.diagnosis.runs.element_flexibility`).
 On a large model the candidates are capped (``max_joint_candidates`` undeclared-joint grids,
-``max_member_candidates`` members, those nearest the declared fit's residual beyond): the cap
-bounds run 3's right-hand sides and rows, and the document says how many were left out.
+``max_member_candidates`` members, those nearest the declared fit's residual beyond; by default
+every member up to :data:`MEMBER_GRIDS` end grids): the cap bounds run 3's right-hand sides and
+rows, and the document says how many were left out.
 
 With an executor of more than one worker (``run(..., executor=...)``, ``--workers N``), run 1 is
 a task on the cluster (it carries the study folder in memory, :func:`blackbox.parallel.pack_study`,
@@ -54,7 +55,7 @@ from blackbox.adapters import make_adapter_for
 from blackbox.commands.common import as_study
 from blackbox.condensation import CondensedModel
 from blackbox.declared import DeclaredModel, SolverCost, declared_model, deck_with_springs
-from blackbox.diagnosis.decks import SplitDeck, cards_at, element_deck, split_deck, unmodelled_notes
+from blackbox.diagnosis.decks import SplitDeck, cards_at, element_deck, member_ends, split_deck, unmodelled_notes
 from blackbox.diagnosis.document import diagnosis_document, verdict_detail
 from blackbox.diagnosis.effects import (CandidateContext, CandidateLimit, Effect, MemberStiffness, PDelta, Preload,
                                        RigidEndZone, families)
@@ -75,7 +76,8 @@ from solver_adapters.protocol import DofLabel, SolverAdapter, UnstableStructureE
 from solver_adapters.subprocess import owned_tempdir
 
 __all__ = ["DiagnosisResult", "Prepared", "PrepareTask", "Remote", "run", "prepare", "prepare_study",
-           "prepare_run", "check_options", "MAX_JOINT_CANDIDATES", "MAX_MEMBER_CANDIDATES"]
+           "prepare_run", "check_options", "MAX_JOINT_CANDIDATES", "MAX_MEMBER_CANDIDATES",
+           "MEMBER_GRIDS", "member_cap"]
 
 TEMP_PREFIX = "blackbox-diagnose-"
 """Name prefix of the temporary folder of one diagnose run (the decks it writes)."""
@@ -87,9 +89,27 @@ grids are ~1,200 right-hand sides, ~4 minutes of MYSTRAN on a 1e5-DOF body (docs
 a frame of up to 100 such grids (the fixtures, a 1e3-DOF body) has all of them considered."""
 
 MAX_MEMBER_CANDIDATES = 300
-"""Members considered at most for ``member_stiffness`` (nearest the residual beyond). Each adds
-its 12 end DOFs to the split run's reported rows and one candidate (one hypothesis of the
-round's Bonferroni correction); a member far from every sensor changes nothing it can see."""
+"""Members considered for ``member_stiffness`` on a large model (those nearest the residual), when
+``max_member_candidates`` is not given and the members' end grids are more than
+:data:`MEMBER_GRIDS`. Each member adds its 12 end DOFs to the split run's reported rows and one
+candidate (one hypothesis of the round's Bonferroni correction); a member far from every sensor
+changes nothing it can see."""
+
+MEMBER_GRIDS = 1000
+"""Up to this many member end grids (6,000 rows of the split run, a 50 MB dense block at 1,000
+right-hand sides), every member is considered: a cap counted in members would leave out a
+member of a 400-member storey frame whose rows cost nothing next to its cut pairs. Beyond (the
+1e5-DOF body: 16,635 grids, 3.2 GB for every member), :data:`MAX_MEMBER_CANDIDATES`."""
+
+
+def member_cap(deck: Deck, requested: int | None) -> int:
+    """The members considered at most: ``requested`` when given, else every member when their
+    end grids are at most :data:`MEMBER_GRIDS`, else :data:`MAX_MEMBER_CANDIDATES`."""
+    if requested is not None:
+        return requested
+    members = [*deck.cbars, *deck.rods]
+    grids = {g for e in members for g in member_ends(deck, e)}
+    return len(members) if len(grids) <= MEMBER_GRIDS else MAX_MEMBER_CANDIDATES
 
 
 # --------------------------------------------------------------------------------------------
@@ -238,7 +258,7 @@ def _split_needs_declared_fit(deck: Deck, dm: DeclaredModel, fams, max_joint_can
 
 def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapter], deck_dir: Path, *,
                   max_joint_candidates: int = MAX_JOINT_CANDIDATES,
-                  max_member_candidates: int = MAX_MEMBER_CANDIDATES, effects: Sequence[str] | None = None,
+                  max_member_candidates: int | None = None, effects: Sequence[str] | None = None,
                   say: Callable[[str], None] | None = None, remote: Remote | None = None) -> Prepared:
     """Fit the declared model, run the element and the split deck (written into ``deck_dir``),
     list the candidates of the families ``effects`` (default: all), at most
@@ -255,6 +275,7 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
     if not deck.cbars:
         raise DiagnosisError(f"the deck of study {study.name!r} has no CBAR members: the diagnosis "
                              "builds its edited decks from members")
+    max_member_candidates = member_cap(deck, max_member_candidates)
     deck_dir = Path(deck_dir)
     log: list[RunRecord] = []
 
@@ -483,20 +504,20 @@ def _nesting_cards(pr: Prepared, rows) -> str:
 
 
 def check_options(alpha: float, max_steps: int, refit_top: int, max_joint_candidates: int,
-                  effects: Sequence[str] | None, max_member_candidates: int = MAX_MEMBER_CANDIDATES) -> None:
+                  effects: Sequence[str] | None, max_member_candidates: int | None = None) -> None:
     """The options' errors, before any work."""
     if not 0.0 < alpha < 1.0:
         raise DiagnosisError(f"alpha must be in (0, 1), got {alpha!r}")
     if max_steps < 0 or refit_top < 1:
         raise DiagnosisError(f"max_steps must be >= 0 and refit_top >= 1, got {max_steps!r}, {refit_top!r}")
-    if max_joint_candidates < 0 or max_member_candidates < 0:
+    if max_joint_candidates < 0 or (max_member_candidates is not None and max_member_candidates < 0):
         raise DiagnosisError(f"max_joint_candidates and max_member_candidates must be >= 0, got "
                              f"{max_joint_candidates!r}, {max_member_candidates!r}")
     families(effects)                          # unknown effect kinds: DiagnosisError
 
 
 def prepare(study: Study | str | Path, deck_dir: Path, *, adapter: str | None = None,
-            max_joint_candidates: int = MAX_JOINT_CANDIDATES, max_member_candidates: int = MAX_MEMBER_CANDIDATES,
+            max_joint_candidates: int = MAX_JOINT_CANDIDATES, max_member_candidates: int | None = None,
             effects: Sequence[str] | None = None, say: Callable[[str], None] | None = None,
             executor: Executor | None = None) -> Prepared:
     """:func:`prepare_study` with the study's adapter (or the one named) on each deck; the edited
@@ -513,7 +534,7 @@ def prepare(study: Study | str | Path, deck_dir: Path, *, adapter: str | None = 
 
 def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float = 0.01, max_steps: int = 5,
         refit_top: int = 6, max_joint_candidates: int = MAX_JOINT_CANDIDATES,
-        max_member_candidates: int = MAX_MEMBER_CANDIDATES, effects: Sequence[str] | None = None,
+        max_member_candidates: int | None = None, effects: Sequence[str] | None = None,
         plots: bool = True, progress: Callable[[str], None] | None = None,
         executor: Executor | None = None) -> DiagnosisResult:
     """Diagnose the study (module docstring). ``alpha``: the family-wise significance level of
