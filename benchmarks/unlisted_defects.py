@@ -13,7 +13,15 @@ in no list of the diagnosis, each of a kind real static tests have:
 * ``noisy``: one channel's noise is 6x its declared sigma (a loose mount, a bad cable);
 * ``dead``: one channel reads only noise around zero (an unplugged transducer);
 * ``units``: one case's readings are in millimetres where the others are in metres (x 1000);
-* ``swapped_cases``: the readings of two cases are exchanged (files mixed up).
+* ``swapped_cases``: the readings of two cases are exchanged (files mixed up);
+* ``misplaced_load``: one fitted case's load went into the structure at a neighbouring grid (the
+  other end of a member at the declared load point: the actuator on the wrong node), the
+  readings measured again from the truth with the study's own noise draws;
+* ``tilted_load``: one fitted case's load is turned 15 degrees off its declared direction (an
+  actuator mounted askew), measured again the same way.
+
+The two load defects are placed where they move the readings by a noncentrality between 60 and
+1e4 (whitened, before any refit), as the unlisted defects of the structure are.
 
 What the tool should say: the defect as a defect of the data at its place (a sensor offset,
 gain or outliers at the channel, a load scale of the case), or "unexplained" with the misfit
@@ -28,6 +36,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -38,9 +47,14 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.blind.frames import TUNED                               # noqa: E402
+from benchmarks.blind import generate as gen                            # noqa: E402
 from benchmarks.blind.generate import NONE, generate_study              # noqa: E402
+from blackbox.study import load_study                                   # noqa: E402
+from solver_adapters.bdf import read_deck                               # noqa: E402
 
-DEFECTS = ("drift", "slip", "noisy", "dead", "units", "swapped_cases")
+DEFECTS = ("drift", "slip", "noisy", "dead", "units", "swapped_cases", "misplaced_load", "tilted_load")
+LOAD_DEFECTS = ("misplaced_load", "tilted_load")
+LAMBDA_RANGE = (60.0, 1e4)          # noncentrality of a load defect: clearly detectable, not absurd
 
 
 def _read(path: Path) -> tuple[list[str], list[dict]]:
@@ -115,6 +129,93 @@ def plant(folder: Path, defect: str, rng: np.random.Generator) -> dict:
     return {"grid": int(ch[0]), "component": int(ch[1])}
 
 
+def study_loads(folder: Path) -> list[tuple[str, int, int, float]]:
+    """The study's load rows ``(case, grid, component, value)`` in its case order (the order the
+    generator drew the noise in)."""
+    L = load_study(folder).loads
+    V = L.values.tocoo()
+    rows = sorted(zip(V.col.tolist(), V.row.tolist(), V.data.tolist()))
+    return [(L.cases[j], L.dofs[i][0], L.dofs[i][1], v) for j, i, v in rows]
+
+
+def _fitted_cases(folder: Path, cases: list[str]) -> list[str]:
+    toml = (folder / "study.toml").read_text()
+    hold = toml.split("holdout_cases", 1)[-1].split("]", 1)[0] if "holdout_cases" in toml else ""
+    return [c for c in cases if f'"{c}"' not in hold]
+
+
+def _turned(v: np.ndarray, rng: np.random.Generator, degrees: float) -> np.ndarray:
+    """``v`` turned by ``degrees`` about a random axis perpendicular to it."""
+    n = float(np.linalg.norm(v))
+    if n == 0.0:
+        return v
+    a = np.cross(v / n, rng.normal(size=3))
+    a /= np.linalg.norm(a)
+    t = math.radians(degrees)
+    return v * math.cos(t) + np.cross(a, v) * math.sin(t)
+
+
+def _moved_loads(truth, loads, case: str, defect: str, rng: np.random.Generator):
+    """``loads`` with ``case``'s load misplaced or tilted (module docstring); ``None`` when it
+    cannot be (no free neighbour)."""
+    rows = [r for r in loads if r[0] == case]
+    others = [r for r in loads if r[0] != case]
+    if defect == "tilted_load":
+        out = []
+        for g in dict.fromkeys(r[1] for r in rows):
+            for base in (1, 4):                     # forces, then moments, as vectors
+                v = np.zeros(3)
+                for _, gg, c, val in rows:
+                    if gg == g and base <= c < base + 3:
+                        v[c - base] += val
+                w = _turned(v, rng, 15.0)
+                out += [(case, g, base + i, float(w[i])) for i in range(3) if w[i] != 0.0]
+        return others + out
+    held = {g: set(s.components) for s in truth.spc1s for g in s.grids}
+    nbr: dict[int, set[int]] = {}
+    for m in [*truth.cbars.values(), *truth.rods.values()]:
+        nbr.setdefault(m.ga, set()).add(m.gb)
+        nbr.setdefault(m.gb, set()).add(m.ga)
+    moved = {}
+    for g in dict.fromkeys(r[1] for r in rows):
+        free = sorted(n for n in nbr.get(g, ()) if not held.get(n))
+        if not free:
+            return None
+        moved[g] = int(rng.choice(free))
+    return others + [(case, moved[g], c, v) for _, g, c, v in rows]
+
+
+def plant_load(st, defect: str, rng: np.random.Generator) -> dict | None:
+    """Measure the study again with one fitted case's load misplaced or tilted (loads.csv keeps
+    the declared load); ``None`` when no case qualifies."""
+    p = st.planted
+    truth = read_deck(st.hidden / "truth" / "truth.bdf")
+    seed = json.loads((st.hidden / "truth.json").read_text())["seed"]
+    noise = gen.NoiseConfig(**p["noise"])
+    loads = study_loads(st.folder)
+    cases = list(dict.fromkeys(r[0] for r in loads))
+    rest = (p["joints"], p["away_grids"], [], noise, seed)
+    clean = gen.simulate_study(truth, loads, *rest)
+    for i in rng.permutation(len(cases)).tolist():
+        case = cases[i]
+        if case not in _fitted_cases(st.folder, cases):
+            continue
+        changed = _moved_loads(truth, loads, case, defect, rng)
+        if changed is None:
+            continue
+        changed.sort(key=lambda r: cases.index(r[0]))
+        sim = gen.simulate_study(truth, changed, *rest)
+        lam = float(np.sum(((sim.rows.true - clean.rows.true) / clean.rows.sigma) ** 2))
+        if not LAMBDA_RANGE[0] <= lam <= LAMBDA_RANGE[1]:
+            continue
+        rows = ["case,grid,component,value,sigma"]
+        rows += [f"{sim.cases[ci]},{g},{c},{float(v)!r},{float(s)!r}"
+                 for (g, c), ci, v, s in zip(sim.rows.dofs, sim.rows.case_index, sim.values, sim.rows.sigma)]
+        (st.folder / "measurements.csv").write_text("\n".join(rows) + "\n")
+        return {"case": case, "noncentrality": lam}
+    return None
+
+
 STRUCTURE_OF = "structure"
 
 
@@ -134,11 +235,15 @@ def diagnosed(st, family: str, defect: str, where) -> tuple[dict | None, dict | 
 
 def run_one(index: int, seed: int, family: str, defect: str, out: Path) -> dict:
     st = generate_study(index, seed, out / defect, kind=NONE, shape=family, style="plain")
-    where = plant(st.folder, defect, np.random.default_rng([seed, index, DEFECTS.index(defect)]))
+    rng = np.random.default_rng([seed, index, DEFECTS.index(defect)])
+    where = plant_load(st, defect, rng) if defect in LOAD_DEFECTS else plant(st.folder, defect, rng)
+    if where is None:
+        return None
     doc, error, wall = diagnosed(st, family, defect, where)
     if error is not None:
         return error
-    added = [(a["effect"], a["where"], a.get("of"), a.get("component"), a.get("pattern")) for a in doc["added"]]
+    added = [(a["effect"], a["where"], a.get("of"), a.get("component"), a.get("pattern"), a.get("case"))
+             for a in doc["added"]]
     hot = (doc.get("hotspots") or [None])[0]
     return {"study": st.folder.name, "family": family, "defect": defect, "where": where,
             "verdict": doc["verdict"], "added": added,
@@ -154,7 +259,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--defects", nargs="+", choices=DEFECTS, default=list(DEFECTS))
     args = ap.parse_args(argv)
-    run_defects(run_one, table, DEFECTS, args.defects, args.n, args.seed, args.out)
+    run_defects(run_one, table, DEFECTS, args.defects, args.n, args.seed, args.out, tries=5 * args.n)
     return 0
 
 
@@ -198,8 +303,11 @@ def table(rows: list[dict]) -> str:
         if "grid" in w:
             placed = bool(r["added"]) and all(a[2] == "data" and a[1][:1] == [w["grid"]] for a in r["added"])
         else:
+            # a data effect of the case: set aside or scaled, or one reading of it an outlier
             cases = set(w.get("cases") or [w.get("case")])
-            placed = bool(r["added"]) and all(a[2] == "data" and set(map(str, a[1])) <= cases for a in r["added"])
+            placed = bool(r["added"]) and all(a[2] == "data" and (set(map(str, a[1])) <= cases or
+                                                                  (len(a) > 5 and a[5] in cases))
+                                              for a in r["added"])
         out.append(f"| {r['study']} | {r['family']} | {r['defect']} | {at} | {added} | {r['verdict']} | "
                    f"{'yes' if placed else 'no'} |")
     return "\n".join(out) + "\n"

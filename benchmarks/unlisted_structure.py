@@ -42,22 +42,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.blind import generate as gen                            # noqa: E402
-from blackbox.study import load_study                                   # noqa: E402
-from benchmarks.unlisted_defects import diagnosed, run_defects          # noqa: E402
+from benchmarks.unlisted_defects import diagnosed, run_defects, study_loads  # noqa: E402
 from solver_adapters.bdf import read_deck                               # noqa: E402
 from solver_adapters.deck import Spc1                                   # noqa: E402
 
 DEFECTS = ("missing_member", "rotated_section", "base_fixity")
 LAMBDA_RANGE = (60.0, 1e4)
-
-
-def _loads(folder: Path):
-    """The study's load rows ``(case, grid, component, value)`` in its case order (the order the
-    generator drew the noise in)."""
-    L = load_study(folder).loads
-    V = L.values.tocoo()
-    rows = sorted(zip(V.col.tolist(), V.row.tolist(), V.data.tolist()))
-    return [(L.cases[j], L.dofs[i][0], L.dofs[i][1], v) for j, i, v in rows]
 
 
 def _places(deck, defect: str, joint_grids: set[int]) -> list:
@@ -118,7 +108,7 @@ def plant(st, defect: str, rng: np.random.Generator) -> dict | None:
     truth = read_deck(st.hidden / "truth" / "truth.bdf")
     seed = json.loads((st.hidden / "truth.json").read_text())["seed"]
     noise = gen.NoiseConfig(**p["noise"])
-    loads = _loads(st.folder)
+    loads = study_loads(st.folder)
     args = (loads, p["joints"], p["away_grids"], [], noise, seed)
     clean = gen.simulate_study(truth, *args)
     joint_grids = {g for j in p["joints"] for g in j["grids"]}

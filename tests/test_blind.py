@@ -810,12 +810,48 @@ def test_unlisted_structure_defects_change_exactly_what_they_name(tmp_path):
     # the readings of the unchanged structure, simulated again, are the study's own
     p = st.planted
     seed = json.loads((st.hidden / "truth.json").read_text())["seed"]
-    sim = gen.simulate_study(truth, us._loads(st.folder), p["joints"], p["away_grids"], [],
+    sim = gen.simulate_study(truth, us.study_loads(st.folder), p["joints"], p["away_grids"], [],
                              gen.NoiseConfig(**p["noise"]), seed)
     # to a millionth of each reading's sigma (truth.bdf holds the truth to ~15 digits; small
     # readings are differences of large displacements)
     m = load_study(st.folder).measurements
     assert np.all(np.abs(m.values - sim.values) <= 1e-6 * sim.rows.sigma)
+
+
+def test_unlisted_load_defects_change_one_case_as_they_name(tmp_path):
+    """``benchmarks/unlisted_defects.py``'s load defects change one case's load and nothing
+    else: ``misplaced_load`` puts each of its loads, same component and value, on a grid a member
+    joins to the declared one and no support holds; ``tilted_load`` turns each force and moment
+    vector by 15 degrees, its magnitude kept (to rounding, 1e-12)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import unlisted_defects as ud
+
+    st = gen.generate_study(0, 7, tmp_path, kind=gen.NONE, shape="hall", style="plain")
+    truth = read_deck(st.hidden / "truth" / "truth.bdf")
+    loads = ud.study_loads(st.folder)
+    case = loads[0][0]
+    mine = [r for r in loads if r[0] == case]
+    joined = {(m.ga, m.gb) for m in [*truth.cbars.values(), *truth.rods.values()]}
+    held = {g for s in truth.spc1s for g in s.grids}
+    for defect in ud.LOAD_DEFECTS:
+        new = ud._moved_loads(truth, loads, case, defect, np.random.default_rng(3))
+        assert [r for r in new if r[0] != case] == [r for r in loads if r[0] != case]
+        moved = [r for r in new if r[0] == case]
+        if defect == "misplaced_load":
+            assert [(c, v) for _, _, c, v in moved] == [(c, v) for _, _, c, v in mine]
+            for (_, g0, _, _), (_, g1, _, _) in zip(mine, moved):
+                assert ((g0, g1) in joined or (g1, g0) in joined) and g1 not in held
+        else:
+            for g in {r[1] for r in mine}:
+                for base in (1, 4):
+                    v0 = np.array([sum(v for _, gg, c, v in mine if gg == g and c == base + i) for i in range(3)])
+                    v1 = np.array([sum(v for _, gg, c, v in moved if gg == g and c == base + i) for i in range(3)])
+                    n0 = np.linalg.norm(v0)
+                    if n0 == 0:
+                        assert not np.any(v1)
+                        continue
+                    assert abs(np.linalg.norm(v1) / n0 - 1) < 1e-12
+                    assert abs(np.degrees(np.arccos(np.clip(v0 @ v1 / n0 ** 2, -1, 1))) - 15.0) < 1e-6
 
 
 def _user_deck_through_mystran_is_the_plain_structure(tmp_path, family, seed):
