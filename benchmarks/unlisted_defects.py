@@ -54,7 +54,7 @@ from solver_adapters.bdf import read_deck                               # noqa: 
 
 DEFECTS = ("drift", "slip", "noisy", "dead", "units", "swapped_cases", "misplaced_load", "tilted_load")
 LOAD_DEFECTS = ("misplaced_load", "tilted_load")
-LAMBDA_RANGE = (60.0, 1e4)          # noncentrality of a load defect: clearly detectable, not absurd
+LAMBDA_RANGE = (60.0, 1e4)          # noncentrality of a planted defect: clearly detectable, not absurd
 
 
 def _read(path: Path) -> tuple[list[str], list[dict]]:
@@ -185,6 +185,20 @@ def _moved_loads(truth, loads, case: str, defect: str, rng: np.random.Generator)
     return others + [(case, moved[g], c, v) for _, g, c, v in rows]
 
 
+def kept_readings(folder: Path, sim, clean) -> float | None:
+    """The noncentrality of the readings ``sim`` against the ``clean`` ones (whitened, before any
+    refit); when it is in :data:`LAMBDA_RANGE` they are written as ``folder``'s measurements,
+    else ``None`` and nothing written."""
+    lam = float(np.sum(((sim.rows.true - clean.rows.true) / clean.rows.sigma) ** 2))
+    if not LAMBDA_RANGE[0] <= lam <= LAMBDA_RANGE[1]:
+        return None
+    rows = ["case,grid,component,value,sigma"]
+    rows += [f"{sim.cases[ci]},{g},{c},{float(v)!r},{float(s)!r}"
+             for (g, c), ci, v, s in zip(sim.rows.dofs, sim.rows.case_index, sim.values, sim.rows.sigma)]
+    (folder / "measurements.csv").write_text("\n".join(rows) + "\n")
+    return lam
+
+
 def plant_load(st, defect: str, rng: np.random.Generator) -> dict | None:
     """Measure the study again with one fitted case's load misplaced or tilted (loads.csv keeps
     the declared load); ``None`` when no case qualifies."""
@@ -205,13 +219,9 @@ def plant_load(st, defect: str, rng: np.random.Generator) -> dict | None:
             continue
         changed.sort(key=lambda r: cases.index(r[0]))
         sim = gen.simulate_study(truth, changed, *rest)
-        lam = float(np.sum(((sim.rows.true - clean.rows.true) / clean.rows.sigma) ** 2))
-        if not LAMBDA_RANGE[0] <= lam <= LAMBDA_RANGE[1]:
+        lam = kept_readings(st.folder, sim, clean)
+        if lam is None:
             continue
-        rows = ["case,grid,component,value,sigma"]
-        rows += [f"{sim.cases[ci]},{g},{c},{float(v)!r},{float(s)!r}"
-                 for (g, c), ci, v, s in zip(sim.rows.dofs, sim.rows.case_index, sim.values, sim.rows.sigma)]
-        (st.folder / "measurements.csv").write_text("\n".join(rows) + "\n")
         return {"case": case, "noncentrality": lam}
     return None
 

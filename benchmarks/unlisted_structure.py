@@ -42,12 +42,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.blind import generate as gen                            # noqa: E402
-from benchmarks.unlisted_defects import diagnosed, run_defects, study_loads  # noqa: E402
+from benchmarks.unlisted_defects import diagnosed, kept_readings, run_defects, study_loads  # noqa: E402
 from solver_adapters.bdf import read_deck                               # noqa: E402
 from solver_adapters.deck import Spc1                                   # noqa: E402
 
 DEFECTS = ("missing_member", "rotated_section", "base_fixity")
-LAMBDA_RANGE = (60.0, 1e4)
 
 
 def _places(deck, defect: str, joint_grids: set[int]) -> list:
@@ -119,13 +118,9 @@ def plant(st, defect: str, rng: np.random.Generator) -> dict | None:
             sim = gen.simulate_study(_changed(truth, defect, place), *args)
         except Exception:                           # a mechanism without the member: not this one
             continue
-        lam = float(np.sum(((sim.rows.true - clean.rows.true) / clean.rows.sigma) ** 2))
-        if not LAMBDA_RANGE[0] <= lam <= LAMBDA_RANGE[1]:
+        lam = kept_readings(st.folder, sim, clean)
+        if lam is None:
             continue
-        rows = ["case,grid,component,value,sigma"]
-        rows += [f"{sim.cases[ci]},{g},{c},{float(v)!r},{float(s)!r}"
-                 for (g, c), ci, v, s in zip(sim.rows.dofs, sim.rows.case_index, sim.values, sim.rows.sigma)]
-        (st.folder / "measurements.csv").write_text("\n".join(rows) + "\n")
         return {"place": list(place), "grids": sorted(_grids_of(truth, defect, place)), "noncentrality": lam}
     return None
 
