@@ -34,8 +34,8 @@ chi2 kept: the valley and a basin at a finite stiffness are both local minima. A
 positive definiteness); it is brought to the structure's stiffness by a congruence that keeps
 ``K_C`` positive definite. This is what a ``joint_coupling`` refit needs when the declared fit
 left one of the joint's springs rigid: from that nested point the refit stays in the rigid
-valley (likelihood ratio 0.02 on a hall frame of the blind benchmark, where the score says 408), from the
-structure's stiffness it reaches the coupled joint (507).
+valley (likelihood ratio 0.02 on a hall frame of the blind benchmark, where the score says
+408), from the structure's stiffness it reaches the coupled joint (507).
 
 Statistics (:mod:`blackbox.fitting.statistics`, the ones ``identify`` reports): Gaussian
 likelihood with the declared sigma, ``chi2``, reduced chi-square, BIC, hold-out chi2 and RMS
@@ -53,9 +53,9 @@ import numpy as np
 from blackbox.diagnosis.model import RIGID_RATIO, AugmentedModel, ModelSpec, ObsMap
 from blackbox.errors import IdentificationError
 from blackbox.fitting.lm import PROJECTED_SCHEDULE, NaturalCoordinates, ProjectedBoxBounds, levenberg_marquardt
+from blackbox.fitting.statistics import FitStatistics, HoldoutStats, chi2_band, covariance
 from blackbox.identification.problem import MatrixLog
 from blackbox.joints import ComplexJoint
-from blackbox.fitting.statistics import FitStatistics, HoldoutStats, chi2_band, covariance
 
 __all__ = ["Fit", "fit_model", "std_of", "chi2_band", "GRAM_RTOL", "RANK_RTOL"]
 
