@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from blackbox.diagnosis.fit import _as_stiff_as_the_structure, _DefiniteJoints
+from blackbox.diagnosis.fit import DEFINITE_LIFT, _as_stiff_as_the_structure, _DefiniteJoints, _into_definite
 from blackbox.diagnosis.model import RIGID_RATIO, ModelSpec
 from blackbox.identification.problem import MatrixLog
 from blackbox.joints import ComplexJoint, SimpleJoint, complex_params_from_kc
@@ -47,6 +47,25 @@ def test_a_rigid_mode_is_brought_back_by_a_congruence_that_keeps_kc_positive_def
     np.testing.assert_allclose(K2, d[:, None] * K * d[None, :], rtol=1e-14)    # rounding only
     assert np.linalg.eigvalsh(K2)[0] > 0
     np.testing.assert_array_equal(out[cj.n_params:], [1e3, 4e14 / RIGID_RATIO, 2e3])
+
+
+def test_a_singular_semidefinite_start_is_lifted_inside_and_nothing_else_moves():
+    """A simple joint with one spring at 0 nests as a singular ``K_C`` (no matrix logarithm): the
+    start is lifted to eigenvalues of at least ``DEFINITE_LIFT`` times the largest (``eigvalsh``,
+    rounding 1e-6 of that), moving no entry by more than that; a definite ``K_C``, an indefinite
+    one and the simple joint beside them are not touched."""
+    cj, cj2, sj = ComplexJoint("A", (1, 2)), ComplexJoint("C", (6, 7)), SimpleJoint("B", (4, 5))
+    spec = ModelSpec((cj, sj, cj2))
+    K = np.diag([3e7, 0.0, 2e7])
+    bad = np.array([[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]]) * 1e6     # indefinite
+    k = np.concatenate([complex_params_from_kc(K), [1e3, 0.0, 2e3], complex_params_from_kc(bad)])
+    out = _into_definite(spec, k)
+    mu = np.linalg.eigvalsh(cj.kc_matrix(out[:cj.n_params]))
+    assert mu[0] >= DEFINITE_LIFT * mu[-1] * (1 - 1e-6)
+    assert np.max(np.abs(out[:cj.n_params] - k[:cj.n_params])) <= 1.01 * DEFINITE_LIFT * 3e7
+    np.testing.assert_array_equal(out[cj.n_params:], k[cj.n_params:])
+    definite = np.concatenate([complex_params_from_kc(_spd(3, 4)), [1.0, 2.0, 3.0], complex_params_from_kc(bad)])
+    np.testing.assert_array_equal(_into_definite(spec, definite), definite)
 
 
 def test_definite_coordinates_round_trip_and_chain_rule():

@@ -185,6 +185,7 @@ def fit_model(model: AugmentedModel, om: ObsMap, hold: ObsMap | None, x0: np.nda
         raise IdentificationError("the model is singular at the start of a refit")
     if model.p:
         def run(k_start):
+            k_start = _into_definite(spec, k_start)
             p = prob.positive_definite(k_start)
             return levenberg_marquardt(p, p.coordinates.to_coords(k_start), max_iterations=max_iterations,
                                        xtol=0.0, ftol=FTOL, geodesic=False, schedule=PROJECTED_SCHEDULE)
@@ -213,6 +214,29 @@ def fit_model(model: AugmentedModel, om: ObsMap, hold: ObsMap | None, x0: np.nda
         h_rms, h_chi2, hn = hs.rms_error, hs.chi2, hs.n_obs
     return Fit(spec, x, std_of(Jn), fs.n_obs, fs.n_params, fs.chi2, fs.reduced_chi2, fs.rms_residual, fs.bic,
                (om.y - f) * w, f, h_rms, h_chi2, hn, bool(converged), msg, Jn, fh)
+
+
+DEFINITE_LIFT = 1e-9
+"""A start whose ``K_C`` is singular but positive semi-definite to rounding (a ``joint_coupling``
+nested at a simple joint with a spring at 0) has its eigenvalues raised to at least this times
+the largest, so that it has matrix-logarithm coordinates; the chi2 it changes is far below what
+candidates are compared by, and the refit moves such a mode by up to a factor 100 an iteration."""
+
+
+def _into_definite(spec: ModelSpec, k: np.ndarray) -> np.ndarray:
+    """``k`` with every complex joint's singular, positive semi-definite ``K_C`` lifted to
+    :data:`DEFINITE_LIFT` of its largest eigenvalue; an indefinite ``K_C`` (a start the refit
+    then iterates in the natural entries) and a definite one are left as they are."""
+    out = np.array(k, dtype=float)
+    for j, sl in zip(spec.joints, spec.joint_slices()):
+        if not isinstance(j, ComplexJoint):
+            continue
+        K = j.kc_matrix(out[sl])
+        mu = np.linalg.eigvalsh(K)
+        if not (mu[-1] > 0.0 and -1e-12 * mu[-1] <= mu[0] <= 0.0):
+            continue
+        out[sl] = j.params_from_kc(K + (DEFINITE_LIFT * mu[-1] - mu[0]) * np.eye(j.m))
+    return out
 
 
 def _as_stiff_as_the_structure(spec: ModelSpec, k: np.ndarray, rigid: np.ndarray, limit: np.ndarray) -> np.ndarray:
