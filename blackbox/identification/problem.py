@@ -104,8 +104,8 @@ class MatrixLog:
         with np.errstate(invalid="ignore", divide="ignore"):   # (1 - e^-a) / a without overflow
             q = np.where(a > 0.0, -np.expm1(-a) / a, 1.0)
         gamma = np.exp(np.maximum(lam[:, None], lam[None, :])) * q
-        Et = np.einsum("ai,qab,bj->qij", V, self.E, V)
-        dK = np.einsum("ia,qab,jb->qij", V, Et * gamma, V)
+        Et = V.T @ self.E @ V                      # V^T E_q V for every basis matrix, O(q m^3)
+        dK = V @ (Et * gamma) @ V.T
         return dK[:, self.iu[0], self.iu[1]].T
 
 
