@@ -243,7 +243,7 @@ def diagnosed(st, family: str, defect: str, where) -> tuple[dict | None, dict | 
                       "error": f"{type(exc).__name__}: {exc}"[:300]}, time.perf_counter() - t0
 
 
-def run_one(index: int, seed: int, family: str, defect: str, out: Path) -> dict:
+def run_one(index: int, seed: int, family: str, defect: str, out: Path) -> dict | None:
     st = generate_study(index, seed, out / defect, kind=NONE, shape=family, style="plain")
     rng = np.random.default_rng([seed, index, DEFECTS.index(defect)])
     where = plant_load(st, defect, rng) if defect in LOAD_DEFECTS else plant(st.folder, defect, rng)
