@@ -353,3 +353,22 @@ def test_separating_measurements(cube_prepared):
     size = mags[0] if dl[1] <= 3 else mags[1]
     assert ld["value"] == size
     assert ld["separation_sigma"] == pytest.approx(np.linalg.norm((Va - Vb) / csig) * size, rel=1e-10)
+
+
+def test_a_share_of_another_reading_is_judged_alike_for_a_swap_and_a_misplaced_sensor():
+    """``channel_swap`` and ``misplaced_sensor`` share one rule (``ReadsAnother``): the refit
+    also starts at the whole defect (share 1), and a share below 1/2 or above 3/2 is refused
+    with a message that says how the channels read; 1/2 to 3/2 is accepted."""
+    from blackbox.diagnosis.effects import ChannelSwap, MisplacedSensor
+    swap = ChannelSwap((3, 7), ("swap_3_7_1",), component=1)
+    moved = MisplacedSensor((3,), ("t_3_9",), read_at=9, components=(1,), weights=((1.0, 0.0, 0.0),))
+    x2, step = np.array([5.0, 0.0]), np.array([0.2])
+    lo, hi = np.array([0.0, 0.0]), np.array([10.0, 2.0])
+    for e in (swap, moved):
+        starts = e.refit_starts(x2, step, lo, hi, 1)
+        assert [s[1] for s in starts] == [0.0, 0.2, 1.0] and all(s[0] == 5.0 for s in starts)
+        assert e.rejection(np.array([0.5])) is None and e.rejection(np.array([1.5])) is None
+    assert swap.rejection(np.array([0.3])) == "the channels mix by 0.3: mostly their own grids, not a swap"
+    assert swap.rejection(np.array([1.7])) == "the channels mix by 1.7: more than a swap can explain"
+    assert moved.rejection(np.array([0.3])) == "the channels read 0.3 of grid 9: mostly their own grid, not misplaced"
+    assert moved.rejection(np.array([1.7])) == "the channels read 1.7 of grid 9: more than a misplacement can explain"

@@ -53,7 +53,7 @@ if TYPE_CHECKING:
     from blackbox.joints import JointModel
     from solver_adapters.protocol import Deck, LoadMatrix
 
-__all__ = ["CandidateContext", "CandidateLimit", "Effect", "JointCaseEffect", "OnChannel", "SetAsideEffect", "finite_or_none",
+__all__ = ["CandidateContext", "CandidateLimit", "Effect", "JointCaseEffect", "OnChannel", "ReadsAnother", "SetAsideEffect", "finite_or_none",
            "kept_parameters", "proximity"]
 
 
@@ -482,6 +482,34 @@ class OnChannel:
 
     def marker_points(self, xyz, deck):
         return [xyz[self.grid]] if self.grid in xyz else []
+
+
+class ReadsAnother:
+    """What an effect whose one parameter ``t`` is the share of another DOF's displacement that
+    channels read (0 nested, 1 the whole defect: two channels swapped, a sensor on the
+    neighbouring grid) does on top of :class:`Effect`: its refit also starts at the whole defect,
+    and a share below 1/2 (mostly the channels' own reading) or above 3/2 (more than the defect
+    can explain) is no defect of its kind. Mixed into an :class:`Effect` dataclass that says how
+    its share reads (:meth:`share_read`), what a low share is (:attr:`not_low`) and what the whole
+    defect is called (:attr:`summary_noun`)."""
+    not_low = ""
+    summary_noun = ""
+
+    def share_read(self, t: float) -> str:
+        raise NotImplementedError
+
+    def refit_starts(self, x2, step, lo, hi, first):
+        whole = x2.copy()
+        whole[first:] = 1.0
+        return super().refit_starts(x2, step, lo, hi, first) + [whole]
+
+    def rejection(self, x_effect: np.ndarray) -> str | None:
+        t = float(np.asarray(x_effect)[0])
+        if t < 0.5:
+            return f"{self.share_read(t)}: {self.not_low}"
+        if t > 1.5:
+            return f"{self.share_read(t)}: more than {self.summary_noun} can explain"
+        return None
 
 
 class JointCaseEffect(Effect):

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from blackbox.diagnosis.effects.base import Effect
+from blackbox.diagnosis.effects.base import Effect, ReadsAnother
 from blackbox.diagnosis.effects.registry import register
 
 __all__ = ["ChannelSwap"]
@@ -26,7 +26,7 @@ __all__ = ["ChannelSwap"]
 
 @register
 @dataclass(frozen=True, eq=False)
-class ChannelSwap(Effect):
+class ChannelSwap(ReadsAnother, Effect):
     kind = "channel_swap"
     summary = "two measurement channels were exchanged (the data, not the structure)"
     of_data = True
@@ -102,19 +102,11 @@ class ChannelSwap(Effect):
                         np.concatenate(vals_all) if vals_all else np.zeros(0)))
         return out
 
-    def refit_starts(self, x2, step, lo, hi, first):
-        swapped = x2.copy()
-        swapped[first:] = 1.0
-        return super().refit_starts(x2, step, lo, hi, first) + [swapped]
+    not_low = "mostly their own grids, not a swap"
+    summary_noun = "a swap"
 
-    def rejection(self, x_effect: np.ndarray) -> str | None:
-        """A fraction below 1/2 is no defect of this kind (at 1, its bound, it is the whole defect)."""
-        s = float(np.asarray(x_effect)[0])
-        if s < 0.5:
-            return f"the channels mix by {s:.3g}: mostly their own grids, not a swap"
-        if s > 1.5:
-            return f"the channels mix by {s:.3g}: more than a swap can explain"
-        return None
+    def share_read(self, t: float) -> str:
+        return f"the channels mix by {t:.3g}"
 
     def details_json(self) -> dict:
         return {"component": self.component}

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from blackbox.diagnosis.decks import constrained_grids
-from blackbox.diagnosis.effects.base import Effect
+from blackbox.diagnosis.effects.base import Effect, ReadsAnother
 from blackbox.diagnosis.effects.registry import register
 
 __all__ = ["MisplacedSensor", "neighbours"]
@@ -39,7 +39,7 @@ def neighbours(deck) -> dict[int, list[int]]:
 
 @register
 @dataclass(frozen=True, eq=False)
-class MisplacedSensor(Effect):
+class MisplacedSensor(ReadsAnother, Effect):
     """``read_at``: the neighbour grid; ``components``: the channels of ``where[0]`` it moves;
     ``weights[k]``: for channel ``components[k]``, the three weights of ``h``'s components of the
     same kind (translations or rotations) that give ``h``'s motion along ``g``'s direction."""
@@ -147,19 +147,11 @@ class MisplacedSensor(Effect):
                         np.concatenate(vals_all) if vals_all else np.zeros(0)))
         return out
 
-    def refit_starts(self, x2, step, lo, hi, first):
-        moved = x2.copy()
-        moved[first:] = 1.0
-        return super().refit_starts(x2, step, lo, hi, first) + [moved]
+    not_low = "mostly their own grid, not misplaced"
+    summary_noun = "a misplacement"
 
-    def rejection(self, x_effect: np.ndarray) -> str | None:
-        """A fraction below 1/2 is no defect of this kind (at 1, its bound, it is the whole defect)."""
-        t = float(np.asarray(x_effect)[0])
-        if t < 0.5:
-            return f"the channels read {t:.3g} of grid {self.read_at}: mostly their own grid, not misplaced"
-        if t > 1.5:
-            return f"the channels read {t:.3g} of grid {self.read_at}: more than a misplacement can explain"
-        return None
+    def share_read(self, t: float) -> str:
+        return f"the channels read {t:.3g} of grid {self.read_at}"
 
     def details_json(self) -> dict:
         return {"read_at": self.read_at, "components": list(self.components)}
