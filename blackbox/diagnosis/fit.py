@@ -99,16 +99,20 @@ class _Refit:
         self.coordinates = NaturalCoordinates()
         self.bounds = ProjectedBoxBounds(lo, hi)
 
-    def positive_definite(self, k: np.ndarray) -> "_Refit":
-        """The same refit with every complex joint in matrix-logarithm coordinates
-        (:class:`_DefiniteJoints`) when its ``K_C`` at ``k`` is positive definite; else ``self``."""
+    def positive_definite(self, k: np.ndarray) -> tuple["_Refit", np.ndarray]:
+        """``(refit, coordinates of k)``: the same refit with every complex joint in
+        matrix-logarithm coordinates (:class:`_DefiniteJoints`) when its ``K_C`` at ``k`` is
+        positive definite; else ``self`` in natural coordinates."""
         blocks = [MatrixLog(sl, j.m) for j, sl in zip(self.model.spec.joints, self.model.spec.joint_slices())
                   if isinstance(j, ComplexJoint)]
-        if not blocks or not all(np.all(np.isfinite(b.to_phi(k[b.sl]))) for b in blocks):
-            return self
-        out = copy.copy(self)
-        out.coordinates = _DefiniteJoints(blocks)
-        return out
+        if blocks:
+            coordinates = _DefiniteJoints(blocks)
+            x = coordinates.to_coords(k)
+            if all(np.all(np.isfinite(x[b.sl])) for b in blocks):
+                out = copy.copy(self)
+                out.coordinates = coordinates
+                return out, x
+        return self, self.coordinates.to_coords(k)
 
     def predict(self, k: np.ndarray):
         try:
@@ -186,8 +190,8 @@ def fit_model(model: AugmentedModel, om: ObsMap, hold: ObsMap | None, x0: np.nda
     if model.p:
         def run(k_start):
             k_start = _into_definite(spec, k_start)
-            p = prob.positive_definite(k_start)
-            return levenberg_marquardt(p, p.coordinates.to_coords(k_start), max_iterations=max_iterations,
+            p, x_start = prob.positive_definite(k_start)
+            return levenberg_marquardt(p, x_start, max_iterations=max_iterations,
                                        xtol=0.0, ftol=FTOL, geodesic=False, schedule=PROJECTED_SCHEDULE)
         res = run(x)
         # a spring (or a mode of K_C) that ended rigid may sit in the flat valley of a misfit
