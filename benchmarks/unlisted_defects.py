@@ -75,13 +75,8 @@ def plant(folder: Path, defect: str, rng: np.random.Generator) -> dict:
     fields, rows = _read(folder / "measurements.csv")
     cases = list(dict.fromkeys(r["case"] for r in rows))
     channels = list(dict.fromkeys((r["grid"], r["component"]) for r in rows))
-    fitted = set(cases)
-    toml = (folder / "study.toml").read_text()
-    hold = [c for c in cases if f'"{c}"' in toml.split("holdout_cases", 1)[-1].split("]", 1)[0]] \
-        if "holdout_cases" in toml else []
-    fitted -= set(hold)
     if defect in ("units", "swapped_cases"):
-        pick = sorted(fitted, key=cases.index)
+        pick = fitted_cases(folder, cases)
         if defect == "units":
             c = str(rng.choice(pick))
             for r in rows:
@@ -138,7 +133,8 @@ def study_loads(folder: Path) -> list[tuple[str, int, int, float]]:
     return [(L.cases[j], L.dofs[i][0], L.dofs[i][1], v) for j, i, v in rows]
 
 
-def _fitted_cases(folder: Path, cases: list[str]) -> list[str]:
+def fitted_cases(folder: Path, cases: list[str]) -> list[str]:
+    """``cases`` (in their order) less the study's hold-out cases (study.toml ``holdout_cases``)."""
     toml = (folder / "study.toml").read_text()
     hold = toml.split("holdout_cases", 1)[-1].split("]", 1)[0] if "holdout_cases" in toml else ""
     return [c for c in cases if f'"{c}"' not in hold]
@@ -210,9 +206,10 @@ def plant_load(st, defect: str, rng: np.random.Generator) -> dict | None:
     cases = list(dict.fromkeys(r[0] for r in loads))
     rest = (p["joints"], p["away_grids"], [], noise, seed)
     clean = gen.simulate_study(truth, loads, *rest)
+    fitted = fitted_cases(st.folder, cases)
     for i in rng.permutation(len(cases)).tolist():
         case = cases[i]
-        if case not in _fitted_cases(st.folder, cases):
+        if case not in fitted:
             continue
         changed = _moved_loads(truth, loads, case, defect, rng)
         if changed is None:
@@ -315,8 +312,7 @@ def table(rows: list[dict]) -> str:
         else:
             # a data effect of the case: set aside or scaled, or one reading of it an outlier
             cases = set(w.get("cases") or [w.get("case")])
-            placed = bool(r["added"]) and all(a[2] == "data" and (set(map(str, a[1])) <= cases or
-                                                                  (len(a) > 5 and a[5] in cases))
+            placed = bool(r["added"]) and all(a[2] == "data" and (set(map(str, a[1])) <= cases or a[5] in cases)
                                               for a in r["added"])
         out.append(f"| {r['study']} | {r['family']} | {r['defect']} | {at} | {added} | {r['verdict']} | "
                    f"{'yes' if placed else 'no'} |")
