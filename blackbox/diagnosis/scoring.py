@@ -47,6 +47,7 @@ class CandidateScore:
     lr_p_value: float | None = None
     lr_p_adjusted: float | None = None
     holdout_delta_chi2: float | None = None
+    holdout_dispersion: float = 1.0     # search.holdout_dispersion after the refit
     accepted: bool = False
     reason: str = ""
     variants: tuple = ()                # search.VariantTrial: richer variants tried after acceptance
@@ -56,9 +57,10 @@ class CandidateScore:
 
     @property
     def evidence(self) -> float:
-        """``delta_bic`` plus the hold-out chi2 change (when there are hold-out cases): what ranks
-        and admits an addition (:mod:`blackbox.diagnosis.validation`)."""
-        return self.delta_bic + (self.holdout_delta_chi2 or 0.0)
+        """``delta_bic`` plus the hold-out chi2 change (when there are hold-out cases) over the
+        hold-out's dispersion: what ranks an addition against the others
+        (:func:`blackbox.diagnosis.search.evidence`)."""
+        return self.delta_bic + (self.holdout_delta_chi2 or 0.0) / self.holdout_dispersion
 
 
 class Projector:

@@ -73,7 +73,7 @@ from blackbox.identification import Observations
 from blackbox.joints import ComplexJoint, JointModel, SimpleJoint
 from solver_adapters.protocol import DofLabel
 
-__all__ = ["declared_fit", "multipliers", "hypotheses_by_kind", "refit_schedule", "screen", "SCREEN_DOF_COLUMNS", "eliminate", "without", "Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "holdout_worse", "VERDICTS", "verdict",
+__all__ = ["declared_fit", "multipliers", "hypotheses_by_kind", "refit_schedule", "screen", "SCREEN_DOF_COLUMNS", "eliminate", "without", "Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "holdout_dispersion", "holdout_worse", "VERDICTS", "verdict",
            "refit_candidate", "subsumed_removed", "refine", "round_level", "diagnose", "map_refits", "refits_pay"]
 
 
@@ -276,10 +276,16 @@ class Judgement:
     kfold_delta_chi2: float | None
     reasons: tuple[str, ...]
     note: str = ""
+    holdout_dispersion: float = 1.0
 
     @property
     def accepted(self) -> bool:
         return not self.reasons
+
+    @property
+    def evidence(self) -> float:
+        """What ranks an addition against others (:func:`evidence`)."""
+        return evidence(self.delta_bic, self.holdout_delta_chi2, self.holdout_dispersion)
 
     @property
     def decision(self) -> str:
@@ -323,10 +329,23 @@ def holdout_chi2(fit: Fit, hold: ObsMap, keep: np.ndarray) -> float:
     return float(np.sum(((hold.y - fit.holdout_predicted) / hold.sigma)[keep] ** 2))
 
 
-def evidence(delta_bic: float, holdout_delta_chi2: float | None) -> float:
-    """What ranks and admits an addition: ``delta BIC`` plus the hold-out chi2 change when there
-    are hold-out cases (:mod:`blackbox.diagnosis.validation`)."""
-    return delta_bic + (holdout_delta_chi2 or 0.0)
+def evidence(delta_bic: float, holdout_delta_chi2: float | None, dispersion: float = 1.0) -> float:
+    """``delta BIC`` plus the hold-out chi2 change when there are hold-out cases
+    (:mod:`blackbox.diagnosis.validation`), that change divided by the hold-out's ``dispersion``
+    (:func:`holdout_dispersion`) where it ranks additions against each other; admitting one
+    weighs it undivided (``dispersion`` 1)."""
+    return delta_bic + (holdout_delta_chi2 or 0.0) / dispersion
+
+
+def holdout_dispersion(chi2: float, n: int) -> float:
+    """The hold-out's excess dispersion after an addition: its chi2 per reading ``chi2 / n``, at
+    least 1 -- the quasi-likelihood scale the LR test takes from the fitted readings' reduced
+    chi2. A hold-out that the fit still predicts at many times the noise (its cases excite joint
+    parameters the fitted cases leave loose) changes its chi2 with every move of those parameters,
+    by amounts that follow the loose parameters more than the effect; divided by the dispersion,
+    such a change ranks an addition as a change of that size would in a hold-out predicted to
+    its noise, and an addition that predicts the hold-out to its noise keeps its whole change."""
+    return max(1.0, chi2 / max(n, 1))
 
 
 class Checks:
@@ -380,13 +399,15 @@ class Checks:
         if not dbic < 0:
             reasons.append(f"BIC does not improve ({dbic:+.4g})")
         dh = dcv = None
+        disp = 1.0
         if self.val.kind == "holdout" and fit.holdout_chi2 is not None and f2.holdout_chi2 is not None:
             # readings the addition sets aside (a bad channel's hold-out readings) are compared
             # for neither fit: what it claims is that they follow no model
             aside = e.set_aside_rows(self.hold) if e is not None else None
             keep = None if aside is None or not aside.any() else ~aside
-            dh = f2.holdout_chi2 - fit.holdout_chi2 if keep is None else \
-                holdout_chi2(f2, self.hold, keep) - holdout_chi2(fit, self.hold, keep)
+            h2 = f2.holdout_chi2 if keep is None else holdout_chi2(f2, self.hold, keep)
+            dh = h2 - (fit.holdout_chi2 if keep is None else holdout_chi2(fit, self.hold, keep))
+            disp = holdout_dispersion(h2, len(self.hold.y) if keep is None else int(keep.sum()))
             if dbic < 0 and not evidence(dbic, dh) < 0:
                 reasons.append(f"the hold-out prediction gets worse by more than the fit improves "
                                f"(delta BIC {dbic:+.4g}, hold-out chi2 {dh:+.4g})")
@@ -400,12 +421,13 @@ class Checks:
                 note = "confined to cases no other fold predicts: LR test and BIC only"
             elif not dcv < 0:
                 reasons.append(f"the {self.val.k}-fold prediction over load cases is not better (chi2 {dcv:+.4g})")
-        return Judgement(lr, lr_p, lr_adj, dbic, dh, dcv, tuple(reasons), note)
+        return Judgement(lr, lr_p, lr_adj, dbic, dh, dcv, tuple(reasons), note, disp)
 
 
 def _judged(c: CandidateScore, j: Judgement, **kw) -> CandidateScore:
     return replace(c, lr=j.lr, lr_p_value=j.lr_p, lr_p_adjusted=j.lr_p_adjusted, delta_bic=j.delta_bic,
-                   holdout_delta_chi2=j.holdout_delta_chi2, kfold_delta_chi2=j.kfold_delta_chi2,
+                   holdout_delta_chi2=j.holdout_delta_chi2, holdout_dispersion=j.holdout_dispersion,
+                   kfold_delta_chi2=j.kfold_delta_chi2,
                    accepted=j.accepted, reason=j.decision, **kw)
 
 
@@ -465,8 +487,8 @@ def refine(base: SplitBase, fit: Fit, i: int, om: ObsMap, hold: ObsMap | None, b
                 j = replace(j, reasons=j.reasons + ("no parameter added after dropping those at their bound",))
             trials.append(VariantTrial(r2, e.variant, f2, j.lr, j.lr_p, j.lr_p_adjusted, j.delta_bic,
                                        j.holdout_delta_chi2, j.accepted, j.decision, j.kfold_delta_chi2))
-            if j.accepted and (best is None or evidence(j.delta_bic, j.holdout_delta_chi2) < best[1]):
-                best = (f2, evidence(j.delta_bic, j.holdout_delta_chi2))
+            if j.accepted and (best is None or j.evidence < best[1]):
+                best = (f2, j.evidence)
         if best is None:
             return fit, tuple(trials)
         fit = best[0]
@@ -665,7 +687,7 @@ def eliminate(ctx: _Refits, fit: Fit, mults: dict, alpha: float, checks: "Checks
                 continue
             jd = checks.judge(f_minus, fit, mults.get(e.key, 1.0), alpha, j)
             if not jd.accepted:
-                ev = evidence(jd.delta_bic, jd.holdout_delta_chi2)
+                ev = jd.evidence
                 if worst is None or ev > worst[0]:
                     worst = (ev, e, jd, f_minus)
         if worst is None:
