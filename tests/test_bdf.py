@@ -412,6 +412,7 @@ MALFORMED = [
     ("PBARL dimension zero", "PBARL,2,1,,BAR\n,.1,0.\n", 9, "PBARL", 11, "DIM2 must be > 0"),
     ("PBARL dimension missing", "PBARL,2,1,,TUBE\n,.1\n", 9, "PBARL", 11, "required real"),
     ("PBARL tube inside out", "PBARL,2,1,,TUBE\n,.1,.2\n", 9, "PBARL", 11, "inner radius"),
+    ("PBARL TUBE2 wall thicker than the radius", "PBARL,2,1,,TUBE2\n,.1,.2\n", 9, "PBARL", 11, "wall thickness"),
     ("PBARL box walls", "PBARL,2,1,,BOX\n,.1,.1,.05,.01\n", 9, "PBARL", 12, "horizontal walls"),
     ("PBARL too many dims", "PBARL,2,1,,ROD\n,.1,0.,.3\n", 9, "PBARL", 12, "at most 11"),
     ("CELAS2 without K", "CELAS2,9,,1,1\n", 8, "CELAS2", 3, "required real"),

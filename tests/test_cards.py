@@ -573,7 +573,8 @@ def test_loads_and_results_in_cd_are_the_basic_ones_turned():
 PBARL_DECK = DATA / "pbarl_cantilevers.bdf"
 PBARL_TYPES = {1: ("ROD", (0.01,)), 2: ("TUBE", (0.02, 0.015)), 3: ("BAR", (0.02, 0.04)),
                4: ("BOX", (0.04, 0.06, 0.004, 0.004)), 5: ("I", (0.1, 0.06, 0.05, 0.005, 0.008, 0.006)),
-               6: ("CHAN", (0.04, 0.08, 0.004, 0.005)), 7: ("T", (0.06, 0.08, 0.006, 0.005))}
+               6: ("CHAN", (0.04, 0.08, 0.004, 0.005)), 7: ("T", (0.06, 0.08, 0.006, 0.005)),
+               8: ("TUBE2", (0.02, 0.005))}
 
 
 def rectangles(kind, d):
@@ -625,12 +626,17 @@ def test_pbarl_area_and_inertias_against_integration(k):
 
 def test_pbarl_closed_forms():
     """Circles exactly; J as documented (pbarl_section): ROD/TUBE polar moment, BAR Roark's
-    series, BOX Bredt, I/CHAN/T the thin-walled sum; shear factors 6/7, Cowper's tube, 5/6."""
+    series, BOX Bredt, I/CHAN/T the thin-walled sum; shear factors 6/7, Cowper's tube, 5/6;
+    TUBE2 the TUBE of the same outer radius and wall."""
     deck = read_deck(PBARL_DECK)
     rod, tube, bar, box = (deck.pbars[k] for k in (1, 2, 3, 4))
     assert (rod.a, rod.i1, rod.j, rod.k1) == pytest.approx((np.pi * 1e-4, np.pi * 1e-8 / 4,
                                                             np.pi * 1e-8 / 2, 6 / 7), rel=1e-15)
     assert tube.j == pytest.approx(np.pi * (0.02**4 - 0.015**4) / 2, rel=1e-15)
+    # TUBE2 (outer radius 0.02, wall 0.005) is the same tube: every constant to round-off
+    tube2 = deck.pbars[8]
+    for f in ("a", "i1", "i2", "j", "k1", "k2"):
+        assert getattr(tube2, f) == pytest.approx(getattr(tube, f), rel=1e-14), f
     m2 = 0.75**2
     assert tube.k1 == pytest.approx(6 * (1 + m2) ** 2 / (7 * (1 + m2) ** 2 + 20 * m2), rel=1e-15)
     assert bar.j == pytest.approx(0.04 * 0.02**3 * (1 / 3 - 0.21 * 0.5 * (1 - 0.5**4 / 12)), rel=1e-15)

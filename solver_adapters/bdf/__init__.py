@@ -13,7 +13,7 @@ bulk converter.
 
 Cards modelled: GRID (CP and CD systems), GRDSET, CORD1R/C/S and CORD2R/C/S (resolved to basic,
 nested in any order), CBAR (pin flags, offsets; orientation and offsets turned into basic),
-BAROR, PBAR (K1/K2, I12), PBARL (ROD, TUBE, BAR, BOX, I, CHAN, T, L), CBEAM/PBEAM/PBEAML
+BAROR, PBAR (K1/K2, I12), PBARL (ROD, TUBE, TUBE2, BAR, BOX, I, CHAN, T, L), CBEAM/PBEAM/PBEAML
 (prismatic, no warping), CROD, PROD, CONROD, CTUBE and PTUBE (a rod of the tube's A and J), MAT1
 (completed as NASTRAN does), SPC1, SPC (zero enforced value), SPCADD, RBE2, RBAR (all six
 independent components at one grid: an RBE2), RBE3, CBUSH/PBUSH, PELAS, CELAS1, CELAS2,

@@ -8,7 +8,7 @@ from solver_adapters.bdf.fields import _blank, _max_fields, _int, _real
 from solver_adapters.deck import PBar
 
 # PBARL section types: number of dimensions DIM1..DIMn (MSC QRG, PBARL)
-PBARL_DIMS = {"ROD": 1, "TUBE": 2, "BAR": 2, "BOX": 4, "I": 6, "CHAN": 4, "T": 4, "L": 4}
+PBARL_DIMS = {"ROD": 1, "TUBE": 2, "TUBE2": 2, "BAR": 2, "BOX": 4, "I": 6, "CHAN": 4, "T": 4, "L": 4}
 # types whose section is not symmetric about y or z (I12 != 0): PBARL only (see _pbeaml)
 UNSYMMETRIC = frozenset({"L"})
 
@@ -21,6 +21,8 @@ def pbarl_section(kind: str, d: tuple[float, ...]) -> tuple[float, ...]:
     thicker than the section).
 
     A, I1, I2 are exact for the idealized shape (rectangles, circles), about the centroid.
+    TUBE2 is TUBE given by its outer radius DIM1 and wall thickness DIM2 (inner radius DIM1 -
+    DIM2), as MYSTRAN 18 takes it (BD_PBARL.f90, SECTION_PROPS_TUBE2).
     J: ROD, TUBE exact (polar moment); BAR Roark's series for a solid rectangle
     (a b^3 (1/3 - 0.21 b/a (1 - b^4 / (12 a^4))), a >= b, within 0.5 % of St Venant's value);
     BOX Bredt's thin-walled closed section on the wall mid-line, 4 A_m^2 / sum(s_i / t_i);
@@ -50,9 +52,13 @@ def pbarl_section(kind: str, d: tuple[float, ...]) -> tuple[float, ...]:
         (r,) = d
         i = pi * r**4 / 4
         return pi * r * r, i, i, 2 * i, 6 / 7, 6 / 7, 0.0
-    if kind == "TUBE":
+    if kind in ("TUBE", "TUBE2"):
         r1, r2 = d
-        if not r2 < r1:
+        if kind == "TUBE2":                       # DIM2 the wall thickness (MSC QRG PBARL)
+            if not 0.0 < r2 <= r1:
+                raise ValueError(1, "wall thickness DIM2 must be positive and at most the outer radius DIM1")
+            r2 = r1 - r2
+        elif not r2 < r1:
             raise ValueError(1, "inner radius DIM2 must be smaller than the outer radius DIM1")
         i = pi * (r1**4 - r2**4) / 4
         m2 = (r2 / r1) ** 2
