@@ -18,7 +18,14 @@ in no list of the diagnosis, each of a kind real static tests have:
   other end of a member at the declared load point: the actuator on the wrong node), the
   readings measured again from the truth with the study's own noise draws;
 * ``tilted_load``: one fitted case's load is turned 15 degrees off its declared direction (an
-  actuator mounted askew), measured again the same way.
+  actuator mounted askew), measured again the same way;
+* ``saturated``: one channel reads at most 60 % of its largest reading (a transducer past its
+  range: the larger readings clipped, sign kept);
+* ``reversed_case``: one fitted case was loaded the other way (an actuator pushing where the log
+  says pull): its readings are the declared ones' negatives;
+* ``rig_slip``: in one fitted case the whole specimen moved as a rigid body (the test frame or a
+  support base slid): every reading of the case gets one small rigid translation and rotation,
+  sized to a noncentrality drawn log-uniform in :data:`LAMBDA_RANGE`.
 
 The two load defects are placed where they move the readings by a noncentrality between 60 and
 1e4 (whitened, before any refit), as the unlisted defects of the structure are.
@@ -52,7 +59,8 @@ from benchmarks.blind.generate import NONE, generate_study              # noqa: 
 from blackbox.study import load_study                                   # noqa: E402
 from solver_adapters.bdf import read_deck                               # noqa: E402
 
-DEFECTS = ("drift", "slip", "noisy", "dead", "units", "swapped_cases", "misplaced_load", "tilted_load")
+DEFECTS = ("drift", "slip", "noisy", "dead", "units", "swapped_cases", "misplaced_load", "tilted_load",
+           "saturated", "reversed_case", "rig_slip")
 LOAD_DEFECTS = ("misplaced_load", "tilted_load")
 LAMBDA_RANGE = (60.0, 1e4)          # noncentrality of a planted defect: clearly detectable, not absurd
 
@@ -75,9 +83,17 @@ def plant(folder: Path, defect: str, rng: np.random.Generator) -> dict:
     fields, rows = _read(folder / "measurements.csv")
     cases = list(dict.fromkeys(r["case"] for r in rows))
     channels = list(dict.fromkeys((r["grid"], r["component"]) for r in rows))
-    if defect in ("units", "swapped_cases"):
+    if defect in ("units", "swapped_cases", "reversed_case", "rig_slip"):
         pick = fitted_cases(folder, cases)
-        if defect == "units":
+        if defect == "rig_slip":
+            where = _rig_slip(folder, rows, str(rng.choice(pick)), rng)
+        elif defect == "reversed_case":
+            c = str(rng.choice(pick))
+            for r in rows:
+                if r["case"] == c:
+                    r["value"] = repr(-float(r["value"]))
+            where = {"case": c}
+        elif defect == "units":
             c = str(rng.choice(pick))
             for r in rows:
                 if r["case"] == c:
@@ -107,6 +123,7 @@ def plant(folder: Path, defect: str, rng: np.random.Generator) -> dict:
     ch = big[int(rng.integers(len(big)))] if big else channels[int(rng.integers(len(channels)))]
     rr = [r for r in rows if (r["grid"], r["component"]) == ch]
     sig = float(np.median([float(r["sigma"]) for r in rr]))
+    peak = max(abs(float(r["value"])) for r in rr)
     n = len(cases)
     for r in rr:
         i = cases.index(r["case"])
@@ -119,9 +136,42 @@ def plant(folder: Path, defect: str, rng: np.random.Generator) -> dict:
             v += float(rng.normal(0.0, 6.0 * s))
         elif defect == "dead":
             v = float(rng.normal(0.0, s))
+        elif defect == "saturated":
+            v = math.copysign(min(abs(v), SATURATION * peak), v)
         r["value"] = repr(v)
     _write(folder / "measurements.csv", fields, rows)
     return {"grid": int(ch[0]), "component": int(ch[1])}
+
+
+SATURATION = 0.6                    # a saturated channel's range, as a share of its largest reading
+
+
+def _rig_slip(folder: Path, rows: list[dict], case: str, rng: np.random.Generator) -> dict:
+    """Add one rigid-body motion of the whole specimen to ``case``'s readings (module docstring):
+    a translation ``t`` and a rotation ``w`` about the measured grids' centre, ``|w| L = |t|``
+    (``L`` their largest distance from it), scaled to the drawn noncentrality; each reading in its
+    grid's CD system."""
+    deck = read_deck(folder / "model.bdf")
+    mine = [r for r in rows if r["case"] == case]
+    grids = sorted({int(r["grid"]) for r in mine})
+    xyz = {g: np.asarray(deck.grids[g].xyz, float) for g in grids}
+    frame = dict(zip(grids, deck.displacement_frames(grids)))      # rows: CD axes in basic
+    c0 = np.mean(list(xyz.values()), axis=0)
+    size = max(float(np.linalg.norm(x - c0)) for x in xyz.values()) or 1.0
+    t, w = rng.normal(size=3), rng.normal(size=3)
+    t, w = t / np.linalg.norm(t), w / np.linalg.norm(w) / size
+
+    def motion(r) -> float:
+        g, k = int(r["grid"]), int(r["component"])
+        u = t + np.cross(w, xyz[g] - c0) if k <= 3 else w
+        return float(frame[g][(k - 1) % 3] @ u)
+
+    unit = np.array([motion(r) / float(r["sigma"]) for r in mine])
+    lam = float(np.exp(rng.uniform(*np.log(LAMBDA_RANGE))))
+    a = math.sqrt(lam / float(unit @ unit))
+    for r in mine:
+        r["value"] = repr(float(r["value"]) + a * motion(r))
+    return {"case": case, "noncentrality": lam}
 
 
 def study_loads(folder: Path) -> list[tuple[str, int, int, float]]:

@@ -854,6 +854,64 @@ def test_unlisted_load_defects_change_one_case_as_they_name(tmp_path):
                     assert abs(np.degrees(np.arccos(np.clip(v0 @ v1 / n0 ** 2, -1, 1))) - 15.0) < 1e-6
 
 
+def test_unlisted_reading_defects_change_what_they_name(tmp_path):
+    """``saturated`` clips one channel at 60 % of its largest reading and touches no other;
+    ``reversed_case`` negates one fitted case's readings; ``rig_slip`` adds to one fitted case a
+    motion that is rigid (exact: a translation plus a rotation about one point, read along each
+    reading's CD direction, reproduces it to rounding, 1e-9 of its size) and whose noncentrality is the one it reports (1e-9)."""
+    import csv
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import unlisted_defects as ud
+
+    st = gen.generate_study(0, 7, tmp_path, kind=gen.NONE, shape="hall", style="plain")
+    before = (st.folder / "measurements.csv").read_text()
+
+    def rows():
+        with open(st.folder / "measurements.csv", newline="") as f:
+            return {(r["case"], int(r["grid"]), int(r["component"])): (float(r["value"]), float(r["sigma"]))
+                    for r in csv.DictReader(f)}
+
+    r0 = rows()
+    hold = set(r0) and {c for c, _, _ in r0} - set(ud.fitted_cases(st.folder, sorted({c for c, _, _ in r0})))
+    deck = read_deck(st.folder / "model.bdf")
+    for defect in ("saturated", "reversed_case", "rig_slip"):
+        (st.folder / "measurements.csv").write_text(before)
+        where = ud.plant(st.folder, defect, np.random.default_rng(5))
+        r1 = rows()
+        assert r1.keys() == r0.keys()
+        changed = {k for k in r0 if r1[k][0] != r0[k][0]}
+        if defect == "saturated":
+            ch = (where["grid"], where["component"])
+            assert changed and {k[1:] for k in changed} == {ch}
+            peak = max(abs(v) for k, (v, _) in r0.items() if k[1:] == ch)
+            for k in changed:
+                assert r1[k][0] == pytest.approx(np.sign(r0[k][0]) * 0.6 * peak, rel=1e-15)
+            continue
+        case = where["case"]
+        assert case not in hold and {k[0] for k in changed} == {case}
+        if defect == "reversed_case":
+            assert all(r1[k][0] == -r0[k][0] for k in r0 if k[0] == case)
+            continue
+        ks = sorted(k for k in r0 if k[0] == case)
+        d = np.array([r1[k][0] - r0[k][0] for k in ks])
+        # fit t, w of u = t + w x (x - 0) (translations), w (rotations): exact when rigid
+        A = []
+        for _, g, c in ks:
+            x = np.asarray(deck.grids[g].xyz)
+            e = deck.displacement_frames([g])[0][(c - 1) % 3]   # the reading's direction in basic
+            row = np.zeros(6)
+            if c <= 3:
+                row[:3] = e
+                row[3:] = np.cross(x, e)                     # e . (w x x) = w . (x x e)
+            else:
+                row[3:] = e
+            A.append(row)
+        sol, *_ = np.linalg.lstsq(np.array(A), d, rcond=None)
+        assert np.abs(np.array(A) @ sol - d).max() <= 1e-9 * np.abs(d).max()
+        lam = sum(((r1[k][0] - r0[k][0]) / r0[k][1]) ** 2 for k in ks)
+        assert lam == pytest.approx(where["noncentrality"], rel=1e-9)
+
+
 def _user_deck_through_mystran_is_the_plain_structure(tmp_path, family, seed):
     """A frame of ``family`` written as a user writes it (systems, offsets), run by MYSTRAN,
     against its plain deck through the reference solver (to 1e-5 of the largest value: MYSTRAN
