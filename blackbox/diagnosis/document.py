@@ -88,7 +88,7 @@ def alternatives(step) -> list[dict]:
         if c is a or not c.accepted or c.refit is None or c.effect.key == a.effect.key:
             continue
         gap = c.evidence - a.evidence
-        if gap < AMBIGUOUS:
+        if abs(gap) < AMBIGUOUS:
             alt = {"effect": c.effect.kind, "where": c.effect.where_json(), **c.effect.details_json(),
                    "evidence_gap": _num(gap), "of": "data" if c.effect.of_data else "structure"}
             sep = step.separations.get(c.effect.key)

@@ -54,6 +54,8 @@ class CandidateScore:
     kfold_delta_chi2: float | None = None
     screen_drop: float | None = None    # the chi2 drop at the effect's screen point, others held
                                         # (search.screen: a member removed), when evaluated
+    prior: float = 0.0                  # 2 ln M_k: -2 ln of its prior probability, up to the
+                                        # round's shared constant (search.multipliers)
 
     @property
     def evidence(self) -> float:
@@ -61,6 +63,13 @@ class CandidateScore:
         hold-out's dispersion: what ranks an addition against the others
         (:func:`blackbox.diagnosis.search.evidence`)."""
         return self.delta_bic + (self.holdout_delta_chi2 or 0.0) / self.holdout_dispersion
+
+    @property
+    def posterior(self) -> float:
+        """:attr:`evidence` plus :attr:`prior`: -2 ln of the candidate's posterior odds against the
+        current model, up to the round's shared constant. What chooses the addition among the
+        accepted candidates."""
+        return self.evidence + self.prior
 
 
 class Projector:

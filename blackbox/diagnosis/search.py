@@ -612,13 +612,14 @@ def refit_schedule(scored: Sequence[CandidateScore], best_evidence: float, alpha
                    log_n: float, screened: dict | None = None,
                    multiplier: dict | None = None) -> list[CandidateScore]:
     """The candidates (not refitted yet) that could still win on a refit against the best
-    accepted evidence so far, ``best_evidence`` (``delta BIC + hold-out chi2``; 0 when none was
-    accepted: then every candidate that could be accepted). A candidate's best case is
-    ``-c S + df ln n``, its score ``S`` times ``c = SCORE_RATIO`` for a structural candidate and
-    ``c = 1`` (less ``OUTPUT_MARGIN``) for an output-side one; it must also be significant on its
-    score at ``SCREEN`` (structural) or at the round's level (output-side). So a candidate is left
-    out only when even that best case cannot beat the evidence in hand or pass the level -- the
-    stated guarantee of the search. The cost: the refits the schedule adds are counted in each
+    accepted candidate so far, ``best_evidence`` (its :attr:`~CandidateScore.posterior`, ``delta
+    BIC + hold-out chi2 + prior``; infinite when none was accepted: then every candidate that
+    could be accepted). A candidate's best case is ``-c S + df ln n``, its score ``S`` times ``c =
+    SCORE_RATIO`` for a structural candidate and ``c = 1`` (less ``OUTPUT_MARGIN``) for an
+    output-side one: it must lower BIC and, with its own prior added, beat ``best_evidence``; it
+    must also be significant on its score at ``SCREEN`` (structural) or at the round's level
+    (output-side). So a candidate is left out only when even that best case cannot be accepted
+    or win -- the stated guarantee of the search. The cost: the refits the schedule adds are counted in each
     round's ``candidates`` (``refit``) and measured in docs (benchmarks/diagnose_refits.py).
 
     ``screened``: effect key -> the chi2 drop at the candidate's screen point (:func:`screen`),
@@ -628,17 +629,21 @@ def refit_schedule(scored: Sequence[CandidateScore], best_evidence: float, alpha
     and large when complete."""
     out = []
     screened, multiplier = screened or {}, multiplier or {}
+
+    def wins(best_case: float, c: CandidateScore) -> bool:
+        return best_case < 0.0 and best_case + c.prior < best_evidence
+
     for c in scored:
         if c.df == 0:
             continue
         if c.effect.acts_on_output:
-            ok = c.p_adjusted < alpha and -c.score + c.df * log_n - OUTPUT_MARGIN < best_evidence
+            ok = c.p_adjusted < alpha and wins(-c.score + c.df * log_n - OUTPUT_MARGIN, c)
         else:
-            ok = c.p_adjusted < SCREEN and -SCORE_RATIO * c.score + c.df * log_n < best_evidence
+            ok = c.p_adjusted < SCREEN and wins(-SCORE_RATIO * c.score + c.df * log_n, c)
             d = screened.get(c.effect.key)
             if not ok and d is not None and d > 0:
                 p = min(1.0, multiplier.get(c.effect.kind, 1.0) * float(stats.chi2.sf(d, c.df)))
-                ok = p < SCREEN and -d + c.df * log_n < best_evidence
+                ok = p < SCREEN and wins(-d + c.df * log_n, c)
         if ok:
             out.append(c)
     return out
@@ -882,7 +887,8 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
             lps[k] = log10_sf_array(Ss[k], int(df))
         for (e, S, df, step), p, lp in zip(raw, ps, lps):
             scored.append(CandidateScore(e, S, df, float(p), float(lp), min(1.0, mults[e.kind] * float(p)), step,
-                                         (-S + df * math.log(n)) if df else 0.0, "score approximation"))
+                                         (-S + df * math.log(n)) if df else 0.0, "score approximation",
+                                         prior=2.0 * math.log(by_kind[e.kind])))
         scored.sort(key=lambda c: (c.log10_p + math.log10(mults[c.effect.kind]), -c.score))
         refits: list[CandidateScore] = []
         done_keys: set = set()
@@ -906,7 +912,7 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         # refit's evidence (refit_schedule); a second pass cannot admit more, since the best
         # evidence only falls
         run_refits([c for c in scored[:refit_top] if c.df > 0])
-        best_ev = min((c.evidence for c in refits if c.refit is not None and c.accepted), default=0.0)
+        best_ev = min((c.posterior for c in refits if c.refit is not None and c.accepted), default=math.inf)
         if complete_refits:
             screened, used, left, which = screen(model, fit, om, [c.effect for c in scored], base, boundary,
                                                  K_deck, o_dofs,
@@ -942,7 +948,7 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         # refit that lowers BIC, not only the accepted ones (a joint loose about one axis is not
         # significant as one equal spring, but is as one spring per axis)
         order = sorted((k for k, c in enumerate(refits) if c.refit is not None and c.delta_bic < 0),
-                       key=lambda k: refits[k].evidence)
+                       key=lambda k: refits[k].posterior)
         for k in order[:refine_top]:
             c = refits[k]
             i = len(c.refit.spec.effects) - 1
@@ -952,9 +958,10 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
                 c = _judged(c, checks.judge(fit, f3, mk, alpha, i), effect=f3.spec.effects[-1], refit=f3)
             refits[k] = replace(c, variants=trials)
         ok = [c for c in refits if c.accepted]
-        best = min(ok, key=lambda c: c.evidence) if ok else None
+        best = min(ok, key=lambda c: c.posterior) if ok else None
         if best is not None:
-            refits = [replace(c, reason="accepted, but another candidate has stronger evidence (lower delta BIC + hold-out chi2)")
+            refits = [replace(c, reason="accepted, but another candidate is more probable (lower delta BIC + "
+                                        "hold-out chi2 + 2 ln of its kind's hypotheses)")
                       if (c.accepted and c is not best) else c for c in refits]
             best = next(c for c in refits if c.effect is best.effect)
         by_key = {c.effect.key: c for c in refits}
@@ -971,7 +978,7 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         seps = {}
         for c in refits:                    # what would separate the near-equal alternatives
             if (c.accepted or c.reason.startswith("accepted")) and c is not best and c.refit is not None \
-                    and c.evidence - best.evidence < AMBIGUOUS and len(seps) < 2:
+                    and abs(c.evidence - best.evidence) < AMBIGUOUS and len(seps) < 2:
                 seps[c.effect.key] = separating_measurements(base, best.refit, c.refit, boundary, K_deck, om,
                                                              load_magnitudes)
         subsumed = [(o, Judgement(0.0, 1.0, 1.0, 0.0, None, None,
