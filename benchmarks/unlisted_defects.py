@@ -171,7 +171,8 @@ def _rig_slip(folder: Path, rows: list[dict], case: str, rng: np.random.Generato
     a = math.sqrt(lam / float(unit @ unit))
     for r in mine:
         r["value"] = repr(float(r["value"]) + a * motion(r))
-    return {"case": case, "noncentrality": lam}
+    return {"case": case, "noncentrality": lam, "translation": [float(v) for v in a * t],
+            "rotation_rad": [float(v) for v in a * w], "about": [float(v) for v in c0]}
 
 
 def study_loads(folder: Path) -> list[tuple[str, int, int, float]]:

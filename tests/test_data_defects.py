@@ -180,6 +180,34 @@ def test_bad_case(tmp_module):
     assert a["pattern"] == "scale" and "millimetres read as metres" in a["pattern_detail"], a["pattern_detail"]
 
 
+def test_rigid_motion(tmp_module):
+    """Case L4 read while the whole cube moved as a rigid body (a translation and a rotation
+    about the measured grids' centre, planted by ``benchmarks/unlisted_defects.py``'s rig slip
+    at a noncentrality of 485): found as ``rigid_motion`` at L4, of the data, with each
+    planted translation and rotation within 4 standard errors of the fitted one. The
+    structure's effects cannot mimic it: a motion in one case only."""
+    import sys
+    sys.path.insert(0, str(FIXTURES.parent / "benchmarks"))
+    import unlisted_defects as ud
+
+    study = _copy(tmp_module, "rigid_motion")
+    fields, rows = ud._read(study / "measurements.csv")
+    where = ud._rig_slip(study, rows, "L4", np.random.default_rng(5))
+    ud._write(study / "measurements.csv", fields, rows)
+    assert where["noncentrality"] == pytest.approx(485.0, abs=1.0)
+    doc = _diagnose(study)
+    a = _only(doc, "rigid_motion")
+    assert len(doc["added"]) == 1 and a["where"] == ["L4"] and a["of"] == "data"
+    np.testing.assert_allclose(a["about"], where["about"], rtol=1e-12)
+    p = {q["name"]: q for q in a["parameters"]}
+    for k in range(3):
+        _within(p[f"t{k + 1}_L4"], where["translation"][k])
+        # r_k is the rotation times the effect's length scale: its std scales alike
+        r = p[f"r{k + 1}_L4"]
+        length = r["value"] / a["rotation_rad"][k]
+        _within({"value": a["rotation_rad"][k], "std": r["std"] / length}, where["rotation_rad"][k])
+
+
 def test_patterns_of_set_aside_readings():
     """``channel_pattern`` and ``case_pattern`` on exact data (noise 1, 12 cases): each pattern
     is recognised, and the simplest one that leaves a chi2 within its 99 % band is named (a

@@ -463,7 +463,10 @@ class AugmentedModel:
         """The output offsets' sum at each row of ``om``."""
         add = np.zeros(len(om.y))
         for i, rows in self._output_offsets(om):
-            add[rows] += x[i]
+            if rows.dtype.kind == "f":          # weights over every row (a rigid motion)
+                add += x[i] * rows
+            else:
+                add[rows] += x[i]
         return add
 
     def multiplier(self, x: np.ndarray, om: ObsMap) -> np.ndarray:
@@ -579,5 +582,8 @@ class AugmentedModel:
         for i, rows, col in self._mix_columns(st.U_O, om):
             J[rows, i] += mult[rows] * col
         for i, rows in self._output_offsets(om):
-            J[rows, i] = 1.0
+            if rows.dtype.kind == "f":
+                J[:, i] = rows
+            else:
+                J[rows, i] = 1.0
         return J

@@ -291,7 +291,8 @@ class Effect:
         return []
 
     def offset_rows(self, om: "ObsMap") -> list[tuple[int, np.ndarray]]:
-        """``[(q, rows)]``: ``x_q`` is added to the predictions at ``rows`` (after the factors)."""
+        """``[(q, rows)]``: ``x_q`` is added to the predictions at ``rows`` (after the factors):
+        a mask or indices, or float weights over every row of ``om`` (``x_q`` times each)."""
         return []
 
     def mix_rows(self, om: "ObsMap", o_index: dict) -> list[tuple[int, np.ndarray, list]]:
