@@ -338,14 +338,18 @@ def evidence(delta_bic: float, holdout_delta_chi2: float | None, dispersion: flo
 
 
 def holdout_dispersion(chi2: float, n: int) -> float:
-    """The hold-out's excess dispersion after an addition: its chi2 per reading ``chi2 / n``, at
-    least 1 -- the quasi-likelihood scale the LR test takes from the fitted readings' reduced
-    chi2. A hold-out that the fit still predicts at many times the noise (its cases excite joint
-    parameters the fitted cases leave loose) changes its chi2 with every move of those parameters,
-    by amounts that follow the loose parameters more than the effect; divided by the dispersion,
-    such a change ranks an addition as a change of that size would in a hold-out predicted to
-    its noise, and an addition that predicts the hold-out to its noise keeps its whole change."""
-    return max(1.0, chi2 / max(n, 1))
+    """The hold-out's excess dispersion after an addition: its chi2 over the upper end of its
+    99 % band for ``n`` readings, at least 1 -- the quasi-likelihood scale the LR test takes
+    from the fitted readings' reduced chi2, counted only where noise cannot explain it. A
+    hold-out that the fit still predicts at many times the noise (its cases excite joint
+    parameters the fitted cases leave loose) changes its chi2 with every move of those
+    parameters, by amounts that follow the loose parameters more than the effect; divided by the
+    dispersion, such a change ranks an addition as a change of that size would in a hold-out
+    predicted to its noise. A hold-out predicted within its band keeps the whole change, so two
+    additions that both predict it to its noise are not ranked by their chance wobble within
+    the band."""
+    n = max(int(n), 1)
+    return max(1.0, chi2 / float(stats.chi2.ppf(0.99, n)))
 
 
 class Checks:

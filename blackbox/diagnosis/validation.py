@@ -9,7 +9,8 @@ Two ways, chosen by the study:
   sees an effect (two cases against a sensor offset, or a scale confined to one fitted case) then
   cannot veto strong evidence by the chance sign of a small change, while a hold-out that the
   effect predicts clearly worse (a member factor standing in for a joint) vetoes it; the same
-  sum ranks the accepted candidates.
+  sum ranks the accepted candidates, ``dh`` divided there by the hold-out's dispersion
+  (:func:`blackbox.diagnosis.search.holdout_dispersion`).
 * **K-fold over load cases** (no hold-out declared: every case is fitted): the fitted cases in
   study order are dealt into ``K = min(5, n_cases)`` folds (case ``i`` in fold ``i mod K``); each
   fold is predicted from the others and the chi2 of those predictions summed (``cv_chi2``). An
