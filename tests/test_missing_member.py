@@ -3,8 +3,8 @@
 References and tolerances:
 
 * the schedule's rule (``search.refit_schedule``) on hand-made scores: a candidate is refitted
-  on its screen drop when that drop alone is significant at ``SCREEN`` and beats the best
-  evidence in hand (exact comparisons, no tolerance);
+  on its screen drop when that drop alone is significant at ``SCREEN`` and, with its kind's
+  prior term, beats the best posterior in hand (exact comparisons, no tolerance);
 * the screen drop is the chi2 drop of the member removed with every other parameter held, so
   the refit, which also starts there when the drop exceeds the score, reaches at least that drop: ``LR >= drop`` up to the
   optimiser's tolerance on chi2 (1e-6 relative, far below the drop of thousands);
@@ -57,6 +57,22 @@ def test_schedule_refits_what_the_screen_shows_whatever_its_score():
     # evidence in hand it is not refitted on its drop; alone it is
     assert refit_schedule([c[1]], 0.0, 0.01, log_n, {other.key: 12.0}, {"member_stiffness": 3000.0}) == []
     assert refit_schedule([c[1]], 0.0, 0.01, log_n, {other.key: 12.0}, {"member_stiffness": 1.0}) == [c[1]]
+
+
+def test_schedule_counts_each_candidates_prior():
+    """The schedule compares posteriors: a candidate whose best case (its removal drop of 3,000,
+    less ln n) beats the best accepted evidence in hand by 20 is left out when its kind's prior
+    term is 30 larger than that of the one in hand (it cannot win), and refitted when the
+    prior is 10; with nothing accepted (infinite), it is refitted whenever it could lower BIC."""
+    from dataclasses import replace
+    brace = _member(90)
+    log_n = np.log(500)
+    mult = {"member_stiffness": 1.0}
+    best = -3000.0 + log_n + 20.0
+    c = _scored(brace, 5.0, 1.0)
+    assert refit_schedule([replace(c, prior=30.0)], best, 0.01, log_n, {brace.key: 3000.0}, mult) == []
+    assert len(refit_schedule([replace(c, prior=10.0)], best, 0.01, log_n, {brace.key: 3000.0}, mult)) == 1
+    assert len(refit_schedule([replace(c, prior=30.0)], np.inf, 0.01, log_n, {brace.key: 3000.0}, mult)) == 1
 
 
 def test_bounds_and_the_missing_report():
