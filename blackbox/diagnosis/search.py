@@ -20,8 +20,10 @@ loose about one axis may fail as one equal spring and pass as one spring per axi
 (:meth:`blackbox.diagnosis.effects.Effect.richer`, nested: per-axis springs, per-branch springs,
 a member's separate EA / EI1 / EI2 / GJ factors) are refitted from their nested point and one
 is kept only when it passes the same tests against the variant it extends; this repeats from the
-kept variant. The accepted candidate with the lowest ``delta BIC + hold-out chi2`` *at its refined
-variant* is added, so a mis-specified simple variant never stays in the model for a further
+kept variant. The accepted candidate with the lowest ``delta BIC + hold-out chi2 + 2 ln M_k``
+*at its refined variant* is added (``M_k`` its kind's hypotheses in the round: -2 ln of its
+posterior odds under the prior the multiplicity rule below assumes, kinds alike and places
+within a kind alike; :attr:`CandidateScore.posterior`), so a mis-specified simple variant never stays in the model for a further
 effect to patch. Repeat until no candidate is accepted: a candidate that is significant after the
 correction is still added when the overall reduced chi2 is already inside its 99 % band (the band
 is a weak omnibus test; a localised effect is found by the targeted score first).
