@@ -60,8 +60,8 @@ class CandidateScore:
     @property
     def evidence(self) -> float:
         """``delta_bic`` plus the hold-out chi2 change (when there are hold-out cases) over the
-        hold-out's dispersion: what ranks an addition against the others
-        (:func:`blackbox.diagnosis.search.evidence`)."""
+        hold-out's dispersion (:func:`blackbox.diagnosis.search.evidence`): the data's evidence
+        for the addition, in which the gap to an alternative is measured."""
         return self.delta_bic + (self.holdout_delta_chi2 or 0.0) / self.holdout_dispersion
 
     @property

@@ -23,8 +23,8 @@ is kept only when it passes the same tests against the variant it extends; this 
 kept variant. The accepted candidate with the lowest ``delta BIC + hold-out chi2 + 2 ln M_k``
 *at its refined variant* is added (``M_k`` its kind's hypotheses in the round: -2 ln of its
 posterior odds under the prior the multiplicity rule below assumes, kinds alike and places
-within a kind alike; :attr:`CandidateScore.posterior`), so a mis-specified simple variant never stays in the model for a further
-effect to patch. Repeat until no candidate is accepted: a candidate that is significant after the
+within a kind alike; :attr:`CandidateScore.posterior`), so a mis-specified simple variant never
+stays in the model for a further effect to patch. Repeat until no candidate is accepted: a candidate that is significant after the
 correction is still added when the overall reduced chi2 is already inside its 99 % band (the band
 is a weak omnibus test; a localised effect is found by the targeted score first).
 
@@ -286,7 +286,8 @@ class Judgement:
 
     @property
     def evidence(self) -> float:
-        """What ranks an addition against others (:func:`evidence`)."""
+        """The data's evidence for the addition (:func:`evidence`): what ranks the variants of
+        one effect, and the effects that no longer pass elimination."""
         return evidence(self.delta_bic, self.holdout_delta_chi2, self.holdout_dispersion)
 
     @property
