@@ -100,15 +100,21 @@ def test_a_nearly_square_section_is_not_turned():
     assert rod.turned_point is None and len(rod.screen_points()) == 1
 
 
-@pytest.mark.slow
-def test_a_turned_member_is_found_turned(tmp_path):
+def _turned_and_diagnosed(tmp_path, index: int, seed: int, family: str, member: int) -> dict:
+    """The unlisted-structure benchmark's study ``index`` of ``family`` (seed ``seed``) with
+    ``member`` turned, diagnosed with default settings: its document."""
     from blackbox.commands import diagnose as diagnose_command
     sys.path.insert(0, str(ROOT))
     from benchmarks import unlisted_structure as us
 
-    st, where = us.planted_study(5, 5, "box", "rotated_section", tmp_path)
-    assert where is not None and where["place"] == ["cbar", 44]
-    d = diagnose_command.run(st.folder, plots=False).document
+    st, where = us.planted_study(index, seed, family, "rotated_section", tmp_path)
+    assert where is not None and where["place"] == ["cbar", member]
+    return diagnose_command.run(st.folder, plots=False).document
+
+
+@pytest.mark.slow
+def test_a_turned_member_is_found_turned(tmp_path):
+    d = _turned_and_diagnosed(tmp_path, 5, 5, "box", 44)
     assert d["verdict"] == "explained", d["verdict_detail"]
     (a,) = d["added"]
     assert (a["effect"], a["where"], a.get("turned")) == ("member_stiffness", [44], True)
@@ -117,17 +123,11 @@ def test_a_turned_member_is_found_turned(tmp_path):
 
 @pytest.mark.slow
 def test_a_hold_out_predicted_far_off_its_noise_does_not_rank_the_turn_last(tmp_path):
-    from blackbox.commands import diagnose as diagnose_command
-    sys.path.insert(0, str(ROOT))
-    from benchmarks import unlisted_structure as us
-
-    st, where = us.planted_study(1, 8, "storey", "rotated_section", tmp_path)
-    assert where is not None and where["place"] == ["cbar", 118]
-    d = diagnose_command.run(st.folder, plots=False).document
+    d = _turned_and_diagnosed(tmp_path, 1, 8, "storey", 118)
     # the premise: a hold-out the declared model predicts at many times its noise
     assert d["before"]["holdout_chi2"] > 10 * d["before"]["holdout_n_obs"]
     assert d["verdict"] == "explained", d["verdict_detail"]
-    # the weak turn (noncentrality 299) leaves EI2 loose (1.6 +- 0.6 against the turned 15; EI1 0.11 against 0.066):
-    # found as the member's bending, not named turned
+    # the weak turn (noncentrality 299) leaves EI2 loose (1.6 +- 0.6 against the turned 15;
+    # EI1 0.11 against 0.066): found as the member's bending, not named turned
     (a,) = d["added"]
     assert (a["effect"], a["where"], a["variant"]) == ("member_stiffness", [118], "bending")

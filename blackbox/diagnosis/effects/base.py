@@ -53,7 +53,7 @@ if TYPE_CHECKING:
     from blackbox.joints import JointModel
     from solver_adapters.protocol import Deck, LoadMatrix
 
-__all__ = ["CandidateContext", "CandidateLimit", "Effect", "JointCaseEffect", "OnChannel", "ReadsAnother", "SetAsideEffect", "finite_or_none",
+__all__ = ["CandidateContext", "CandidateLimit", "Effect", "FreeOffsets", "JointCaseEffect", "OnChannel", "ReadsAnother", "SetAsideEffect", "finite_or_none",
            "kept_parameters", "proximity"]
 
 
@@ -526,8 +526,25 @@ class JointCaseEffect(Effect):
         return str(self.where[0])
 
 
+class FreeOffsets:
+    """What an effect whose parameters are offsets added to readings declares: nested at 0,
+    unbounded, acting on the output only. Mixed into an :class:`Effect` dataclass."""
+
+    @property
+    def nominal(self) -> np.ndarray:
+        return np.zeros(self.n_params)
+
+    @property
+    def bounds(self):
+        return np.full(self.n_params, -np.inf), np.full(self.n_params, np.inf)
+
+    @property
+    def acts_on_output(self) -> bool:
+        return True
+
+
 @dataclass(frozen=True, eq=False)
-class SetAsideEffect(Effect):
+class SetAsideEffect(FreeOffsets, Effect):
     """An effect that sets readings aside (a bad channel, a bad case): one free offset per group
     of rows (:meth:`offset_rows`, disjoint masks), nested at 0 and unbounded. ``readings`` and
     ``sigmas``: each group's reading when the candidate was listed (the mean of repeats) and that
@@ -554,18 +571,6 @@ class SetAsideEffect(Effect):
                 w = 1.0 / v[:, 1] ** 2
                 out[k][j] = (float(np.sum(w * v[:, 0]) / np.sum(w)), float(1.0 / np.sqrt(np.sum(w))))
         return out
-
-    @property
-    def nominal(self) -> np.ndarray:
-        return np.zeros(self.n_params)
-
-    @property
-    def bounds(self):
-        return np.full(self.n_params, -np.inf), np.full(self.n_params, np.inf)
-
-    @property
-    def acts_on_output(self) -> bool:
-        return True
 
     @classmethod
     def sparse_columns(cls, model, st, x, om, effects):

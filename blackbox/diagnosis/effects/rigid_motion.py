@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import linalg
 
-from blackbox.diagnosis.effects.base import Effect
+from blackbox.diagnosis.effects.base import Effect, FreeOffsets
 from blackbox.diagnosis.effects.registry import register
 
 __all__ = ["RigidMotion", "rigid_weights"]
@@ -59,7 +59,7 @@ def rigid_weights(grids: np.ndarray, comps: np.ndarray, geometry: dict, centre: 
 
 @register
 @dataclass(frozen=True, eq=False)
-class RigidMotion(Effect):
+class RigidMotion(FreeOffsets, Effect):
     """``case``: the load case; ``motions``: which of ``t1 t2 t3 r1 r2 r3`` (0-5) it fits;
     ``geometry``: ``((grid, xyz, frame), ...)`` of the measured grids; ``centre``, ``length``:
     the rotation's centre and scale."""
@@ -105,18 +105,6 @@ class RigidMotion(Effect):
                            geometry=tuple((g, *geometry[g]) for g in grids), centre=tuple(centre),
                            length=length))
         return out
-
-    @property
-    def nominal(self) -> np.ndarray:
-        return np.zeros(self.n_params)
-
-    @property
-    def bounds(self):
-        return np.full(self.n_params, -np.inf), np.full(self.n_params, np.inf)
-
-    @property
-    def acts_on_output(self) -> bool:
-        return True
 
     def offset_rows(self, om):
         """Weights, not masks: ``x_q`` times the column adds to every row of the case."""
