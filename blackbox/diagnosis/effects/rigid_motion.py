@@ -45,15 +45,17 @@ def rigid_weights(grids: np.ndarray, comps: np.ndarray, geometry: dict, centre: 
     """``(n, 6)``: the reading of each row (``grids``, ``comps``) per unit ``t1 t2 t3 r1 r2 r3``
     (module docstring); ``geometry``: grid -> ``(xyz, frame)``, ``frame`` the rows' unit
     directions of components 1-3 (and 4-6) in basic."""
+    grids, comps = np.asarray(grids, int), np.asarray(comps, int)
     out = np.zeros((len(grids), 6))
-    for k, (g, c) in enumerate(zip(grids.tolist(), comps.tolist())):
-        x, frame = geometry[int(g)]
-        e = np.asarray(frame)[(int(c) - 1) % 3]
-        if c <= 3:
-            out[k, :3] = e
-            out[k, 3:] = np.cross(np.asarray(x) - centre, e) / length     # e . (w x r) = w . (r x e)
-        else:
-            out[k, 3:] = e / length
+    if not len(grids):
+        return out
+    xyz = np.array([geometry[int(g)][0] for g in grids.tolist()], float)
+    frames = np.array([geometry[int(g)][1] for g in grids.tolist()], float)      # (n, 3, 3)
+    e = frames[np.arange(len(grids)), (comps - 1) % 3]                            # each reading's direction
+    trans = comps <= 3
+    out[trans, :3] = e[trans]
+    out[trans, 3:] = np.cross(xyz[trans] - centre, e[trans]) / length     # e . (w x r) = w . (r x e)
+    out[~trans, 3:] = e[~trans] / length
     return out
 
 
