@@ -20,7 +20,7 @@ import math
 
 from blackbox.diagnosis.fit import Fit, chi2_band
 from blackbox.diagnosis.scoring import CandidateScore
-from blackbox.diagnosis.search import AMBIGUOUS, Diagnosis
+from blackbox.diagnosis.search import AMBIGUOUS, Diagnosis, near_tie
 
 __all__ = ["diagnosis_document", "final_additions", "verdict_detail", "misfit_location", "alternatives", "AMBIGUOUS"]
 
@@ -87,8 +87,8 @@ def alternatives(step) -> list[dict]:
     for c in step.scores:
         if c is a or not c.accepted or c.refit is None or c.effect.key == a.effect.key:
             continue
-        gap = c.evidence - a.evidence
-        if abs(gap) < AMBIGUOUS:
+        if near_tie(c, a):
+            gap = c.evidence - a.evidence
             alt = {"effect": c.effect.kind, "where": c.effect.where_json(), **c.effect.details_json(),
                    "evidence_gap": _num(gap), "of": "data" if c.effect.of_data else "structure"}
             sep = step.separations.get(c.effect.key)

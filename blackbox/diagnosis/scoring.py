@@ -30,6 +30,14 @@ SCORE_RTOL = 1e-8           # a candidate direction whose part outside the model
                             # 1e-4 of its own size (eigenvalue 1e-8) adds nothing (rounding)
 
 
+def evidence(delta_bic: float, holdout_delta_chi2: float | None, dispersion: float = 1.0) -> float:
+    """``delta BIC`` plus the hold-out chi2 change when there are hold-out cases
+    (:mod:`blackbox.diagnosis.validation`), that change divided by the hold-out's ``dispersion``
+    (:func:`blackbox.diagnosis.search.holdout_dispersion`) where it ranks additions against each
+    other; admitting one weighs it undivided (``dispersion`` 1)."""
+    return delta_bic + (holdout_delta_chi2 or 0.0) / dispersion
+
+
 @dataclass(frozen=True, eq=False)
 class CandidateScore:
     """The score test of one candidate at the current optimum, and its refit if it was made."""
@@ -62,7 +70,7 @@ class CandidateScore:
         """``delta_bic`` plus the hold-out chi2 change (when there are hold-out cases) over the
         hold-out's dispersion (:func:`blackbox.diagnosis.search.evidence`): the data's evidence
         for the addition, in which the gap to an alternative is measured."""
-        return self.delta_bic + (self.holdout_delta_chi2 or 0.0) / self.holdout_dispersion
+        return evidence(self.delta_bic, self.holdout_delta_chi2, self.holdout_dispersion)
 
     @property
     def posterior(self) -> float:

@@ -24,8 +24,8 @@ kept variant. The accepted candidate with the lowest ``delta BIC + hold-out chi2
 *at its refined variant* is added (``M_k`` its kind's hypotheses in the round: -2 ln of its
 posterior odds under the prior the multiplicity rule below assumes, kinds alike and places
 within a kind alike; :attr:`CandidateScore.posterior`), so a mis-specified simple variant never
-stays in the model for a further effect to patch. Repeat until no candidate is accepted: a candidate that is significant after the
-correction is still added when the overall reduced chi2 is already inside its 99 % band (the band
+stays in the model for a further effect to patch. Repeat until no candidate is accepted: a
+candidate that is significant after the correction is still added when the overall reduced chi2 is already inside its 99 % band (the band
 is a weak omnibus test; a localised effect is found by the targeted score first).
 
 An effect that sets readings aside (a bad channel, a bad case) takes the place of the effects of
@@ -66,7 +66,7 @@ from blackbox.diagnosis.fit import Fit, chi2_band, fit_model
 from blackbox.diagnosis.model import RIGID_RATIO, AugmentedModel, ModelSpec, ObsMap
 from blackbox.diagnosis.residuals import hotspots, residual_structure
 from blackbox.diagnosis.runs import RunRecord
-from blackbox.diagnosis.scoring import CandidateScore, log10_sf, log10_sf_array, score_candidates
+from blackbox.diagnosis.scoring import CandidateScore, evidence, log10_sf, log10_sf_array, score_candidates
 from blackbox.diagnosis.separation import separating_measurements
 from blackbox.diagnosis.split import SplitBase
 from blackbox.diagnosis.validation import Validation, cv_chi2, kfold
@@ -75,7 +75,7 @@ from blackbox.identification import Observations
 from blackbox.joints import ComplexJoint, JointModel, SimpleJoint
 from solver_adapters.protocol import DofLabel
 
-__all__ = ["declared_fit", "multipliers", "hypotheses_by_kind", "refit_schedule", "screen", "SCREEN_DOF_COLUMNS", "eliminate", "without", "Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "holdout_dispersion", "holdout_worse", "VERDICTS", "verdict",
+__all__ = ["declared_fit", "multipliers", "hypotheses_by_kind", "refit_schedule", "screen", "SCREEN_DOF_COLUMNS", "eliminate", "without", "Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "near_tie", "holdout_dispersion", "holdout_worse", "VERDICTS", "verdict",
            "refit_candidate", "subsumed_removed", "refine", "round_level", "diagnose", "map_refits", "refits_pay"]
 
 
@@ -87,6 +87,12 @@ REFINE_TOP = 3              # candidates refined per round (those whose refit lo
                             # evidence first): a richer variant can overtake the runner-ups (an EI-only
                             # member against an undeclared joint at its end); refining all six refits
                             # costs 2x the round
+
+
+def near_tie(c: CandidateScore, added: CandidateScore) -> bool:
+    """Whether the data hardly tell ``c`` from the candidate ``added``: their evidence (without
+    the prior) within :data:`AMBIGUOUS`, either way."""
+    return abs(c.evidence - added.evidence) < AMBIGUOUS
 
 
 def round_level(alpha: float, round_no: int, n_hypotheses: int) -> float:
@@ -330,14 +336,6 @@ def holdout_worse(fit: Fit, f2: Fit, hold: ObsMap | None, keep: np.ndarray | Non
 def holdout_chi2(fit: Fit, hold: ObsMap, keep: np.ndarray) -> float:
     """The hold-out chi2 of ``fit`` over the rows ``keep``."""
     return float(np.sum(((hold.y - fit.holdout_predicted) / hold.sigma)[keep] ** 2))
-
-
-def evidence(delta_bic: float, holdout_delta_chi2: float | None, dispersion: float = 1.0) -> float:
-    """``delta BIC`` plus the hold-out chi2 change when there are hold-out cases
-    (:mod:`blackbox.diagnosis.validation`), that change divided by the hold-out's ``dispersion``
-    (:func:`holdout_dispersion`) where it ranks additions against each other; admitting one
-    weighs it undivided (``dispersion`` 1)."""
-    return delta_bic + (holdout_delta_chi2 or 0.0) / dispersion
 
 
 def holdout_dispersion(chi2: float, n: int) -> float:
@@ -985,7 +983,7 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         seps = {}
         for c in refits:                    # what would separate the near-equal alternatives
             if (c.accepted or c.reason.startswith("accepted")) and c is not best and c.refit is not None \
-                    and abs(c.evidence - best.evidence) < AMBIGUOUS and len(seps) < 2:
+                    and near_tie(c, best) and len(seps) < 2:
                 seps[c.effect.key] = separating_measurements(base, best.refit, c.refit, boundary, K_deck, om,
                                                              load_magnitudes)
         subsumed = [(o, Judgement(0.0, 1.0, 1.0, 0.0, None, None,
