@@ -27,7 +27,7 @@ explains every case with fewer parameters.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import linalg
@@ -63,8 +63,9 @@ def rigid_weights(grids: np.ndarray, comps: np.ndarray, geometry: dict, centre: 
 @dataclass(frozen=True, eq=False)
 class RigidMotion(FreeOffsets, Effect):
     """``case``: the load case; ``motions``: which of ``t1 t2 t3 r1 r2 r3`` (0-5) it fits;
-    ``geometry``: ``((grid, xyz, frame), ...)`` of the measured grids; ``centre``, ``length``:
-    the rotation's centre and scale."""
+    ``geometry``: grid -> ``(xyz, frame)`` of the measured grids (:func:`rigid_weights`), one
+    dict shared by the study's candidates; ``centre``, ``length``: the rotation's centre and
+    scale."""
     kind = "rigid_motion"
     of_data = True
     summary = ("in one load case the whole specimen moved as a rigid body (a support base slid, the "
@@ -72,7 +73,7 @@ class RigidMotion(FreeOffsets, Effect):
 
     case: str = ""
     motions: tuple[int, ...] = ()
-    geometry: tuple = ()
+    geometry: dict = field(default_factory=dict)
     centre: tuple[float, float, float] = (0.0, 0.0, 0.0)
     length: float = 1.0
 
@@ -100,11 +101,11 @@ class RigidMotion(FreeOffsets, Effect):
             W = rigid_weights(g_all[rows], c_all[rows], geometry, centre, length) / sig[rows, None]
             _, R, piv = linalg.qr(W, mode="economic", pivoting=True)
             d = np.abs(np.diag(R))
-            seen = sorted(int(p) for p, v in zip(piv, d) if d.size and v > VISIBLE * d[0])
+            seen = sorted(int(p) for p, v in zip(piv, d) if v > VISIBLE * d[0])
             if not seen:
                 continue
             out.append(cls((case,), tuple(f"{names[m]}_{case}" for m in seen), case=case, motions=tuple(seen),
-                           geometry=tuple((g, *geometry[g]) for g in grids), centre=tuple(centre),
+                           geometry=geometry, centre=tuple(centre),
                            length=length))
         return out
 
@@ -112,11 +113,11 @@ class RigidMotion(FreeOffsets, Effect):
         """Weights, not masks: ``x_q`` times the column adds to every row of the case."""
         idx = [i for i, lab in enumerate(om.labels) if lab == self.case]
         rows = np.isin(om.case, idx)
-        geo = {g: (x, f) for g, x, f in self.geometry}
-        rows &= np.isin(om.grid, list(geo))
+        rows &= np.isin(om.grid, list(self.geometry))
         W = np.zeros((len(om.y), 6))
         if rows.any():
-            W[rows] = rigid_weights(om.grid[rows], om.comp[rows], geo, np.asarray(self.centre), self.length)
+            W[rows] = rigid_weights(om.grid[rows], om.comp[rows], self.geometry, np.asarray(self.centre),
+                                    self.length)
         return [(q, W[:, m]) for q, m in enumerate(self.motions)]
 
     def findings(self, fit) -> dict:
