@@ -93,6 +93,26 @@ def test_turned_finding():
     assert e.findings(_Fit([r[0] ** 0.7, r[1] ** 1.3])) == {"turned": True}
 
 
+def test_capped_only_for_a_stiffened_plane_run_from_the_turned_start():
+    """``capped``: a section refitted from its turned point whose stiffened plane's factor ended
+    at the bound 50 gets that factor's bound at the turned value (I1/I2 = 4), the other bound
+    kept; not when the refit did not start turned, when nothing is at 50, when the softened
+    plane is at 50 (no turn explains that), or once capped."""
+    from blackbox.diagnosis.effects.member_stiffness import FACTOR_MAX
+
+    e = _member(8.0e-6, 2.0e-6)
+    s = e.started_at_screen(1)
+    c = s.capped([0.25, FACTOR_MAX])
+    assert c is not None and c.key == s.key and c.variant == "bending"
+    np.testing.assert_allclose(c.bounds[1], [FACTOR_MAX, 4.0], rtol=1e-12)
+    assert c.rejection([0.25, 4.0]) is None           # at the cap: the turned section, plausible
+    assert "upper bound 50" in c.rejection([FACTOR_MAX, 4.0])
+    assert e._as("bending").capped([0.25, FACTOR_MAX]) is None
+    assert s.capped([0.25, 12.0]) is None
+    assert s.capped([FACTOR_MAX, FACTOR_MAX]) is None
+    assert c.capped([0.25, 4.0]) is None
+
+
 def test_a_nearly_square_section_is_not_turned():
     e = _member(1.0e-5, 1.0e-5 / (0.98 * TURN_MIN))
     assert e.turned_point is None and len(e.screen_points()) == 1
@@ -131,3 +151,23 @@ def test_a_hold_out_predicted_far_off_its_noise_does_not_rank_the_turn_last(tmp_
     # EI1 0.11 against 0.066): found as the member's bending, not named turned
     (a,) = d["added"]
     assert (a["effect"], a["where"], a["variant"]) == ("member_stiffness", [118], "bending")
+
+
+@pytest.mark.slow
+def test_a_weak_turn_whose_stiffened_plane_runs_loose_is_held_at_the_turned_value(tmp_path):
+    """Unlisted-structure seed 9, storey s0001: member 48 turned (I2/I1 = 0.0955, noncentrality
+    176, K-fold). Refitted from the turned section, EI1 goes to 0.095 and EI2 runs on from the
+    turned 10.5 to the factor bound 50 (likelihood ratio 184.95 there, 184.41 with EI2 held at
+    10: the stiffened plane is far stiffer than its surroundings either way), and a factor at
+    that bound was rejected as absorbing a misfit: a support spring at grid 13 and member 47 were
+    added instead. The profile of EI2 reaches the turned value (chi2 within the 95 % point of 1
+    degree of freedom), so the refit with EI2 held there is the candidate, and wins."""
+    d = _turned_and_diagnosed(tmp_path, 1, 9, "storey", 48)
+    assert d["verdict"] == "explained", d["verdict_detail"]
+    (a,) = d["added"]
+    assert (a["effect"], a["where"], a["variant"], a.get("turned")) == ("member_stiffness", [48], "bending", True)
+    assert a["held_at_turned_value"] == ["EI2_48"]
+    ei1, ei2 = (p["value"] for p in a["parameters"])
+    # EI1 at the turned I2/I1 = 0.0955 within 2 of its standard errors (0.008)
+    assert abs(ei1 - 0.0955) < 2 * a["parameters"][0]["std"]
+    assert ei2 == pytest.approx(1 / 0.09551051337689412, rel=1e-9)

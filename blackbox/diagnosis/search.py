@@ -197,6 +197,28 @@ def refit_candidate(base: SplitBase, fit: Fit, e: Effect, om: ObsMap, hold: ObsM
         m3 = AugmentedModel(base, spec3, boundary, K_deck, o_dofs)
         best = fit_model(m3, om, hold, x3)
         e = e2
+    return _capped(base, best, e, om, hold, boundary, K_deck, o_dofs)
+
+
+def _capped(base: SplitBase, best: Fit, e: Effect, om: ObsMap, hold, boundary, K_deck, o_dofs) -> tuple[Fit, Effect]:
+    """``(best, e)``, or the refit with ``e``'s parameters that ran to an implausible bound
+    brought back to the plausible point they started from (:meth:`Effect.capped`) when the data
+    do not tell the two apart: the chi2 rises by less than the 95 % point of chi2 with 1 degree
+    of freedom (the profile likelihood's interval of that parameter reaches the start). A
+    parameter the data push to the bound stays there, and the refit is rejected for it."""
+    first = best.spec.n_params - e.n_params
+    e3 = e.capped(best.x[first:])
+    if e3 is None:
+        return best, e
+    spec3 = ModelSpec(best.spec.joints, best.spec.effects[:-1] + (e3,))
+    x3 = best.x.copy()
+    x3[first:] = np.minimum(x3[first:], e3.bounds[1])
+    try:
+        f3 = fit_model(AugmentedModel(base, spec3, boundary, K_deck, o_dofs), om, hold, x3)
+    except (np.linalg.LinAlgError, IdentificationError):
+        return best, e
+    if f3.chi2 - best.chi2 < stats.chi2.ppf(0.95, 1):
+        return f3, e3
     return best, e
 
 

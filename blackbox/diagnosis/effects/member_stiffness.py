@@ -42,13 +42,14 @@ from blackbox.diagnosis.effects.registry import register
 from solver_adapters.protocol import DofLabel
 
 __all__ = ["MemberStiffness", "section_parts", "stiffness_columns", "SECTIONS", "SPLIT_RTOL", "ALPHA_MISSING",
-           "MISSING_BELOW", "TURN_MIN", "TURNED_SHARE"]
+           "FACTOR_MAX", "MISSING_BELOW", "TURN_MIN", "TURNED_SHARE"]
 
 SECTIONS = ("EA", "EI1", "EI2", "GJ")
 # the element's tip DOFs (u_x u_y u_z th_x th_y th_z, element axes) of each part: plane 1 is the
 # element x-y plane (y along the orientation vector, I1), plane 2 the x-z plane (I2)
 _GROUPS = ((0,), (1, 5), (2, 4), (3,))
 ALPHA_MISSING = 1e-4        # the lower bound of a member factor: the member is not there
+FACTOR_MAX = 50.0           # the upper bound of a member factor: beyond any plausible value
 MISSING_BELOW = 0.02        # a fitted factor below this: reported as missing or disconnected
 TURN_MIN = 1.2             # I2/I1 (or I1/I2) at least this: a turned section is looked for
 TURNED_SHARE = (0.5, 2.0)   # fitted EI1, EI2 each this share (in log) of the way to I2/I1, I1/I2:
@@ -133,6 +134,7 @@ class MemberStiffness(Effect):
     parts: np.ndarray | None = None         # (4, 12, 12) section parts, None: "whole" only
     start_removed: bool = False             # the refit also starts with the member removed
     start_turned: bool = False              # ("sections") the refit also starts at the turned section
+    cap: tuple | None = None                # ("bending") upper bounds at the turned section's factors
 
     @property
     def eid(self) -> int:
@@ -195,18 +197,34 @@ class MemberStiffness(Effect):
 
     @property
     def bounds(self):
-        return np.full(self.n_params, ALPHA_MISSING), np.full(self.n_params, 50.0)
+        hi = np.full(self.n_params, FACTOR_MAX) if self.cap is None else np.asarray(self.cap, float)
+        return np.full(self.n_params, ALPHA_MISSING), hi
 
     def rejection(self, x_effect) -> str | None:
-        """Only the upper bound is beyond any plausible value: a factor at ``ALPHA_MISSING`` is
-        the member not being there (module docstring)."""
+        """Only the upper bound ``FACTOR_MAX`` is beyond any plausible value: a factor at
+        ``ALPHA_MISSING`` is the member not being there (module docstring), one at its
+        :attr:`cap` the turned section."""
         x = np.asarray(x_effect, float)
-        hi = self.bounds[1]
-        for name, v, b in zip(self.names, x, hi):
-            if abs(v - b) <= 1e-9 * b:
-                return (f"{name} ends at its upper bound {b:g}: beyond any plausible value, the effect "
+        for name, v in zip(self.names, x):
+            if abs(v - FACTOR_MAX) <= 1e-9 * FACTOR_MAX:
+                return (f"{name} ends at its upper bound {FACTOR_MAX:g}: beyond any plausible value, the effect "
                         "absorbs a misfit it does not describe")
         return None
+
+    def capped(self, x_effect) -> "MemberStiffness | None":
+        """A section refitted from its turned point (``start_turned``) whose stiffened plane's
+        factor ran on to ``FACTOR_MAX``: the same variant with that factor's bound at the turned
+        value (``I1/I2``). A weak turn tells the softened plane well and the stiffened one hardly
+        at all (a plane already far stiffer than its surroundings), so that factor runs loose
+        from the turned value to the bound."""
+        tp = self.turned_point
+        if not self.start_turned or self.variant != "bending" or tp is None or self.cap is not None:
+            return None
+        x = np.asarray(x_effect, float)
+        at_max = np.abs(x - FACTOR_MAX) <= 1e-9 * FACTOR_MAX
+        if not np.any(at_max & (tp > 1.0)) or np.any(at_max & (tp <= 1.0)):
+            return None
+        return replace(self, cap=tuple(np.where(at_max, tp, FACTOR_MAX)))
 
     @property
     def screen_point(self) -> np.ndarray:
@@ -276,6 +294,12 @@ class MemberStiffness(Effect):
         e = fit.spec.effects[i]
         low = [n for n, v in zip(e.names, x) if v < MISSING_BELOW]
         out = {"missing": low} if low else {}
+        if e.cap is not None:
+            held = [n for n, v, c in zip(e.names, x, e.cap) if c < FACTOR_MAX and abs(v - c) <= 1e-9 * c]
+            if held:
+                # the stiffened plane ran loose to FACTOR_MAX: held at the turned value, which
+                # the data do not tell from any stiffer one (search.refit_candidate)
+                out["held_at_turned_value"] = held
         ei = {"sections": x[1:3], "bending": x[0:2]}.get(e.variant)
         if ei is not None and e.turned_point is not None:
             share = np.log(ei) / np.log(e.turned_point)
