@@ -800,7 +800,8 @@ def test_unlisted_structure_defects_change_exactly_what_they_name(tmp_path):
     """``benchmarks/unlisted_structure.py``: each defect of the real structure changes the truth
     deck in the one way it names (a member gone; one member's orientation vector turned 90
     degrees about its axis, so its two bending planes exchange; a pinned support's free
-    rotations held) and nothing else, and the study's readings are re-simulated from it with
+    rotations held; one bar end's two bending rotations released; one held translation of a
+    support freed) and nothing else, and the study's readings are re-simulated from it with
     the study's own noise draws (a clean study's readings are reproduced exactly)."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     import unlisted_structure as us
@@ -811,7 +812,8 @@ def test_unlisted_structure_defects_change_exactly_what_they_name(tmp_path):
     for defect in us.DEFECTS:
         places = us._places(truth, defect, joint_grids)
         assert places, defect
-        what, key = place = places[0]
+        place = places[0]
+        what, key = place[:2]
         d = us._changed(truth, defect, place)
         if defect == "missing_member":
             assert key not in (d.cbars if what == "cbar" else d.rods)
@@ -824,6 +826,14 @@ def test_unlisted_structure_defects_change_exactly_what_they_name(tmp_path):
             assert abs(np.dot(b1.x, axis)) < 1e-9 * np.linalg.norm(axis) * np.linalg.norm(b1.x)
             assert abs(np.dot(b1.x, v0)) < 1e-9 * np.linalg.norm(v0) * np.linalg.norm(b1.x)
             assert {k: v for k, v in d.cbars.items() if k != key} == {k: v for k, v in truth.cbars.items() if k != key}
+        elif defect == "released_end":
+            assert (d.cbars[key].pa, d.cbars[key].pb) == ("", "56")
+            assert {k: v for k, v in d.cbars.items() if k != key} == {k: v for k, v in truth.cbars.items() if k != key}
+        elif defect == "lost_support":
+            comp = place[2]
+            before, after = us._held(truth), us._held(d)
+            assert after[key] == before[key].replace(comp, "") and comp in before[key]
+            assert {g: c for g, c in after.items() if g != key} == {g: c for g, c in before.items() if g != key}
         else:
             held = "".join(sorted({c for s in d.spc1s if key in s.grids for c in s.components}))
             assert held == "123456" and len(d.spc1s) == len(truth.spc1s) + 1

@@ -5,7 +5,8 @@ is rigid: the declared state, exactly and well conditioned). ``D_i`` is :attr:`C
 ``[i]``; ``k_ref[i] / theta_i`` is parameter ``i``'s stiffness (reported as such). The compliance
 form of :class:`blackbox.diagnosis.model.AugmentedModel` takes it; the parameters are one-sided
 (``theta >= 0``), bounded by ``THETA_MAX`` (a free cut is a mechanism), and a parameter that a
-refit leaves at 0 is dropped (that part of the connection stays rigid).
+refit leaves at 0 is dropped (that part of the connection stays rigid); one at ``THETA_MAX`` is
+reported as released (a hinge, a slot, a support that does not hold).
 
 *Variants.* A connection carries a ladder of nested parameterisations of the same cut
 (:class:`Rung`: simplest first), each with the matrix that maps the previous rung's parameters to
@@ -197,6 +198,23 @@ class Connection(Effect):
         xs = x2.copy()
         xs[first:] = START_MODERATE
         return starts + [xs]
+
+    def rejection(self, x_effect: np.ndarray) -> str | None:
+        """``None``: both ends of ``[0, THETA_MAX]`` are physical. At 0 the part stays rigid (the
+        nested state); at ``THETA_MAX`` it is released, no more than 1e-4 of the members' own
+        stiffness: a hinge where the model has a rigid connection, a slotted hole, a support that
+        does not hold that component -- defects real frames have, reported as ``released``
+        (:meth:`findings`), as a member factor at its lower bound is reported ``missing``."""
+        return None
+
+    def findings(self, fit: "Fit") -> dict:
+        """``released``: the parameters at ``THETA_MAX`` (that part of the connection carries
+        nothing the readings can tell from nothing)."""
+        i = next(i for i, e in enumerate(fit.spec.effects) if e.key == self.key)
+        e = fit.spec.effects[i]
+        x = fit.x[fit.spec.effect_slices()[i]]
+        free = [n for n, v in zip(e.names, x) if v >= THETA_MAX * (1.0 - 1e-9)]
+        return {"released": free} if free else {}
 
     def trimmed(self, x_effect: np.ndarray) -> "Connection | None":
         keep = kept_parameters(x_effect, AT_BOUND)
