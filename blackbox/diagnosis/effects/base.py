@@ -377,9 +377,10 @@ class Effect:
     def rejection(self, x_effect: np.ndarray) -> str | None:
         """Why a refit that ended at ``x_effect`` does not describe this effect (a "sign flip"
         whose factor stayed positive), or ``None``; such a refit is not accepted. By default: a
-        parameter held at a bound other than its nested value (a member factor at 0.02 or 50, a
-        connection at its free limit): the data push it beyond any plausible value, so the effect
-        is absorbing a misfit it does not describe."""
+        parameter held at a bound other than its nested value (a load scale or a sensor gain at
+        its limit): the data push it beyond any plausible value, so the effect is absorbing a
+        misfit it does not describe. Kinds whose bound is a physical state say so in their own
+        (a member missing, a connection released)."""
         x = np.asarray(x_effect, float)
         lo, hi = self.bounds
         nom = self.nominal

@@ -1,0 +1,80 @@
+"""A connection released to its free limit is a finding, not a refused fit.
+
+A compliance parameter of a connection (an undeclared joint's springs, a joint's translation
+springs, a support's grounded springs) is bounded by ``THETA_MAX``: no more than 1e-4 of the
+members' own stiffness. A refit that ends there describes a part that carries nothing the
+readings can tell from nothing: a connection the model takes as rigid that is a hinge, a
+support that does not hold a component. Both are defects real frames have; the unlisted-structure
+benchmark plants them (``released_end``: one bar end free in both bending planes, pin flags 56;
+``lost_support``: one held translation of a support freed) and the studies below are its seed 10,
+the first run of those two defects. Before, the fit at the free limit was refused as absorbing
+a misfit, and the diagnosis explained the data with effects elsewhere.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from blackbox.diagnosis.effects.connection import THETA_MAX
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _planted_and_diagnosed(tmp_path, index: int, seed: int, family: str, defect: str):
+    from blackbox.commands import diagnose as diagnose_command
+    sys.path.insert(0, str(ROOT))
+    from benchmarks import unlisted_structure as us
+
+    st, where = us.planted_study(index, seed, family, defect, tmp_path)
+    assert where is not None
+    return where, diagnose_command.run(st.folder, plots=False).document
+
+
+def test_released_is_found_at_the_free_limit_only():
+    """``findings``: the parameters at ``THETA_MAX`` (to rounding) are ``released``; a stiff or
+    moderately soft part is not; the fit at the free limit is not refused."""
+    from blackbox.diagnosis.effects.support_flexibility import SupportFlexibility
+    from blackbox.diagnosis.model import ModelSpec
+
+    e = SupportFlexibility((7,), ("ks_7_1", "ks_7_2"), "per-axis", pairs=(0, 1),
+                           basis=np.stack([np.diag([1.0, 0.0]), np.diag([0.0, 1.0])]), k_ref=np.ones(2))
+
+    class _Fit:
+        def __init__(self, x):
+            self.spec, self.x = ModelSpec((), (e,)), np.asarray(x, float)
+
+    assert e.findings(_Fit([THETA_MAX, 0.5])) == {"released": ["ks_7_1"]}
+    assert e.findings(_Fit([THETA_MAX * (1 - 1e-12), THETA_MAX])) == {"released": ["ks_7_1", "ks_7_2"]}
+    assert e.findings(_Fit([0.99 * THETA_MAX, 0.0])) == {}
+    assert e.rejection(np.array([THETA_MAX, 0.0])) is None
+
+
+@pytest.mark.slow
+def test_a_rigid_connection_that_is_a_hinge_is_released_at_its_grid(tmp_path):
+    """Seed 10, hall s0005: bar 46 (grids 50-51) free to rotate at grid 51 in both bending
+    planes (noncentrality 3,566). Found as one undeclared joint at 51 whose bar-46 branch is
+    released; before, the per-branch variant that releases it was refused at its free limit,
+    and a rigid end zone at grid 52, which no defect is at, was added beside the joint."""
+    where, d = _planted_and_diagnosed(tmp_path, 5, 10, "hall", "released_end")
+    assert where["place"] == ["cbar", 46] and where["grids"] == [50, 51]
+    assert d["verdict"] == "explained", d["verdict_detail"]
+    (a,) = d["added"]
+    assert (a["effect"], a["where"], a["variant"]) == ("undeclared_joint", [51], "per-branch")
+    assert any(n.endswith("_e46") for n in a["released"]), a["released"]
+
+
+@pytest.mark.slow
+def test_a_support_that_does_not_hold_a_component_is_released_there(tmp_path):
+    """Seed 10, hall s0004: grid 27's support does not hold x (noncentrality 518). Found as
+    that support's x spring released; before, refused at its free limit, and a spring of the
+    support at grid 40 was added instead ("explained": a report that would send the user to
+    the wrong support)."""
+    where, d = _planted_and_diagnosed(tmp_path, 4, 10, "hall", "lost_support")
+    assert where["place"] == ["grid", 27, "1"]
+    assert d["verdict"] == "explained", d["verdict_detail"]
+    (a,) = d["added"]
+    assert (a["effect"], a["where"], a["released"]) == ("support_flexibility", [27], ["ks_27_1"])
