@@ -20,7 +20,9 @@ loose about one axis may fail as one equal spring and pass as one spring per axi
 (:meth:`blackbox.diagnosis.effects.Effect.richer`, nested: per-axis springs, per-branch springs,
 a member's separate EA / EI1 / EI2 / GJ factors) are refitted from their nested point and one
 is kept only when it passes the same tests against the variant it extends; this repeats from the
-kept variant. The accepted candidate with the lowest ``delta BIC + hold-out chi2 + 2 ln M_k``
+kept variant. Every other candidate whose refit lowers BIC is refined too when its richer
+variant could still win (:func:`refine_schedule`: the score of that variant at the candidate's
+own refit bounds what it can gain). The accepted candidate with the lowest ``delta BIC + hold-out chi2 + 2 ln M_k``
 *at its refined variant* is added (``M_k`` its kind's hypotheses in the round: -2 ln of its
 posterior odds under the prior the multiplicity rule below assumes, kinds alike and places
 within a kind alike; :attr:`CandidateScore.posterior`), so a mis-specified simple variant never
@@ -521,6 +523,65 @@ def refine(base: SplitBase, fit: Fit, i: int, om: ObsMap, hold: ObsMap | None, b
         fit = best[0]
 
 
+RICHER_RATIO = 2.0
+"""How many times the score of its richer variants (at the nested point, the candidate's own
+refit) a candidate's refined likelihood ratio is allowed to gain when :func:`refine_schedule`
+decides whether it could win. The nested point is the candidate's optimum, close to where its
+richer variant ends, so the score is a near estimate (0.9 to 1.1 of the refit's gain on the
+unlisted-structure studies it was checked on; a branch released to its free limit bends away
+from the tangent the most)."""
+
+
+def richer_gain(base: SplitBase, fit: Fit, i: int, om: ObsMap, boundary, K_deck, o_dofs) -> list[tuple[float, int]]:
+    """``[(S, ddf)]`` per richer variant of effect ``i`` of ``fit`` (:meth:`Effect.richer`): the
+    score statistic of the variant's model at its nested point (``fit`` itself: ``|P r|^2``,
+    ``r`` the whitened residual and ``P`` the projection on the span of the variant's whitened
+    Jacobian there) and the parameters it adds. Bounds are not imposed: the score can only be
+    larger than the bounded one, so a schedule using it leaves out nothing the bounded one
+    keeps."""
+    e = fit.spec.effects[i]
+    sl = fit.spec.effect_slices()[i]
+    out = []
+    for r, xr in e.richer(fit.x[sl]):
+        spec2 = fit.spec.replace_effect(i, r)
+        x2 = np.concatenate([fit.x[:sl.start], np.asarray(xr, float), fit.x[sl.stop:]])
+        try:
+            m2 = AugmentedModel(base, spec2, boundary, K_deck, o_dofs)
+            st = m2.state(x2)
+            res = (om.y - m2.predict(x2, om, st)) / om.sigma
+            J = m2.jacobian(x2, om, st) / om.sigma[:, None]
+        except (np.linalg.LinAlgError, IdentificationError, ValueError):
+            continue
+        if not (np.all(np.isfinite(res)) and np.all(np.isfinite(J))):
+            continue
+        scale = np.linalg.norm(J, axis=0)
+        scale = np.where(scale > 0, scale, 1.0)
+        d = np.linalg.lstsq(J / scale, res, rcond=1e-10)[0]
+        out.append((float(np.sum(((J / scale) @ d) ** 2)), r.n_params - e.n_params))
+    return out
+
+
+def refine_schedule(base: SplitBase, candidates: Sequence[tuple[int, CandidateScore]], best_posterior: float,
+                    om: ObsMap, boundary, K_deck, o_dofs) -> list[tuple[float, int]]:
+    """``[(best case, index)]``, best first: the refitted candidates beyond the ``refine_top``
+    whose richer variant could still be added. A candidate's best case is its posterior less
+    ``RICHER_RATIO`` times its richer variant's score, plus that variant's added parameters
+    times ``ln n`` (:func:`richer_gain`, the best over its variants); it is kept when that beats
+    ``best_posterior``, the best accepted posterior so far. The caller refines them in this
+    order and stops at the first best case the posterior of what it refined has passed."""
+    out = []
+    for k, c in candidates:
+        i = len(c.refit.spec.effects) - 1
+        ln_n = math.log(c.refit.n_obs)
+        gains = richer_gain(base, c.refit, i, om, boundary, K_deck, o_dofs)
+        if not gains:
+            continue
+        bound = c.posterior + min(-RICHER_RATIO * S + ddf * ln_n for S, ddf in gains)
+        if bound < best_posterior:
+            out.append((bound, k))
+    return sorted(out)
+
+
 def multipliers(pool: Sequence[Effect], round_no: int) -> dict[str, float]:
     """Kind -> the Bonferroni multiplier of one hypothesis of that kind in round ``round_no``:
     ``2^r K M_k`` -- the round spends ``alpha / 2^r``, shared equally among the ``K`` kinds of
@@ -976,7 +1037,8 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         # significant as one equal spring, but is as one spring per axis)
         order = sorted((k for k, c in enumerate(refits) if c.refit is not None and c.delta_bic < 0),
                        key=lambda k: refits[k].posterior)
-        for k in order[:refine_top]:
+
+        def run_refine(k):
             c = refits[k]
             i = len(c.refit.spec.effects) - 1
             mk = mults[c.effect.kind]
@@ -984,6 +1046,19 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
             if f3 is not c.refit:
                 c = _judged(c, checks.judge(fit, f3, mk, alpha, i), effect=f3.spec.effects[-1], refit=f3)
             refits[k] = replace(c, variants=trials)
+
+        for k in order[:refine_top]:
+            run_refine(k)
+        # then every other one whose richer variant could still win (refine_schedule): a
+        # connection released on one branch shows little as one equal spring on all of them
+        best_post = min((c.posterior for c in refits if c.accepted), default=math.inf)
+        for bound, k in refine_schedule(base, [(k, refits[k]) for k in order[refine_top:]], best_post, om,
+                                        boundary, K_deck, o_dofs):
+            if bound >= best_post:
+                break
+            run_refine(k)
+            if refits[k].accepted:
+                best_post = min(best_post, refits[k].posterior)
         ok = [c for c in refits if c.accepted]
         best = min(ok, key=lambda c: c.posterior) if ok else None
         if best is not None:
