@@ -25,7 +25,15 @@ in no list of the diagnosis, each of a kind real static tests have:
   says pull): its readings are the declared ones' negatives;
 * ``rig_slip``: in one fitted case the whole specimen moved as a rigid body (the test frame or a
   support base slid): every reading of the case gets one small rigid translation and rotation,
-  sized to a noncentrality drawn log-uniform in :data:`LAMBDA_RANGE`.
+  sized to a noncentrality drawn log-uniform in :data:`LAMBDA_RANGE`;
+* ``tilted_sensor``: one translation channel's transducer is mounted 20 degrees off its axis,
+  towards another translation measured at the same grid: it reads ``cos 20 u_c + sin 20
+  u_c'`` in every case (its readings made from the two channels' recorded ones);
+* ``duplicated_case``: one fitted case's readings are a copy of another fitted case's (a file
+  saved twice under two case names).
+
+The last two were added after the diagnosis of this round was written and run once, on seeds
+never run before, with nothing of the diagnosis changed for them.
 
 The two load defects are placed where they move the readings by a noncentrality between 60 and
 1e4 (whitened, before any refit), as the unlisted defects of the structure are.
@@ -60,7 +68,8 @@ from blackbox.study import load_study                                   # noqa: 
 from solver_adapters.bdf import read_deck                               # noqa: E402
 
 DEFECTS = ("drift", "slip", "noisy", "dead", "units", "swapped_cases", "misplaced_load", "tilted_load",
-           "saturated", "reversed_case", "rig_slip")
+           "saturated", "reversed_case", "rig_slip", "tilted_sensor", "duplicated_case")
+TILT = 20.0                         # a tilted sensor's angle off its axis, degrees
 LOAD_DEFECTS = ("misplaced_load", "tilted_load")
 LAMBDA_RANGE = (60.0, 1e4)          # noncentrality of a planted defect: clearly detectable, not absurd
 
@@ -83,9 +92,18 @@ def plant(folder: Path, defect: str, rng: np.random.Generator) -> dict:
     fields, rows = _read(folder / "measurements.csv")
     cases = list(dict.fromkeys(r["case"] for r in rows))
     channels = list(dict.fromkeys((r["grid"], r["component"]) for r in rows))
-    if defect in ("units", "swapped_cases", "reversed_case", "rig_slip"):
+    if defect == "tilted_sensor":
+        return _tilted_sensor(folder, fields, rows, rng)
+    if defect in ("units", "swapped_cases", "reversed_case", "rig_slip", "duplicated_case"):
         pick = fitted_cases(folder, cases)
-        if defect == "rig_slip":
+        if defect == "duplicated_case":
+            a, b = (str(x) for x in rng.choice(pick, 2, replace=False))
+            va = {(r["grid"], r["component"]): r["value"] for r in rows if r["case"] == a}
+            for r in rows:
+                if r["case"] == b and (r["grid"], r["component"]) in va:
+                    r["value"] = va[(r["grid"], r["component"])]
+            where = {"case": b, "copy_of": a}
+        elif defect == "rig_slip":
             where = _rig_slip(folder, rows, str(rng.choice(pick)), rng)
         elif defect == "reversed_case":
             c = str(rng.choice(pick))
@@ -144,6 +162,29 @@ def plant(folder: Path, defect: str, rng: np.random.Generator) -> dict:
 
 
 SATURATION = 0.6                    # a saturated channel's range, as a share of its largest reading
+
+
+def _tilted_sensor(folder: Path, fields: list[str], rows: list[dict], rng: np.random.Generator) -> dict:
+    """One translation channel read ``TILT`` degrees off its axis towards another translation
+    measured at its grid (module docstring), the channel drawn among those whose mix moves
+    most (the largest other component); every case."""
+    by = {(r["grid"], r["component"], r["case"]): r for r in rows}
+    chans = list(dict.fromkeys((r["grid"], r["component"]) for r in rows if r["component"] in ("1", "2", "3")))
+    cases = list(dict.fromkeys(r["case"] for r in rows))
+    pairs = [(g, c, c2) for g, c in chans for g2, c2 in chans if g2 == g and c2 != c
+             and all((g, c, k) in by and (g, c2, k) in by for k in cases)]
+    if not pairs:
+        raise ValueError("no grid with two measured translations")
+    size = [sum((float(by[(g, c2, k)]["value"]) / float(by[(g, c, k)]["sigma"])) ** 2 for k in cases)
+            for g, c, c2 in pairs]
+    top = np.argsort(size)[::-1][:max(1, len(pairs) // 4)]
+    g, c, c2 = pairs[int(rng.choice(top))]
+    t = math.radians(TILT)
+    for k in cases:
+        a, b = by[(g, c, k)], by[(g, c2, k)]
+        a["value"] = repr(math.cos(t) * float(a["value"]) + math.sin(t) * float(b["value"]))
+    _write(folder / "measurements.csv", fields, rows)
+    return {"grid": int(g), "component": int(c), "towards": int(c2), "degrees": TILT}
 
 
 def _rig_slip(folder: Path, rows: list[dict], case: str, rng: np.random.Generator) -> dict:

@@ -942,6 +942,43 @@ def test_unlisted_reading_defects_change_what_they_name(tmp_path):
         assert lam == pytest.approx(where["noncentrality"], rel=1e-9)
 
 
+def test_unlisted_tilted_sensor_and_duplicated_case_change_what_they_name(tmp_path):
+    """``tilted_sensor`` rewrites one translation channel as ``cos 20 own + sin 20 other`` of
+    another translation recorded at its grid, in every case, and nothing else;
+    ``duplicated_case`` makes one fitted case's readings those of another fitted case, and
+    touches no other case."""
+    import csv
+    import math
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import unlisted_defects as ud
+
+    st = gen.generate_study(0, 7, tmp_path, kind=gen.NONE, shape="hall", style="plain")
+    before = (st.folder / "measurements.csv").read_text()
+
+    def rows():
+        with open(st.folder / "measurements.csv", newline="") as f:
+            return {(r["case"], int(r["grid"]), int(r["component"])): float(r["value"]) for r in csv.DictReader(f)}
+
+    r0 = rows()
+    cases = sorted({c for c, _, _ in r0})
+    where = ud.plant(st.folder, "tilted_sensor", np.random.default_rng(5))
+    r1 = rows()
+    g, c, c2 = where["grid"], where["component"], where["towards"]
+    assert c != c2 and c <= 3 and c2 <= 3 and where["degrees"] == 20.0
+    assert {k for k in r0 if r1[k] != r0[k]} <= {(k, g, c) for k in cases}
+    t = math.radians(20.0)
+    for k in cases:
+        assert r1[(k, g, c)] == pytest.approx(math.cos(t) * r0[(k, g, c)] + math.sin(t) * r0[(k, g, c2)], rel=1e-15)
+    (st.folder / "measurements.csv").write_text(before)
+    where = ud.plant(st.folder, "duplicated_case", np.random.default_rng(5))
+    r1 = rows()
+    b, a = where["case"], where["copy_of"]
+    fitted = ud.fitted_cases(st.folder, cases)
+    assert a != b and a in fitted and b in fitted
+    assert {k[0] for k in r0 if r1[k] != r0[k]} == {b}
+    assert all(r1[(b, gg, cc)] == r0[(a, gg, cc)] for (k, gg, cc) in r0 if k == b)
+
+
 def _user_deck_through_mystran_is_the_plain_structure(tmp_path, family, seed):
     """A frame of ``family`` written as a user writes it (systems, offsets), run by MYSTRAN,
     against its plain deck through the reference solver (to 1e-5 of the largest value: MYSTRAN
