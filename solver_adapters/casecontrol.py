@@ -73,6 +73,8 @@ _NOT_STATIC = {  # selections of other solutions: no effect on the static soluti
     "MODE": "MODES", "ANAL": "ANALYSIS", "STAT": "STATSUB", "RIGI": "RIGID", "MASS": "MASS",
     "RMET": "RMETHOD", "FMET": "FMETHOD", "SMET": "SMETHOD", "TSTEPNL": "TSTEPNL",
     "NONL": "NONLINEAR", "B2GG": "B2GG", "B2PP": "B2PP", "TFL": "TFL", "RGYR": "RGYRO",
+    # p-set direct matrices are used only in dynamic response (MSC QRG K2PP, M2PP remarks)
+    "K2PP": "K2PP", "M2PP": "M2PP",
     "TRIM": "TRIM", "FLUT": "FLUTTER", "GUST": "GUST", "DIVE": "DIVERG",
     "GENG": "GENGAF", "AESYMXY": "AESYMXY", "AESYMXZ": "AESYMXZ", "AEUX": "AEUXREF",
     "CSSC": "CSSCHD", "MODT": "MODTRAK", "MPFA": "MPFACTOR",
@@ -88,7 +90,7 @@ SOL 400); a subcase of any other (MODES, BUCK, DFREQ, SAERO, FLUTTER ...) is not
 _UNSUPPORTED = {  # change the static solution; an imported study cannot carry them
     "DEFO": "DEFORM (enforced element deformation)",
     "P2G": "P2G (direct load input)",
-    "K2PP": "K2PP (direct matrix input)", "K42G": "K42GG (direct matrix input)",
+    "K42G": "K42GG (direct matrix input)",
     "M2GG": "M2GG (direct mass input: changes gravity loads)",
     "LOADSET": "LOADSET (static load sets from LSEQ cards, not read by blackbox import)",
     "SYMC": "SYMCOM",

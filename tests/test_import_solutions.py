@@ -96,23 +96,25 @@ def test_cli_exit_2_without_static_load(tmp_path, capsys):
 # --------------------------------------------------------------------------------------------
 NO_EFFECT = ("TITLE = T\nECHO = NONE\nDISP(PRINT) = ALL\nMETHOD = 10\nRMETHOD = 11\nDESOBJ = 10\n"
              "DESSUB = 2\nDESGLB = 3\nTSTEPNL = 10\nTSTEP = 11\nNLPARM = 3\nSDAMP = 4\nFREQ = 5\n"
-             "ANALYSIS = STATICS\nDLOAD = 6\nFMETHOD = 7\nTRIM = 8\nB2GG = BB\nMPFACTOR = ALL\n")
+             "ANALYSIS = STATICS\nDLOAD = 6\nFMETHOD = 7\nTRIM = 8\nB2GG = BB\nMPFACTOR = ALL\n"
+             "K2PP = KAX\nM2PP = MAX\n")
 
 
 def test_no_effect_commands_are_one_note(tmp_path):
     result = import_deck.run(_deck(tmp_path, "101", f"SPC = 1\nLOAD = 5\n{NO_EFFECT}"))
     assert result.loads_csv == STATIC_LOADS
     lines = [n for n in result.notes if "case-control command" in n]
-    assert lines == ["skipped 19 case-control commands with no effect on a linear static solution: "
+    # K2PP and M2PP: matrices of the p-set, used only in dynamic response (MSC QRG K2PP remark 4)
+    assert lines == ["skipped 21 case-control commands with no effect on a linear static solution: "
                      "title lines (TITLE); output controls (ECHO); output requests (DISPLACEMENT); "
                      "selections of other solutions (METHOD, RMETHOD, TSTEPNL, TSTEP, NLPARM, "
-                     "SDAMPING, FREQUENCY, ANALYSIS, DLOAD, FMETHOD, TRIM, B2GG, MPFACTOR); design "
+                     "SDAMPING, FREQUENCY, ANALYSIS, DLOAD, FMETHOD, TRIM, B2GG, MPFACTOR, K2PP, M2PP); design "
                      "optimisation (DESOBJ, DESSUB, DESGLB)"]
 
 
 @pytest.mark.parametrize("command, named", [
     ("P2G = PDMIG", "P2G (direct load input)"),
-    ("K2PP = KAX", "K2PP"), ("M2GG = MDMIG", "M2GG"), ("LOADSET = 35", "LOADSET"),
+    ("K42GG = KAX", "K42GG"), ("M2GG = MDMIG", "M2GG"), ("LOADSET = 35", "LOADSET"),
     ("DEFORM = 2", "DEFORM"), ("CLOAD = 2", "CLOAD")])
 def test_commands_that_change_the_solution_are_refused(tmp_path, command, named):
     p = _deck(tmp_path, "101", f"SPC = 1\nLOAD = 5\n{command}\n")
