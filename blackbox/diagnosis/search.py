@@ -527,9 +527,8 @@ RICHER_RATIO = 2.0
 """How many times the score of its richer variants (at the nested point, the candidate's own
 refit) a candidate's refined likelihood ratio is allowed to gain when :func:`refine_schedule`
 decides whether it could win. The nested point is the candidate's optimum, close to where its
-richer variant ends, so the score is a near estimate (0.9 to 1.1 of the refit's gain on the
-unlisted-structure studies it was checked on; a branch released to its free limit bends away
-from the tangent the most)."""
+richer variant ends, so the score is a near estimate: on the 18 refinements of the
+unlisted-structure benchmark's seed 10 box s0003 the refits gained 0.52 to 1.07 times it."""
 
 
 def richer_gain(base: SplitBase, fit: Fit, i: int, om: ObsMap, boundary, K_deck, o_dofs) -> list[tuple[float, int]]:
