@@ -95,3 +95,20 @@ def test_a_hinge_the_simple_joint_hardly_shows_is_refined_and_found(tmp_path):
     (a,) = d["added"]
     assert (a["effect"], a["where"], a["variant"]) == ("undeclared_joint", [24], "per-branch")
     assert any(n.endswith("_e36") for n in a["released"]), a["released"]
+
+
+@pytest.mark.slow
+def test_a_hinge_whose_equal_spring_scores_little_is_refitted_for_its_richer_variant(tmp_path):
+    """Seed 11, portal s0002: bar 40 (grids 36-24) free to rotate at grid 24 (noncentrality
+    7,615). The undeclared joint at 24 scores 188 as one equal spring on its three branches,
+    so even ten times that could not beat bar 40 as one factor (likelihood ratio 2,249): it was
+    never refitted, and bar 40 at 0.04 of its stiffness plus a bad channel at grid 24 were
+    reported "explained". The score of its richest variant (per branch, 2,501; its refit
+    reaches 2,503) could, so the refit schedule refits it and the refine schedule takes it to
+    that variant: one joint at 24 whose bar-40 branch is released."""
+    where, d = _planted_and_diagnosed(tmp_path, 2, 11, "portal", "released_end")
+    assert where["place"] == ["cbar", 40] and where["grids"] == [24, 36]
+    assert d["verdict"] == "explained", d["verdict_detail"]
+    (a,) = d["added"]
+    assert (a["effect"], a["where"], a["variant"]) == ("undeclared_joint", [24], "per-branch")
+    assert any(n.endswith("_e40") for n in a["released"]), a["released"]

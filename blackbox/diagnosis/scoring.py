@@ -24,7 +24,7 @@ from blackbox.diagnosis.fit import GRAM_RTOL, Fit
 from blackbox.diagnosis.model import AugmentedModel, ObsMap
 from blackbox.errors import IdentificationError
 
-__all__ = ["CandidateScore", "Projector", "score_test", "sparse_score", "score_candidates", "log10_sf", "log10_sf_array", "SCORE_RTOL"]
+__all__ = ["family_scores", "CandidateScore", "Projector", "score_test", "sparse_score", "score_candidates", "log10_sf", "log10_sf_array", "SCORE_RTOL"]
 
 SCORE_RTOL = 1e-8           # a candidate direction whose part outside the model's span is below
                             # 1e-4 of its own size (eigenvalue 1e-8) adds nothing (rounding)
@@ -220,6 +220,42 @@ def score_candidates(model: AugmentedModel, fit: Fit, om: ObsMap, candidates: Se
         cols, one = e.scored_columns(fit.spec, spec2)
         S, df, step = score_test(proj, J2[:, cols], one)
         out.append((e, S, df, step))
+    return out
+
+
+def family_scores(model: AugmentedModel, fit: Fit, om: ObsMap, candidates: Sequence[Effect], boundary, K_deck,
+                  o_dofs) -> dict:
+    """Effect key -> ``(S, df)``: the score test, at the current optimum, of each candidate's
+    richest variant (the last of :meth:`Effect.richer` at its nested point: per-branch springs,
+    per-axis springs), for candidates scored through their augmented model. Each variant nests
+    the simpler ones at the same point, so this bounds the first-order gain of the whole family:
+    a joint released on one branch scores little as one equal spring on all branches and much
+    as springs per branch. Families scored without augmenting the model (members, by
+    reciprocity) and candidates without a richer variant have no entry."""
+    _, lo, hi = fit.spec.transforms()
+    g = fit.J.T @ fit.residuals
+    held = ((fit.x <= lo) & (g < 0)) | ((fit.x >= hi) & (g > 0))
+    proj = Projector(fit.J[:, ~held], fit.residuals)
+    out = {}
+    for e in candidates:
+        if (type(e).sparse_columns.__func__ is not Effect.sparse_columns.__func__
+                or type(e).batch_columns.__func__ is not Effect.batch_columns.__func__):
+            continue
+        rich = e.richer(e.nominal)
+        if not rich:
+            continue
+        r, xr = rich[-1]
+        spec2, x2 = fit.spec.add(r, fit.x)
+        x2[spec2.n_params - r.n_params:] = xr
+        try:
+            m2 = AugmentedModel(model.base, spec2, boundary, K_deck, o_dofs)
+            J2 = m2.jacobian(x2, om) / om.sigma[:, None]
+        except (np.linalg.LinAlgError, IdentificationError):
+            continue
+        cols, one = r.scored_columns(fit.spec, spec2)
+        S, df, _ = score_test(proj, J2[:, cols], one)
+        if df:
+            out[e.key] = (S, df)
     return out
 
 

@@ -68,7 +68,8 @@ from blackbox.diagnosis.fit import Fit, chi2_band, fit_model
 from blackbox.diagnosis.model import RIGID_RATIO, AugmentedModel, ModelSpec, ObsMap
 from blackbox.diagnosis.residuals import hotspots, residual_structure
 from blackbox.diagnosis.runs import RunRecord
-from blackbox.diagnosis.scoring import CandidateScore, evidence, log10_sf, log10_sf_array, score_candidates
+from blackbox.diagnosis.scoring import (CandidateScore, evidence, family_scores, log10_sf, log10_sf_array,
+                                       score_candidates)
 from blackbox.diagnosis.separation import separating_measurements
 from blackbox.diagnosis.split import SplitBase
 from blackbox.diagnosis.validation import Validation, cv_chi2, kfold
@@ -697,7 +698,7 @@ def screen(model: AugmentedModel, fit: Fit, om: ObsMap, pool: Sequence[Effect], 
 
 def refit_schedule(scored: Sequence[CandidateScore], best_evidence: float, alpha: float,
                    log_n: float, screened: dict | None = None,
-                   multiplier: dict | None = None) -> list[CandidateScore]:
+                   multiplier: dict | None = None, family: dict | None = None) -> list[CandidateScore]:
     """The candidates (not refitted yet) that could still win on a refit against the best
     accepted candidate so far, ``best_evidence`` (its :attr:`~CandidateScore.posterior`, ``delta
     BIC + hold-out chi2 + prior``; infinite when none was accepted: then every candidate that
@@ -713,9 +714,15 @@ def refit_schedule(scored: Sequence[CandidateScore], best_evidence: float, alpha
     a lower bound of its refit's; a candidate whose drop alone is significant at ``SCREEN``
     (``multiplier``: its kind's Bonferroni factor) and beats the best evidence is refitted
     whatever its score. So the guarantee also covers effects that are small to first order
-    and large when complete."""
+    and large when complete.
+
+    ``family``: effect key -> ``(S, df)``, the score of the candidate's richest variant
+    (:func:`blackbox.diagnosis.scoring.family_scores`); a candidate whose family score is
+    significant at ``SCREEN`` and whose best case on it beats the best evidence is refitted
+    (and its richer variants then weighed by :func:`refine_schedule`). So the guarantee covers
+    what its richer variants could reach, not only its simplest one."""
     out = []
-    screened, multiplier = screened or {}, multiplier or {}
+    screened, multiplier, family = screened or {}, multiplier or {}, family or {}
 
     def wins(best_case: float, c: CandidateScore) -> bool:
         return best_case < 0.0 and best_case + c.prior < best_evidence
@@ -731,6 +738,11 @@ def refit_schedule(scored: Sequence[CandidateScore], best_evidence: float, alpha
             if not ok and d is not None and d > 0:
                 p = min(1.0, multiplier.get(c.effect.kind, 1.0) * float(stats.chi2.sf(d, c.df)))
                 ok = p < SCREEN and wins(-d + c.df * log_n, c)
+            fam = family.get(c.effect.key)
+            if not ok and fam is not None:
+                S_f, df_f = fam
+                p = min(1.0, multiplier.get(c.effect.kind, 1.0) * float(stats.chi2.sf(S_f, df_f)))
+                ok = p < SCREEN and wins(-SCORE_RATIO * S_f + c.df * log_n, c)
         if ok:
             out.append(c)
     return out
@@ -1014,8 +1026,10 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
                               effect=(c.effect.started_at_screen(which[c.effect.key])
                                       if screened[c.effect.key] > c.score else c.effect))
                       for c in scored]
-            run_refits(refit_schedule([c for c in scored if c.effect.key not in done_keys], best_ev, alpha,
-                                      math.log(fit.n_obs), screened, mults))
+            rest = [c for c in scored if c.effect.key not in done_keys]
+            family = family_scores(model, fit, om, [c.effect for c in rest if c.df > 0 and not c.effect.acts_on_output],
+                                   boundary, K_deck, o_dofs)
+            run_refits(refit_schedule(rest, best_ev, alpha, math.log(fit.n_obs), screened, mults, family))
             # refitted already, but as a variant that cannot reach what another of its screen
             # points shows (a member refitted as one factor whose section is turned): refitted
             # again from there, and the better of the two refits kept
