@@ -902,8 +902,9 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
     default here. ``load_magnitudes``: the study's typical force and moment, the size of the
     load cases the report proposes to separate near-equal alternatives
     (:mod:`blackbox.diagnosis.separation`). ``complete_refits=False`` refits only the
-    ``refit_top`` best by score (what the guarantee of :func:`refit_schedule` costs is measured
-    against it: ``benchmarks/refit_schedule.py``). ``declared_predict(k)``: the declared
+    ``refit_top`` best by score and refines only the ``refine_top`` strongest (what the
+    guarantees of :func:`refit_schedule` and :func:`refine_schedule` cost is measured against
+    it: ``benchmarks/refit_schedule.py``). ``declared_predict(k)``: the declared
     model's fit-row predictions at any ``k``; when the estimate has springs beyond their rigid
     limit (:meth:`AugmentedModel.rigid_limits`, where both models are rounding), the nesting is
     checked at those limits instead, as the fit starts there."""
@@ -1065,8 +1066,8 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         # then every other one whose richer variant could still win (refine_schedule): a
         # connection released on one branch shows little as one equal spring on all of them
         best_post = min((c.posterior for c in refits if c.accepted), default=math.inf)
-        for bound, k in refine_schedule(base, [(k, refits[k]) for k in order[refine_top:]], best_post, om,
-                                        boundary, K_deck, o_dofs):
+        later = [(k, refits[k]) for k in order[refine_top:]] if complete_refits else []
+        for bound, k in refine_schedule(base, later, best_post, om, boundary, K_deck, o_dofs):
             if bound >= best_post:
                 break
             run_refine(k)
