@@ -73,7 +73,8 @@ _NOT_STATIC = {  # selections of other solutions: no effect on the static soluti
     "MODE": "MODES", "ANAL": "ANALYSIS", "STAT": "STATSUB", "RIGI": "RIGID", "MASS": "MASS",
     "RMET": "RMETHOD", "FMET": "FMETHOD", "SMET": "SMETHOD", "TSTEPNL": "TSTEPNL",
     "NONL": "NONLINEAR", "B2GG": "B2GG", "B2PP": "B2PP", "TFL": "TFL", "RGYR": "RGYRO",
-    # p-set direct matrices are used only in dynamic response (MSC QRG K2PP, M2PP remarks)
+    # p-set direct matrices: used only in dynamic response (OptiStruct's K2PP reference; Autodesk
+    # Nastran's: complex eigenvalue solutions only), never in a linear static solution
     "K2PP": "K2PP", "M2PP": "M2PP",
     "TRIM": "TRIM", "FLUT": "FLUTTER", "GUST": "GUST", "DIVE": "DIVERG",
     "GENG": "GENGAF", "AESYMXY": "AESYMXY", "AESYMXZ": "AESYMXZ", "AEUX": "AEUXREF",

@@ -104,7 +104,8 @@ def test_no_effect_commands_are_one_note(tmp_path):
     result = import_deck.run(_deck(tmp_path, "101", f"SPC = 1\nLOAD = 5\n{NO_EFFECT}"))
     assert result.loads_csv == STATIC_LOADS
     lines = [n for n in result.notes if "case-control command" in n]
-    # K2PP and M2PP: matrices of the p-set, used only in dynamic response (MSC QRG K2PP remark 4)
+    # K2PP and M2PP: matrices of the p-set, used only in dynamic response (OptiStruct's and
+    # Autodesk Nastran's K2PP references)
     assert lines == ["skipped 21 case-control commands with no effect on a linear static solution: "
                      "title lines (TITLE); output controls (ECHO); output requests (DISPLACEMENT); "
                      "selections of other solutions (METHOD, RMETHOD, TSTEPNL, TSTEP, NLPARM, "
