@@ -24,7 +24,8 @@ from blackbox.diagnosis.fit import GRAM_RTOL, Fit
 from blackbox.diagnosis.model import AugmentedModel, ObsMap
 from blackbox.errors import IdentificationError
 
-__all__ = ["family_scores", "CandidateScore", "Projector", "score_test", "sparse_score", "score_candidates", "log10_sf", "log10_sf_array", "SCORE_RTOL"]
+__all__ = ["CandidateScore", "Projector", "fit_projector", "score_test", "sparse_score", "score_candidates",
+           "family_scores", "log10_sf", "log10_sf_array", "SCORE_RTOL"]
 
 SCORE_RTOL = 1e-8           # a candidate direction whose part outside the model's span is below
                             # 1e-4 of its own size (eigenvalue 1e-8) adds nothing (rounding)
@@ -174,18 +175,23 @@ def sparse_score(proj: Projector, rows: np.ndarray, col: np.ndarray, one_sided: 
     return max((h / scale) ** 2 / Ms, 0.0), 1, np.array([th / scale])
 
 
+def fit_projector(fit: Fit) -> Projector:
+    """The projection out of ``fit``'s free directions, for score tests at its optimum. At a
+    bounded optimum the residual is orthogonal only to the free parameters' columns: a parameter
+    held at its bound (a spring at 0) does not remove its direction from a candidate that can go
+    beyond it (the complex model's ``K_C`` is not sign-restricted)."""
+    _, lo, hi = fit.spec.transforms()
+    g = fit.J.T @ fit.residuals
+    held = ((fit.x <= lo) & (g < 0)) | ((fit.x >= hi) & (g > 0))
+    return Projector(fit.J[:, ~held], fit.residuals)
+
+
 def score_candidates(model: AugmentedModel, fit: Fit, om: ObsMap, candidates: Sequence[Effect],
                      boundary, K_deck, o_dofs) -> list[tuple[Effect, float, int, np.ndarray]]:
     """Score every candidate at the current optimum: ``[(effect, S, df, step)]``. A family that
     scores its candidates without augmenting the model (``Effect.batch_columns``: members by
     reciprocity, no run) comes first; the others are scored through their augmented model."""
-    # at a bounded optimum the residual is orthogonal only to the free parameters' columns: a
-    # parameter held at its bound (a spring at 0) does not remove its direction from a candidate
-    # that can go beyond it (the complex model's K_C is not sign-restricted)
-    _, lo, hi = fit.spec.transforms()
-    g = fit.J.T @ fit.residuals
-    held = ((fit.x <= lo) & (g < 0)) | ((fit.x >= hi) & (g > 0))
-    proj = Projector(fit.J[:, ~held], fit.residuals)
+    proj = fit_projector(fit)
     st = model.state(fit.x)
     out = []
     batched: set[int] = set()
@@ -232,10 +238,7 @@ def family_scores(model: AugmentedModel, fit: Fit, om: ObsMap, candidates: Seque
     a joint released on one branch scores little as one equal spring on all branches and much
     as springs per branch. Families scored without augmenting the model (members, by
     reciprocity) and candidates without a richer variant have no entry."""
-    _, lo, hi = fit.spec.transforms()
-    g = fit.J.T @ fit.residuals
-    held = ((fit.x <= lo) & (g < 0)) | ((fit.x >= hi) & (g > 0))
-    proj = Projector(fit.J[:, ~held], fit.residuals)
+    proj = fit_projector(fit)
     out = {}
     for e in candidates:
         if (type(e).sparse_columns.__func__ is not Effect.sparse_columns.__func__

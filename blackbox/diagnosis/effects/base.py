@@ -400,8 +400,9 @@ class Effect:
         """After a refit that ended with a parameter at a bound :meth:`rejection` calls
         implausible: the effect with that parameter's bound brought back to the plausible point
         its refit started from (a screen point), or ``None`` when there is none. The search keeps
-        the capped refit when the data do not tell the two apart (:func:`blackbox.diagnosis.
-        search.refit_candidate`): the parameter then ran loose to the bound, it was not pushed."""
+        the capped refit when the data do not tell the two apart
+        (:func:`blackbox.diagnosis.search.refit_candidate`): the parameter then ran loose to the
+        bound, it was not pushed."""
         return None
 
     @property
