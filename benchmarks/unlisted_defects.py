@@ -32,8 +32,8 @@ in no list of the diagnosis, each of a kind real static tests have:
 * ``duplicated_case``: one fitted case's readings are a copy of another fitted case's (a file
   saved twice under two case names).
 
-The last two were added after the diagnosis of this round was written and run once, on seeds
-never run before, with nothing of the diagnosis changed for them.
+The last two were first run on a diagnosis that was not changed afterwards, and nothing was
+changed for them.
 
 The two load defects are placed where they move the readings by a noncentrality between 60 and
 1e4 (whitened, before any refit), as the unlisted defects of the structure are.
