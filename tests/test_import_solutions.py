@@ -97,7 +97,7 @@ def test_cli_exit_2_without_static_load(tmp_path, capsys):
 NO_EFFECT = ("TITLE = T\nECHO = NONE\nDISP(PRINT) = ALL\nMETHOD = 10\nRMETHOD = 11\nDESOBJ = 10\n"
              "DESSUB = 2\nDESGLB = 3\nTSTEPNL = 10\nTSTEP = 11\nNLPARM = 3\nSDAMP = 4\nFREQ = 5\n"
              "ANALYSIS = STATICS\nDLOAD = 6\nFMETHOD = 7\nTRIM = 8\nB2GG = BB\nMPFACTOR = ALL\n"
-             "K2PP = KAX\nM2PP = MAX\n")
+             "K2PP = KAX\nM2PP = MAX\nAEROF = 99\nAPRES = ALL\n")
 
 
 def test_no_effect_commands_are_one_note(tmp_path):
@@ -106,8 +106,9 @@ def test_no_effect_commands_are_one_note(tmp_path):
     lines = [n for n in result.notes if "case-control command" in n]
     # K2PP and M2PP: matrices of the p-set, used only in dynamic response (OptiStruct's and
     # Autodesk Nastran's K2PP references)
-    assert lines == ["skipped 21 case-control commands with no effect on a linear static solution: "
-                     "title lines (TITLE); output controls (ECHO); output requests (DISPLACEMENT); "
+    assert lines == ["skipped 23 case-control commands with no effect on a linear static solution: "
+                     "title lines (TITLE); output controls (ECHO); output requests (DISPLACEMENT, "
+                     "AEROF, APRESSURE); "
                      "selections of other solutions (METHOD, RMETHOD, TSTEPNL, TSTEP, NLPARM, "
                      "SDAMPING, FREQUENCY, ANALYSIS, DLOAD, FMETHOD, TRIM, B2GG, MPFACTOR, K2PP, M2PP); design "
                      "optimisation (DESOBJ, DESSUB, DESGLB)"]
