@@ -69,7 +69,7 @@ class CandidateScore:
     @property
     def evidence(self) -> float:
         """``delta_bic`` plus the hold-out chi2 change (when there are hold-out cases) over the
-        hold-out's dispersion (:func:`blackbox.diagnosis.search.evidence`): the data's evidence
+        hold-out's dispersion (:func:`evidence`): the data's evidence
         for the addition, in which the gap to an alternative is measured."""
         return evidence(self.delta_bic, self.holdout_delta_chi2, self.holdout_dispersion)
 

@@ -460,12 +460,17 @@ class Effect:
         v = f" ({self.variant})" if self.variant else ""
         return f"{self.kind} @ {', '.join(map(str, self.where))}{v}"
 
+    def in_fit(self, fit: "Fit") -> tuple["Effect", slice]:
+        """``(effect, slice)``: this effect as ``fit`` holds it (same key; its variant may be a
+        refined one) and its parameters' slice of ``fit.x`` (it must be part of ``fit``)."""
+        i = next(i for i, e in enumerate(fit.spec.effects) if e.key == self.key)
+        return fit.spec.effects[i], fit.spec.effect_slices()[i]
+
     def parameters(self, fit: "Fit") -> list[dict]:
         """``[{name, value, std, ...}]`` of this effect in ``fit`` (it must be part of it)."""
-        i = next(i for i, e in enumerate(fit.spec.effects) if e.key == self.key)
-        sl = fit.spec.effect_slices()[i]
+        e, sl = self.in_fit(fit)
         return [{"name": n, "value": float(v), "std": finite_or_none(s)}
-                for n, v, s in zip(fit.spec.effects[i].names, fit.x[sl], fit.std[sl])]
+                for n, v, s in zip(e.names, fit.x[sl], fit.std[sl])]
 
     def marker_points(self, xyz: dict[int, np.ndarray], deck: "Deck") -> list[np.ndarray]:
         """Where to mark the effect on a residual map (none by default)."""
@@ -593,6 +598,5 @@ class SetAsideEffect(FreeOffsets, Effect):
 
     def model_readings(self, fit: "Fit") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(readings, the model's prediction of them, sigmas)`` in ``fit``, which holds this effect."""
-        i = next(i for i, e in enumerate(fit.spec.effects) if e.key == self.key)
         y = np.array(self.readings)
-        return y, y - fit.x[fit.spec.effect_slices()[i]], np.array(self.sigmas)
+        return y, y - fit.x[self.in_fit(fit)[1]], np.array(self.sigmas)

@@ -210,10 +210,8 @@ class Connection(Effect):
     def findings(self, fit: "Fit") -> dict:
         """``released``: the parameters at ``THETA_MAX`` (that part of the connection carries
         nothing the readings can tell from nothing)."""
-        i = next(i for i, e in enumerate(fit.spec.effects) if e.key == self.key)
-        e = fit.spec.effects[i]
-        x = fit.x[fit.spec.effect_slices()[i]]
-        free = [n for n, v in zip(e.names, x) if v >= THETA_MAX * (1.0 - 1e-9)]
+        e, sl = self.in_fit(fit)
+        free = [n for n, v in zip(e.names, fit.x[sl]) if v >= THETA_MAX * (1.0 - 1e-9)]
         return {"released": free} if free else {}
 
     def trimmed(self, x_effect: np.ndarray) -> "Connection | None":
@@ -226,9 +224,7 @@ class Connection(Effect):
 
     def parameters(self, fit: "Fit") -> list[dict]:
         """Compliances as stiffnesses ``k = k_ref / theta`` (delta-method std), with the compliance."""
-        i = next(i for i, e in enumerate(fit.spec.effects) if e.key == self.key)
-        e = fit.spec.effects[i]
-        sl = fit.spec.effect_slices()[i]
+        e, sl = self.in_fit(fit)
         out = []
         for q, name in enumerate(e.names):
             v, s = float(fit.x[sl][q]), float(fit.std[sl][q])

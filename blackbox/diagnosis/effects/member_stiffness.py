@@ -289,9 +289,8 @@ class MemberStiffness(Effect):
         part of its stiffness, is not there: missing, broken or not connected); ``turned``: the
         EI1 and EI2 factors each went ``TURNED_SHARE`` of the way (in log) to the exchanged
         moments (the section mounted turned 90 degrees about the member's axis)."""
-        i = next(i for i, e in enumerate(fit.spec.effects) if e.key == self.key)
-        x = fit.x[fit.spec.effect_slices()[i]]
-        e = fit.spec.effects[i]
+        e, sl = self.in_fit(fit)
+        x = fit.x[sl]
         low = [n for n, v in zip(e.names, x) if v < MISSING_BELOW]
         out = {"missing": low} if low else {}
         if e.cap is not None:

@@ -121,8 +121,7 @@ class RigidMotion(FreeOffsets, Effect):
         return [(q, W[:, m]) for q, m in enumerate(self.motions)]
 
     def findings(self, fit) -> dict:
-        i = next(i for i, e in enumerate(fit.spec.effects) if e.key == self.key)
-        x = fit.x[fit.spec.effect_slices()[i]]
+        x = fit.x[self.in_fit(fit)[1]]
         v = np.zeros(6)
         v[list(self.motions)] = x
         return {"translation": [float(a) for a in v[:3]], "rotation_rad": [float(a) / self.length for a in v[3:]],

@@ -215,9 +215,8 @@ class SupportFixity(Effect):
 
     def findings(self, fit) -> dict:
         """The grounded spring each component gets, ``k_ref r / (1 - r)`` (N/m or N m/rad)."""
-        i = next(i for i, e in enumerate(fit.spec.effects) if e.key == self.key)
-        e = fit.spec.effects[i]
-        r = e._factors(fit.x[fit.spec.effect_slices()[i]])
+        e, sl = self.in_fit(fit)
+        r = e._factors(fit.x[sl])
         k = np.array(e.k_ref) * r / (1.0 - r)
         return {"spring_stiffness": {str(c): float(v) for (_, c), v in zip(e.dofs, k)}}
 
