@@ -64,8 +64,9 @@ NO_EFFECT = frozenset({
     # frequency-dependent and nonlinear bush properties: a linear static solution uses the
     # PBUSH's nominal K (MSC QRG PBUSH remark 1; a note names every PBUSHT, PBUSHT_NOTE)
     "PBUSHT",
-    # static condensation sets: the reduction of a linear static solution to them is exact
-    "ASET", "ASET1", "OMIT", "OMIT1",
+    # static condensation sets: the reduction of a linear static solution to them is exact;
+    # resequencing (SEQGP): the order of the unknowns in the solver's matrices, not the solution
+    "ASET", "ASET1", "OMIT", "OMIT1", "SEQGP",
     # output only: plot elements, monitor points, bar output stations (CBARAO: where a CBAR's
     # forces and stresses are printed)
     "PLOTEL", "MONPNT1", "MONPNT3", "CBARAO",
