@@ -33,6 +33,13 @@ class Grid:
     scalar: bool = False
 
 
+ON_AXIS_RULE = ("lies on the polar axis of its cylindrical or spherical displacement system (CD), "
+                "where that system's directions are undefined: its displacements, constraints and "
+                "loads are in the basic system's directions, as NASTRAN takes them there (Autodesk "
+                "Nastran QRG, CORD1S remark 7; MYSTRAN solves such a grid as one with CD 0)")
+"""The note on a grid on the polar axis of its CD system, and the rule the reader follows."""
+
+
 @dataclass(frozen=True)
 class Coord:
     """A resolved coordinate system (CORD1R/C/S, CORD2R/C/S): ``kind`` ``"R"`` (rectangular),
@@ -63,12 +70,25 @@ class Coord:
         p = np.radians(x[:, 2])
         return x[:, :1] * np.column_stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)])
 
-    def frames_at(self, xyz: np.ndarray) -> np.ndarray:
+    def on_axis(self, xyz: np.ndarray) -> np.ndarray:
+        """Which basic points ``(n, 3)`` lie on the polar axis of this cylindrical or spherical
+        system (to rounding; the origin included), where its directions are undefined; none
+        for a rectangular one."""
+        xyz = np.asarray(xyz, float).reshape(-1, 3)
+        if self.kind == "R":
+            return np.zeros(xyz.shape[0], bool)
+        p = (xyz - np.asarray(self.origin)) @ np.asarray(self.axes).T
+        rho = np.hypot(p[:, 0], p[:, 1])
+        scale = np.maximum(np.abs(p).max(axis=1), np.abs(np.asarray(self.origin)).max(initial=0.0))
+        return rho <= 1e-12 * np.maximum(scale, 1e-300)
+
+    def frames_at(self, xyz: np.ndarray, on_axis: str = "error") -> np.ndarray:
         """The displacement axes at basic points ``(n, 3)``: ``(n, 3, 3)``, rows the unit vectors
         of components 1, 2, 3 in basic (rectangular: the axes; cylindrical: radial, tangential, z;
-        spherical: radial, theta, phi at the point). Raises ``ValueError`` with the positions of
-        points on the axis (or at the origin) of a cylindrical or spherical system, where the
-        directions are undefined."""
+        spherical: radial, theta, phi at the point). Points on the polar axis of a cylindrical
+        or spherical system (:meth:`on_axis`), where the directions are undefined: ``on_axis``
+        ``"error"`` raises ``ValueError`` with their positions, ``"basic"`` gives them the basic
+        system's axes (NASTRAN's rule for a grid's displacement system there, below)."""
         xyz = np.asarray(xyz, float).reshape(-1, 3)
         ax = np.asarray(self.axes)
         n = xyz.shape[0]
@@ -76,10 +96,11 @@ class Coord:
             return np.broadcast_to(ax, (n, 3, 3)).copy()
         p = (xyz - np.asarray(self.origin)) @ ax.T          # rectangular along the system's axes
         rho = np.hypot(p[:, 0], p[:, 1])
-        scale = np.maximum(np.abs(p).max(axis=1), np.abs(np.asarray(self.origin)).max(initial=0.0))
-        bad = np.flatnonzero(rho <= 1e-12 * np.maximum(scale, 1e-300))
-        if bad.size:
+        axis = self.on_axis(xyz)
+        bad = np.flatnonzero(axis)
+        if bad.size and on_axis != "basic":
             raise ValueError(bad)
+        rho = np.where(axis, 1.0, rho)
         c, s = p[:, 0] / rho, p[:, 1] / rho
         zero, one = np.zeros(n), np.ones(n)
         if self.kind == "C":
@@ -91,7 +112,9 @@ class Coord:
             loc = np.stack([np.column_stack([st * c, st * s, ct]),
                             np.column_stack([ct * c, ct * s, -st]),
                             np.column_stack([-s, c, zero])], axis=1)
-        return loc @ ax
+        out = loc @ ax
+        out[bad] = np.eye(3)
+        return out
 
 
 @dataclass(frozen=True)
@@ -468,21 +491,26 @@ class Deck:
 
     def displacement_frames(self, grid_ids) -> np.ndarray:
         """``(n, 3, 3)``: for each grid of ``grid_ids`` the unit vectors of its displacement
-        components 1-3 (and 4-6) in basic, as rows (identity for CD = 0). ``ValueError(message,
-        grid id)`` for a grid on the axis of its cylindrical or spherical CD system."""
+        components 1-3 (and 4-6) in basic, as rows (identity for CD = 0). A grid on the polar
+        axis of its cylindrical or spherical CD system, where that system's directions are
+        undefined, takes the basic system's (:data:`ON_AXIS_RULE`; :meth:`grids_on_cd_axis`
+        names them)."""
         out = np.broadcast_to(np.eye(3), (len(grid_ids), 3, 3)).copy()
         cds = np.array([self.grids[g].cd for g in grid_ids], dtype=np.int64)
         for cd in np.unique(cds[cds != 0]).tolist():
             idx = np.flatnonzero(cds == cd)
             xyz = np.array([self.grids[grid_ids[i]].xyz for i in idx.tolist()], float)
-            try:
-                out[idx] = self.coords[cd].frames_at(xyz)
-            except ValueError as exc:
-                g = self.grids[grid_ids[int(idx[int(exc.args[0][0])])]]
-                raise ValueError(f"CD {cd} is a "
-                                 f"{'cylindrical' if self.coords[cd].kind == 'C' else 'spherical'} "
-                                 f"system and GRID {g.id} lies on its axis, where the displacement "
-                                 f"directions are undefined", g.id) from None
+            out[idx] = self.coords[cd].frames_at(xyz, on_axis="basic")
+        return out
+
+    def grids_on_cd_axis(self, grid_ids) -> list[int]:
+        """The grids of ``grid_ids`` on the polar axis of their cylindrical or spherical CD
+        system (their displacements are in basic: :data:`ON_AXIS_RULE`)."""
+        out = []
+        for g in grid_ids:
+            grid = self.grids[g]
+            if grid.cd and self.coords[grid.cd].on_axis(np.array([grid.xyz], float))[0]:
+                out.append(g)
         return out
 
     def scalar_points(self) -> set[int]:

@@ -368,8 +368,6 @@ MALFORMED = [
     ("CORD1R same grid", "CORD1R,3,1,2,2\n", 8, "CORD1R", 3, "three different grids"),
     ("CORD loop", "CORD2R,3,4,0.,0.,0.,0.,0.,1.\n,1.,0.,0.\nCORD2R,4,3,0.,0.,0.,0.,0.,1.\n,1.,0.,0.\n",
      8, "CORD2R", 2, "depends on itself"),
-    ("CD on a cylinder's axis", "CORD2C,3,,0.,0.,0.,0.,0.,1.\n,1.,0.,0.\nGRID,9,,0.,0.,5.,3\n",
-     10, "GRID", 7, "lies on its axis"),
     ("SEID", "GRID,5,,0.,0.,0.,,,3\n", 8, "GRID", 9, "superelements"),
     ("PS repeated digit", "GRID,5,,0.,0.,0.,,121\n", 8, "GRID", 8, "without repeats"),
     ("PS digit 7", "GRID,5,,0.,0.,0.,,7\n", 8, "GRID", 8, "digits 1-6"),

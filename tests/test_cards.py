@@ -118,6 +118,59 @@ def test_no_effect_cards_listed_once_in_the_summary():
 
 
 # --------------------------------------------------------------------------------------------
+# a grid on the polar axis of its cylindrical CD system (MYSTRAN's benchmark deck
+# SB-RADIAL-BARS-CYL-GLOBAL-END-LOADS.DAT: GRDSET gives every grid CD 25, the hub is on its axis)
+# --------------------------------------------------------------------------------------------
+RADIAL_BARS = """\
+SOL 101
+CEND
+BEGIN BULK
+GRDSET          25                              25
+CORD2C  25              0.      0.      0.      0.      0.      1.
+        1.      0.      0.
+GRID    101             0.      0.      0.
+GRID    201             10.     0.      0.
+GRID    202             10.     60.     0.
+GRID    203             10.     120.    0.
+GRID    204             10.     180.    0.
+GRID    205             10.     240.    0.
+GRID    206             10.     300.    0.
+SPC1    1       123456  201     202     203     204     205     206
+CBAR    11      10      101     201     0.      0.      1.
+CBAR    12      10      101     202     0.      0.      1.
+CBAR    13      10      101     203     0.      0.      1.
+CBAR    14      10      101     204     0.      0.      1.
+CBAR    15      10      101     205     0.      0.      1.
+CBAR    16      10      101     206     0.      0.      1.
+PBAR    10      20      .4      4.      5.      1.5
+MAT1    20      1.E+7   4.+6    .33
+ENDDATA
+"""
+
+
+def test_grid_on_its_cd_axis_is_in_basic():
+    """The hub lies on the axis of its cylindrical CD, where radial and tangential mean
+    nothing: its displacement directions are basic's (NASTRAN's rule), with a note naming it."""
+    deck = read_deck_text(RADIAL_BARS, name="radial.bdf")
+    frames = deck.displacement_frames([101, 202])
+    np.testing.assert_array_equal(frames[0], np.eye(3))
+    c, s = np.cos(np.radians(60.0)), np.sin(np.radians(60.0))
+    np.testing.assert_allclose(frames[1], [[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]], atol=1e-15)
+    (note,) = [n for n in deck.notes if "polar axis" in n]
+    assert note.startswith("GRID 101 (its CD from the GRDSET at radial.bdf:4)") and "basic" in note
+
+
+@needs_mystran
+def test_grid_on_its_cd_axis_agrees_with_mystran(tmp_path):
+    """The hub free, the rim clamped; unit forces and moments at the hub. MYSTRAN takes the hub's
+    displacements in basic too (measured: the same F06 with the hub's CD set to 0)."""
+    path = tmp_path / "radial.bdf"
+    path.write_text(RADIAL_BARS.replace("SOL 101\nCEND\n", "SOL 101\nCEND\nSPC = 1\n"))
+    ref, mys = against_mystran(path, 101, 1.0e3)
+    assert_close_to_mystran(ref, mys)
+
+
+# --------------------------------------------------------------------------------------------
 # GRDSET, SPC, SPCADD, MAT1
 # --------------------------------------------------------------------------------------------
 def test_grdset_fills_blank_fields_in_any_order():

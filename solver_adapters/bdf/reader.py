@@ -26,7 +26,7 @@ from solver_adapters.bdf.grids import coord_from_points
 from solver_adapters.bdf.numbers import typed
 from solver_adapters.bdf.params import NO_EFFECT, PBUSHT_NOTE, _param
 from solver_adapters.bdf.table import CardTable, Irregular, TableCard
-from solver_adapters.deck import Deck, Spc1, Unmodelled
+from solver_adapters.deck import ON_AXIS_RULE, Deck, Spc1, Unmodelled
 from solver_adapters.errors import ReaderFallback as Fallback
 from solver_adapters.protocol import DeckFormatError, ModelError
 
@@ -222,11 +222,11 @@ class _Reader:
                                  f"depends on itself (systems {', '.join(map(str, sorted(pending)))} "
                                  f"refer to each other, directly or through grids)")
         with_cd = [gid for gid, g in deck.grids.items() if g.cd]
-        try:
-            self.frames = dict(zip(with_cd, deck.displacement_frames(with_cd)))
-        except ValueError as exc:
-            message, gid = exc.args
-            raise self.grid_card(gid).error(7, message) from None
+        self.frames = dict(zip(with_cd, deck.displacement_frames(with_cd)))
+        for gid in deck.grids_on_cd_axis(with_cd):
+            c = self.grid_card(gid)          # the GRID, or the GRDSET its CD came from
+            self.notes.setdefault(ON_AXIS_RULE, []).append(
+                f"GRID {gid} at {c.src}" if c.name == "GRID" else f"GRID {gid} (its CD from the {c.name} at {c.src})")
 
     def resolve_bars(self) -> None:
         """Every bar's orientation vector and offsets into basic, as its OFFT says (MSC QRG,
