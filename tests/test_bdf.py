@@ -198,6 +198,10 @@ CONTINUATIONS = {
     "free-trailing-comma": "SPC1,1,123456,1,2,3,4,5,6,\n,7,8\n",
     "free-explicit": "SPC1,1,123456,1,2,3,4,5,6,+A\n+A,7,8\n",
     "free-plus": "SPC1,1,123456,1,2,3,4,5,6\n+,7,8\n",
+    # NASTRAN reads its input in either letter case: '+a' continues a card ending '+A'
+    # (pyNastran's ar29sadl.bdf writes 'pbush1d, ..., +pb1' and '+PB1, ...')
+    "free-marker-other-case": "SPC1,1,123456,1,2,3,4,5,6,+a1\n+A1,7,8\n",
+    "small-marker-other-case": small("SPC1", *_SPC_DATA, cont="+c1") + small("+C1", "7", "8"),
     "free-large": "SPC1*,1,123456,1,2\n*,3,4,5,6\n*,7,8\n",
     "small-parent-free-child": small("SPC1", *_SPC_DATA) + ",7,8\n",
     "comments-between": (small("SPC1", *_SPC_DATA, cont="+C1") + "$ a comment\n\n"

@@ -245,6 +245,7 @@ class CardTable:
         prev = self.cont[idx - 1]
         idx, prev = idx[prev != b""], prev[prev != b""]
         for marker, above in zip(self.first[idx].tolist(), prev.tolist()):
+            marker, above = marker.upper(), above.upper()       # either letter case, as NASTRAN
             if above[1:] != marker[1:] and above != marker[1:]:
                 raise Irregular("continuation marker does not match")
 

@@ -305,8 +305,10 @@ def group_cards(lines):
             if card is None:
                 raise DeckFormatError("continuation line without a card before it",
                                       file=line.file, line=line.line, field=1, value=line.first)
-            marker = line.first[1:]
-            if card.cont and marker and card.cont[1:] != marker and card.cont != marker:
+            # NASTRAN reads its input in either letter case (as upper case): so do the markers
+            marker = line.first[1:].upper()
+            above = card.cont.upper() if card.cont else card.cont
+            if above and marker and above[1:] != marker and above != marker:
                 raise DeckFormatError(f"continuation marker does not match {card.cont!r} of the "
                                       f"card above", file=line.file, line=line.line,
                                       card=card.name, field=1, value=line.first)
