@@ -40,6 +40,18 @@ def _deck(tmp_path: Path, sol: str, case_control: str, bulk: str = FORCE) -> Pat
 # --------------------------------------------------------------------------------------------
 # decks of other solutions
 # --------------------------------------------------------------------------------------------
+def test_modal_deck_whose_load_names_no_set_has_no_static_case(tmp_path):
+    """SOL 103 does not read LOAD =; one naming no set (pyNastran's cbar_modes.solver.bdf: LOAD = 2
+    and no load cards) is nothing to import, said as such. In SOL 101 the same selection is an
+    error naming the set."""
+    p = _deck(tmp_path, "103", "SPC = 1\nSUBCASE 1\n  LOAD = 9\n  METHOD = 10\n")
+    with pytest.raises(DeckFormatError, match="no static load case to import: the deck's solution is SOL 103"):
+        import_deck.run(p)
+    p = _deck(tmp_path, "101", "SPC = 1\nSUBCASE 1\n  LOAD = 9\n")
+    with pytest.raises(DeckFormatError, match="load set 9 .*not found"):
+        import_deck.run(p)
+
+
 def test_buckling_deck_gives_its_static_subcase(tmp_path):
     """SOL 105: subcase 1 is the static preload (LOAD = 5), subcase 2 the eigenvalue problem
     (METHOD, STATSUB): case 1 imported with the FORCE as written, subcase 2 named in a note."""

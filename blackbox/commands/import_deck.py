@@ -524,6 +524,12 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
             if not s.static:
                 notes.append(f"subcase {s.id} selects no load set (no LOAD = or TEMPERATURE(LOAD) =): not imported")
                 continue
+            if (cc.sol and cc.sol.upper() not in _STATIC_SOLS and s.temp_load is None
+                    and s.load not in loads.set_ids):
+                # a modal or dynamic solution does not read a LOAD = naming no set: nothing to import
+                notes.append(f"subcase {s.id}: LOAD = {s.load} at {path}:{s.load_line} names no load set, "
+                             f"which {_sol_text(cc.sol)} does not read: not imported")
+                continue
             what = ([f"LOAD = {s.load} at {path}:{s.load_line}"] if s.load is not None else []) + \
                 ([f"TEMPERATURE(LOAD) = {s.temp_load} at {path}:{s.temp_load_line}"]
                  if s.temp_load is not None else [])
