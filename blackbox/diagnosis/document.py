@@ -4,7 +4,9 @@ Keys: ``study``, ``before`` / ``after`` (fit statistics with the 99 % band), ``c
 first round's, best first), ``added`` (each effect of the final model with its parameters there,
 in the order added), ``removed`` (effects a later addition made unnecessary), ``steps`` (every round:
 statistics, the 25 best candidates, joint parameters and residual structure before and after),
-``stop_reason``, ``joint_parameters``, ``holdout``, ``validation`` (hold-out cases or K-fold over
+``stop_reason``, ``joint_parameters``, ``holdout``, ``holdout_check`` (the hold-out cases read
+against the final model: outliers, cases of another size, whether the rest is predicted;
+:mod:`blackbox.diagnosis.holdout`), ``validation`` (hold-out cases or K-fold over
 the load cases, :mod:`blackbox.diagnosis.validation`), ``settings``, ``identify_check``, ``solver``,
 ``warnings``, ``method_wall_s`` (and ``wall_s``, the whole command, and ``notes``, what the
 diagnosis leaves aside on a deck with shells or solids, added by the command);
@@ -161,6 +163,7 @@ def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: li
         "stop_reason": diag.stop_reason,
         "joint_parameters": {"declared": _joint_params(diag.declared), "final": _joint_params(diag.final)},
         "holdout": {"cases": list(holdout), "declared_in_study": declared_holdout},
+        "holdout_check": None if diag.holdout_check is None else diag.holdout_check.to_json(),
         "validation": {"method": diag.validation.kind, "description": diag.validation.describe(),
                        **({} if diag.kfold is None else
                           {"k": diag.kfold["k"], "folds": diag.kfold["folds"],
@@ -211,14 +214,23 @@ def verdict_detail(diag: Diagnosis) -> str:
     lo, hi = diag.band
     r = diag.final.reduced_chi2
     n = len(diag.added)
+    hc = diag.holdout_check
+    if hc is not None and not hc.predicted and r <= hi:
+        return (f"the fitted cases are within the noise (reduced chi2 {r:.4g}, 99 % band {lo:.4g}..{hi:.4g}) "
+                f"but the hold-out cases are not predicted: " + "; ".join(hc.sentences()))
+    held = ("" if hc is None or not hc.findings else
+            "; the hold-out cases hold defects of the data, not of the structure: " + "; ".join(hc.sentences()))
     if diag.verdict == "adequate":
         return f"the declared model fits within the noise (reduced chi2 {r:.4g}, 99 % band {lo:.4g}..{hi:.4g}); nothing added"
+    if diag.verdict == "explained" and not diag.added:
+        return (f"the declared model fits within the noise (reduced chi2 {r:.4g}, 99 % band {lo:.4g}..{hi:.4g}); "
+                f"nothing added{held}")
     if diag.verdict == "explained":
         data = sum(1 for c in diag.added if c.effect.of_data)
         which = ("" if not data else " (all of them defects of the test data, not of the structure)" if data == n
                  else f" ({data} of them defects of the test data, not of the structure)")
         return (f"{n} effect(s) added{which}; the reduced chi2 is back within the noise band ({r:.4g}, 99 % band "
-                f"{lo:.4g}..{hi:.4g})")
+                f"{lo:.4g}..{hi:.4g}){held}")
     what = f"after {n} added effect(s)" if n else "and no candidate effect is supported"
     return (f"the reduced chi2 stays at {r:.4g}, above the 99 % band {lo:.4g}..{hi:.4g}, {what}; "
             f"the misfit sits at {misfit_location(diag.hotspots)}")

@@ -149,6 +149,11 @@ class ObsMap:
                    np.asarray(obs.values, float), np.asarray(obs.sigma, float),
                    np.array([d[1] for d in obs.dofs], dtype=int), tuple(obs.case_labels))
 
+    def subset(self, rows: np.ndarray) -> "ObsMap":
+        """The rows ``rows`` (indices or a mask) alone."""
+        return ObsMap(self.row[rows], self.ref[rows], self.case[rows], self.grid[rows], self.y[rows],
+                      self.sigma[rows], None if self.comp is None else self.comp[rows], self.labels)
+
     @functools.cached_property
     def _channels(self) -> dict:
         out: dict = {}

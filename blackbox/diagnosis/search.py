@@ -48,8 +48,12 @@ however many rounds run.
 The verdict (:func:`verdict`) compares the final reduced chi2 with its 99 % band: *adequate*
 (nothing added, within or below the band), *explained* (effects added, back within or below the
 band), *unexplained* (above the band: the model still lacks something no candidate describes,
-or the data cannot tell which). A reduced chi2 below the band is no missing effect (a misfit only
-raises chi2); it says the declared sigma may be too large, and is a warning. The hotspots
+or the data cannot tell which). The hold-out cases, never fitted, are then read against the final
+model (:mod:`blackbox.diagnosis.holdout`): a reading or a case found there to be a defect of the
+data (an outlier, a case of another size or another case's readings) makes an *adequate* verdict
+*explained*, and a hold-out case or rest the final model does not predict makes any verdict
+*unexplained*. A reduced chi2 below the band is no missing effect (a misfit only raises chi2); it
+says the declared sigma may be too large, and is a warning. The hotspots
 (:func:`blackbox.diagnosis.residuals.hotspots`) say where the final fit's chi-square excess sits.
 """
 
@@ -65,6 +69,7 @@ from scipy import special, stats
 
 from blackbox.diagnosis.effects.base import Effect, proximity
 from blackbox.diagnosis.fit import Fit, chi2_band, fit_model
+from blackbox.diagnosis.holdout import HoldoutCheck, check_holdout
 from blackbox.diagnosis.model import RIGID_RATIO, AugmentedModel, ModelSpec, ObsMap
 from blackbox.diagnosis.residuals import hotspots, residual_structure
 from blackbox.diagnosis.runs import RunRecord
@@ -156,6 +161,7 @@ class Diagnosis:
     hotspots: dict = field(default_factory=dict)
     validation: Validation = Validation("holdout")
     kfold: dict | None = None           # K-fold: the folds' case labels and the cv chi2 before / after
+    holdout_check: HoldoutCheck | None = None   # the hold-out cases read against the final model
 
     @property
     def added(self) -> list[CandidateScore]:
@@ -166,18 +172,21 @@ class Diagnosis:
 
     @property
     def verdict(self) -> str:
-        return verdict(self.final.reduced_chi2, self.band, bool(self.added))
+        return verdict(self.final.reduced_chi2, self.band, bool(self.added), self.holdout_check)
 
 
 VERDICTS = ("adequate", "explained", "unexplained")
 
 
-def verdict(reduced_chi2: float, band: tuple[float, float], added: bool) -> str:
-    """``"unexplained"`` above the band, else ``"explained"`` when effects were added and
-    ``"adequate"`` when none was (module docstring)."""
-    if not reduced_chi2 <= band[1]:
+def verdict(reduced_chi2: float, band: tuple[float, float], added: bool,
+            holdout: HoldoutCheck | None = None) -> str:
+    """``"unexplained"`` above the band or when the hold-out cases are not predicted
+    (:mod:`blackbox.diagnosis.holdout`), else ``"explained"`` when effects were added or defects
+    of the data were found in the hold-out cases, and ``"adequate"`` when neither (module
+    docstring)."""
+    if not reduced_chi2 <= band[1] or (holdout is not None and not holdout.predicted):
         return "unexplained"
-    return "explained" if added else "adequate"
+    return "explained" if added or (holdout is not None and holdout.findings) else "adequate"
 
 
 def refit_candidate(base: SplitBase, fit: Fit, e: Effect, om: ObsMap, hold: ObsMap | None, boundary,
@@ -1134,6 +1143,12 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
     for j, sl in zip(fit.spec.joints, fit.spec.joint_slices()):
         if isinstance(j, ComplexJoint) and not j.is_admissible(fit.x[sl]):
             warnings.append(f"joint {j.name}: the fitted K_C is not positive semi-definite")
+    hc = None
+    if hold is not None:
+        rig = next((e for e in candidates if e.kind == "rigid_motion"), None)     # its measured-grid geometry
+        hc = check_holdout(AugmentedModel(base, fit.spec, boundary, K_deck, o_dofs), fit, hold, alpha,
+                           None if rig is None else (rig.geometry, rig.centre), om)
+        warnings += [f"hold-out check: {w}" for w in hc.sentences()]
     kf = None
     if val.kind == "kfold":
         kf = {"k": val.k, "folds": [[obs_fit.case_labels[c] for c in f] for f in val.folds],
@@ -1141,4 +1156,4 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
     return Diagnosis(declared, fit, tuple(steps), counts, alpha, (lo, hi),
                      tuple(obs_hold.case_labels[c] for c in obs_hold.cases) if obs_hold is not None else (),
                      nest, tuple(base.log), time.perf_counter() - t0, stop, tuple(warnings),
-                     hotspots(obs_fit, fit.residuals), val, kf)
+                     hotspots(obs_fit, fit.residuals), val, kf, hc)

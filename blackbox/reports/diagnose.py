@@ -84,6 +84,20 @@ def diagnosis_report(study: Study, doc: dict, files: list[str]) -> str:
                     out += [f"| {title} | share | rows | excess |", "|---|---|---|---|"]
                     out += [f"| {h[col]} | {_g(h['share'], 3)} | {h['n']} | {_g(h['excess'])} |" for h in rows]
                     out.append("")
+    hc = doc.get("holdout_check")
+    if hc is not None:
+        out += ["## Hold-out cases against the final model", "",
+                f"The {hc['n']} hold-out readings, never fitted, against the final model's predictions (their "
+                f"noise and the fitted parameters' error): chi2 {_g(hc['chi2'])}; each case against its "
+                f"Bonferroni level, each reading against |z| {_g(hc['z_limit'], 3)}, the rest against its "
+                f"level (alpha {_g(hc['alpha'])} split among the three). "
+                + ("They are predicted." if hc["predicted"] and not hc["findings"] else
+                   "They are predicted once the defects of the data below are set aside." if hc["predicted"]
+                   else "They are **not** predicted."), ""]
+        out += [f"- {f}" for f in hc["findings"]]
+        out += ["", "| case | readings | chi2 |", "|---|---|---|"]
+        out += [f"| {c} | {v['n']} | {_g(v['chi2'])} |" for c, v in hc["per_case"].items()]
+        out.append("")
     if doc.get("removed"):
         out += ["## Effects removed again", "",
                 "Added in an earlier round, then made unnecessary by a later addition (judged again as "

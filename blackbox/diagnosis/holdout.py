@@ -1,0 +1,354 @@
+"""The hold-out cases, read once more at the end: are they predicted, and if not, where not?
+
+The search never fits a hold-out case, so it cannot find a defect confined to one: a transducer
+clipped past its range in the one case that loads it hardest, a hold-out case loaded the other
+way. Its checks only compare the hold-out chi2 of two fits. What the final model predicts for
+the hold-out readings is fixed once the fit rows are fitted, so they can be tested against that
+prediction directly, with three tests at ``alpha / 3`` each (``alpha`` the search's level; on
+data the model describes, the chance that any of them fires is below ``alpha``):
+
+* **each case**: its chi2 against ``chi2(n_c)`` at ``alpha / (3 C)`` (``C`` hold-out cases).
+  A case beyond it has up to :data:`OUTLIERS_PER_CASE` of its readings set aside as outliers
+  (largest ``|z|`` first, each beyond the reading level below); when that brings the rest of
+  the case within its level those readings are the finding, else the whole case is. A case is
+  then tried as what a rig gets wrong in one case (:func:`_as_case`): its prediction times one
+  factor, on the load (``-1``: loaded the other way) or on the readings, noise and all
+  (``1000``: another unit); another case's prediction (two files mixed up, one saved twice);
+  its prediction plus one rigid motion of the specimen. Otherwise it is not predicted.
+* **each reading** of a case that passes: ``|z| > z*``, two-sided at ``alpha / (3 n)`` (``n``
+  hold-out readings): an outlier.
+* **the rest** (the readings of no finding): its chi2 against ``chi2(n_rest)`` at ``alpha / 3``.
+  Beyond it, the hold-out cases are not predicted by the final model, though no single case or
+  reading is to blame.
+
+``z`` and the chi2 take the prediction's own uncertainty into account: a hold-out reading's
+residual is the reading's noise plus the error of the fitted parameters carried to it, with
+covariance ``I + A A^T`` (whitened; ``A = J_h W S^-1``, the hold-out Jacobian in the fit's
+singular basis: ``(J^T J)^+`` restricted to the free parameters that the fit rows determine).
+A parameter at a bound (a spring at 0, a rigid joint) is held there. Readings an effect of the
+final model sets aside in every case (a bad channel's) are left out.
+
+An outlier or a case read as one of those descriptions is a defect of the data and the
+diagnosis says so; a case or a rest that is not predicted leaves the verdict "unexplained", since
+the model does not describe data it was not fitted to (:func:`blackbox.diagnosis.search.verdict`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy import linalg, stats
+
+from blackbox.diagnosis.fit import RANK_RTOL, Fit
+from blackbox.diagnosis.effects.rigid_motion import rigid_weights
+from blackbox.diagnosis.model import AugmentedModel, ObsMap
+
+__all__ = ["HoldoutReading", "HoldoutCase", "HoldoutCheck", "check_holdout", "read_holdout", "prediction_basis",
+           "free_parameters", "OUTLIERS_PER_CASE", "TESTS"]
+
+OUTLIERS_PER_CASE = 2       # readings of one case set aside as outliers before the case is the finding
+TESTS = 3                   # the tests alpha is split among (module docstring)
+
+
+@dataclass(frozen=True)
+class HoldoutReading:
+    """One hold-out reading beyond its level: ``z`` its standardized residual (the prediction's
+    uncertainty included)."""
+    grid: int
+    component: int
+    case: str
+    measured: float
+    predicted: float
+    z: float
+
+    def to_json(self) -> dict:
+        return {"grid": self.grid, "component": self.component, "case": self.case, "measured": self.measured,
+                "predicted": self.predicted, "z": self.z}
+
+
+@dataclass(frozen=True)
+class HoldoutCase:
+    """A hold-out case beyond its level (``chi2`` over ``n`` readings, ``limit`` its level) and
+    what it reads as, when one of the descriptions of :func:`_as_case` fits it (``reads_as``:
+    ``"load_scale"``, ``"readings_scale"``, ``"other_case"``, ``"rigid_motion"``; ``None``: not
+    predicted). ``scale``/``scale_std``: the factor; ``other``: the case whose prediction it
+    reads as; ``motion``: the rigid translation (length) and rotation (rad); ``fitted_chi2``:
+    the case's chi2 so described."""
+    case: str
+    n: int
+    chi2: float
+    limit: float
+    reads_as: str | None = None
+    fitted_chi2: float | None = None
+    scale: float | None = None
+    scale_std: float | None = None
+    other: str | None = None
+    motion: tuple[float, ...] | None = None
+
+    @property
+    def explained(self) -> bool:
+        return self.reads_as is not None
+
+    def sentence(self) -> str:
+        if self.reads_as is None:
+            return (f"hold-out case {self.case} is not predicted (chi2 {self.chi2:.4g} over {self.n} readings, "
+                    f"beyond {self.limit:.4g}); no factor on its load or readings, no other case's prediction and "
+                    "no rigid motion of the specimen fits it")
+        if self.reads_as == "other_case":
+            how = (f"case {self.other}'s readings (the files of two cases mixed up, or one saved twice)")
+        elif self.reads_as == "rigid_motion":
+            t, w = self.motion[:3], self.motion[3:]
+            how = ("its prediction plus one rigid motion of the whole specimen (a support base or the "
+                   f"reference frame moved: translation {', '.join(f'{v:.3g}' for v in t)}, rotation "
+                   f"{', '.join(f'{v:.3g}' for v in w)} rad)")
+        elif abs(self.scale + 1.0) <= max(3.0 * (self.scale_std or 0.0), 0.05):
+            how = f"loaded the other way (its prediction times {self.scale:.4g} +- {self.scale_std:.2g})"
+        elif self.reads_as == "readings_scale":
+            how = (f"its prediction read {self.scale:.4g} +- {self.scale_std:.2g} times, noise and all "
+                   "(another unit or gain)")
+        else:
+            how = f"loaded {self.scale:.4g} +- {self.scale_std:.2g} times as declared"
+        return (f"hold-out case {self.case} reads as {how}: chi2 {self.chi2:.4g} -> {self.fitted_chi2:.4g} over "
+                f"{self.n} readings")
+
+    def to_json(self) -> dict:
+        return {"case": self.case, "n": self.n, "chi2": self.chi2, "limit": self.limit, "reads_as": self.reads_as,
+                "fitted_chi2": self.fitted_chi2, "scale": self.scale, "scale_std": self.scale_std,
+                "other": self.other, "motion": None if self.motion is None else list(self.motion),
+                "of": "data" if self.explained else "unknown", "finding": self.sentence()}
+
+
+@dataclass(frozen=True)
+class HoldoutCheck:
+    """The result of :func:`check_holdout` (module docstring)."""
+    n: int
+    chi2: float                         # all hold-out rows checked, prediction uncertainty included
+    n_rest: int
+    chi2_rest: float                    # the rows of no finding
+    limit_rest: float                   # the rest's chi2 level
+    z_limit: float                      # a reading's level
+    readings: tuple[HoldoutReading, ...] = ()
+    cases: tuple[HoldoutCase, ...] = ()
+    alpha: float = 0.01
+    set_aside: int = 0                  # rows an effect of the model sets aside, not checked
+    per_case: dict = field(default_factory=dict)    # case -> (chi2, n)
+
+    @property
+    def predicted(self) -> bool:
+        """Whether the final model predicts the hold-out cases, once the defects of the data
+        found in them are set aside."""
+        return self.chi2_rest <= self.limit_rest and all(c.explained for c in self.cases)
+
+    @property
+    def findings(self) -> int:
+        """Defects of the data found in the hold-out cases."""
+        return len(self.readings) + sum(c.explained for c in self.cases)
+
+    def sentences(self) -> list[str]:
+        out = [f"hold-out reading at grid {r.grid}, component {r.component}, case {r.case} is an outlier "
+               f"({r.measured:.4g} against {r.predicted:.4g} predicted, z {r.z:+.3g})" for r in self.readings]
+        out += [c.sentence() for c in self.cases]
+        if self.chi2_rest > self.limit_rest:
+            out.append(f"the other hold-out readings are not predicted (chi2 {self.chi2_rest:.4g} over "
+                       f"{self.n_rest}, beyond {self.limit_rest:.4g})")
+        return out
+
+    def to_json(self) -> dict:
+        return {"n": self.n, "chi2": self.chi2, "n_rest": self.n_rest, "chi2_rest": self.chi2_rest,
+                "limit_rest": self.limit_rest, "z_limit": self.z_limit, "predicted": self.predicted,
+                "alpha": self.alpha, "set_aside_by_effects": self.set_aside,
+                "outliers": [r.to_json() for r in self.readings], "cases": [c.to_json() for c in self.cases],
+                "per_case": {k: {"chi2": v[0], "n": v[1]} for k, v in self.per_case.items()},
+                "findings": self.sentences()}
+
+
+def free_parameters(model: AugmentedModel, fit: Fit) -> np.ndarray:
+    """The parameters of ``fit`` strictly inside their bounds (a spring at 0 or at its rigid
+    limit is held there)."""
+    _, lo, hi = fit.spec.transforms()
+    hi = np.minimum(hi, model.rigid_limits())
+    tol = 1e-9 * np.maximum(np.abs(fit.x), 1.0)
+    return (fit.x > lo + tol) & (fit.x < hi - tol)
+
+
+def prediction_basis(J: np.ndarray, Jh: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """``A`` with ``A A^T`` the whitened covariance of the hold-out predictions that the fitted
+    parameters carry (module docstring); ``J``, ``Jh``: the whitened fit and hold-out Jacobians;
+    ``free``: the parameters that move. The fit's singular basis is cut at :data:`RANK_RTOL` of
+    its largest singular value (the columns scaled to unit norm)."""
+    if not free.any():
+        return np.zeros((Jh.shape[0], 0))
+    Jf = J[:, free]
+    scale = np.linalg.norm(Jf, axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    _, s, Wt = np.linalg.svd(Jf / scale, full_matrices=False)
+    keep = s > RANK_RTOL * s[0] if s[0] > 0 else np.zeros(len(s), bool)
+    return (Jh[:, free] / scale) @ Wt[keep].T / s[keep]
+
+
+def _chi2(r: np.ndarray, A: np.ndarray) -> float:
+    """``r^T (I + A A^T)^-1 r`` by Woodbury."""
+    if A.shape[1] == 0:
+        return float(r @ r)
+    b = A.T @ r
+    return float(r @ r - b @ np.linalg.solve(np.eye(A.shape[1]) + A.T @ A, b))
+
+
+def check_holdout(model: AugmentedModel, fit: Fit, hold: ObsMap, alpha: float,
+                  geometry: tuple | None = None, fitted: ObsMap | None = None) -> HoldoutCheck:
+    """The tests of the module docstring on ``fit``'s predictions of the rows ``hold``
+    (``model``: the final model, ``fit`` its fit). ``geometry``: ``(grid -> (xyz, frame),
+    centre)`` of the measured grids (as :class:`~blackbox.diagnosis.effects.rigid_motion.RigidMotion`
+    holds them), to try a case as a rigid motion of the specimen; ``None``: not tried.
+    ``fitted``: the fitted rows, whose declared sigma a case read as another's takes."""
+    st = model.state(fit.x)
+    f = model.predict(fit.x, hold, st)
+    if model.p:
+        Jh = model.jacobian(fit.x, hold, st) / hold.sigma[:, None]
+        A = prediction_basis(fit.J, Jh, free_parameters(model, fit))
+    else:
+        A = np.zeros((len(hold.y), 0))
+    use = np.ones(len(hold.y), bool)
+    for e in fit.spec.effects:
+        aside = e.set_aside_rows(hold)
+        if aside is not None:
+            use &= ~aside
+
+    # each reading's declared sigma by (grid, component, case), fitted and hold-out rows: a case
+    # that is another's readings carries that case's noise
+    sig = {}
+    for o in ((fitted,) if fitted is not None else ()) + (hold,):
+        for g, c, k, v in zip(o.grid.tolist(), o.comp.tolist(), o.case.tolist(), o.sigma.tolist()):
+            sig[(g, c, k)] = v
+
+    def other_cases(rows: np.ndarray) -> dict:
+        out = {}
+        for k, lab in enumerate(hold.labels):
+            om = replace(hold.subset(rows), case=np.full(len(rows), k))
+            s_k = np.array([sig.get((g, c, k), s) for g, c, s in
+                            zip(hold.grid[rows].tolist(), hold.comp[rows].tolist(), hold.sigma[rows].tolist())])
+            out[lab] = (model.predict(fit.x, om, st), s_k)
+        return out
+
+    rigid = None
+    if geometry is not None:
+        grid_map, centre = geometry
+
+        def rigid(rows: np.ndarray) -> np.ndarray:
+            W = np.zeros((len(rows), 6))
+            known = np.isin(hold.grid[rows], list(grid_map))
+            W[known] = rigid_weights(hold.grid[rows][known], hold.comp[rows][known], grid_map,
+                                     np.asarray(centre, float), 1.0)
+            return W
+    return read_holdout(hold, f, A, use, alpha, other_cases, rigid)
+
+
+def read_holdout(hold: ObsMap, f: np.ndarray, A: np.ndarray, use: np.ndarray, alpha: float,
+                 other_cases=None, rigid=None) -> HoldoutCheck:
+    """The tests of the module docstring: the readings ``hold`` (rows ``use``) against the
+    predictions ``f``, whose whitened covariance is ``A A^T`` (:func:`prediction_basis`);
+    ``other_cases``, ``rigid``: what a case beyond its level is tried as (:func:`_as_case`)."""
+    r_all = (hold.y - f) / hold.sigma
+    n = int(use.sum())
+    labels = hold.labels
+    case_ids = list(dict.fromkeys(hold.case[use].tolist()))
+    a_case = alpha / TESTS / max(len(case_ids), 1)
+    a_read = alpha / TESTS / max(n, 1)
+    z_lim = float(stats.norm.isf(a_read / 2.0))
+    z = r_all / np.sqrt(1.0 + np.sum(A ** 2, axis=1))
+    rest = use.copy()
+    readings: list[HoldoutReading] = []
+    cases: list[HoldoutCase] = []
+    per_case = {}
+    for c in case_ids:
+        rows = np.flatnonzero(use & (hold.case == c))
+        q = _chi2(r_all[rows], A[rows])
+        per_case[labels[c]] = (q, len(rows))
+        limit = float(stats.chi2.isf(a_case, len(rows)))
+        beyond = rows[np.abs(z[rows]) > z_lim]
+        beyond = beyond[np.argsort(-np.abs(z[beyond]))]
+        out = beyond                                        # a case within its level: its readings beyond theirs
+        if q > limit:
+            out = None
+            if 0 < len(beyond) <= OUTLIERS_PER_CASE:
+                kept = np.setdiff1d(rows, beyond)
+                if len(kept) and _chi2(r_all[kept], A[kept]) <= float(stats.chi2.isf(a_case, len(kept))):
+                    out = beyond
+            if out is None:
+                rest[rows] = False
+                cases.append(_as_case(labels[c], rows, hold, f, A, q, limit, a_case, other_cases, rigid))
+                continue
+        for i in out:
+            rest[i] = False
+            readings.append(HoldoutReading(int(hold.grid[i]), int(hold.comp[i]), labels[c], float(hold.y[i]),
+                                           float(f[i]), float(z[i])))
+    n_rest = int(rest.sum())
+    chi2_rest = _chi2(r_all[rest], A[rest]) if n_rest else 0.0
+    limit_rest = float(stats.chi2.isf(alpha / TESTS, n_rest)) if n_rest else 0.0
+    return HoldoutCheck(n, _chi2(r_all[use], A[use]), n_rest, chi2_rest, limit_rest, z_lim, tuple(readings),
+                        tuple(cases), alpha, int(len(use) - n), per_case)
+
+
+def _as_case(label: str, rows: np.ndarray, hold: ObsMap, f: np.ndarray, A: np.ndarray, q: float, limit: float,
+             a_case: float, other_cases=None, rigid=None) -> HoldoutCase:
+    """A case beyond its level, tried against what a rig gets wrong in one case, each within
+    the case's level at ``a_case`` for its own degrees of freedom, the one with the least
+    ``chi2 + k ln n`` (``k`` its parameters) kept:
+
+    * its prediction times one factor ``s`` (least squares in the whitened readings), on the
+      *load* (``s`` times as declared: the noise as declared, the prediction's error times ``s``)
+      or on the *readings* (``s`` times what was measured, noise and all: another unit, a gain
+      of the whole acquisition); ``s``'s standard error from both errors;
+    * another case's prediction at the same channels (``other_cases(rows)``: label ->
+      ``(predictions, that case's declared sigma there)``; no parameter): the files of two cases
+      mixed up, or one saved twice;
+    * its prediction plus one rigid motion of the specimen (``rigid(rows)``: the readings per
+      unit translation and rotation, :func:`blackbox.diagnosis.effects.rigid_motion.rigid_weights`;
+      up to six parameters).
+
+    The prediction's error enters the factor and the rigid motion; another case's prediction
+    is compared with the noise alone."""
+    n = len(rows)
+    y = hold.y[rows] / hold.sigma[rows]
+    p = f[rows] / hold.sigma[rows]
+    pp = float(p @ p)
+    tries = []                      # (chi2 + k ln n, chi2, k, reads_as, extra)
+    lnn = float(np.log(max(n, 2)))
+
+    def level(k: int) -> float:
+        return float(stats.chi2.isf(a_case, n - k)) if n > k else -1.0
+
+    s = float(p @ y) / pp if pp > 0.0 else 0.0
+    if s != 0.0:
+        ap = A[rows].T @ p
+        for qs, how, std in ((_chi2(y - s * p, s * A[rows]), "load_scale", float(np.sqrt(pp + s * s * (ap @ ap)) / pp)),
+                             (_chi2(y / s - p, A[rows]), "readings_scale", float(abs(s) * np.sqrt(pp + ap @ ap) / pp))):
+            if qs <= level(1):
+                tries.append((qs + lnn, qs, how, {"scale": s, "scale_std": std}))
+    if other_cases is not None:
+        for other, (fo, so) in other_cases(rows).items():
+            if other == label:
+                continue
+            qo = float(np.sum(((hold.y[rows] - fo) / so) ** 2))
+            if qo <= level(0):
+                tries.append((qo, qo, "other_case", {"other": other}))
+    if rigid is not None:
+        W = rigid(rows) / hold.sigma[rows, None]
+        seen = np.linalg.norm(W, axis=0) > 0
+        if seen.any():
+            # generalised least squares with the residual's covariance I + A A^T
+            L = np.linalg.cholesky(np.eye(n) + A[rows] @ A[rows].T)
+            Wl = linalg.solve_triangular(L, W[:, seen], lower=True)
+            rl = linalg.solve_triangular(L, y - p, lower=True)
+            theta, *_ = np.linalg.lstsq(Wl, rl, rcond=1e-8)
+            rank = int(np.linalg.matrix_rank(Wl))
+            qr = float(np.sum((rl - Wl @ theta) ** 2))
+            if qr <= level(rank):
+                motion = np.zeros(6)
+                motion[seen] = theta
+                tries.append((qr + rank * lnn, qr, "rigid_motion", {"motion": tuple(float(v) for v in motion)}))
+    if not tries:
+        return HoldoutCase(label, n, q, limit)
+    _, qf, how, extra = min(tries, key=lambda t: t[0])
+    return HoldoutCase(label, n, q, limit, how, qf, **extra)
