@@ -1,6 +1,6 @@
 """Defects of test data that no effect kind describes: does ``blackbox diagnose`` say so?
 
-    python benchmarks/unlisted_defects.py --out DIR [--n 4] [--seed 7] [--defects drift dead ...]
+    python benchmarks/unlisted_defects.py --out DIR [--n 4] [--seed 7] [--defects drift dead ...] [--in-holdout]
 
 Clean studies of the blind benchmark's generator (``benchmarks/blind/generate.py``, no planted
 effect, families drawn in turn) get one defect written into their ``measurements.csv`` that is
@@ -35,6 +35,12 @@ in no list of the diagnosis, each of a kind real static tests have:
 The last two were first run on a diagnosis that was not changed afterwards, and nothing was
 changed for them.
 
+The case defects go into a fitted case; with ``--in-holdout`` into a hold-out case instead
+(:data:`CASE_DEFECTS`; for two cases, the one written over is a hold-out case), where the
+search, which never fits a hold-out case, cannot see them and only the hold-out check
+(:mod:`blackbox.diagnosis.holdout`) reads them. Its findings are listed with what was added
+(``holdout_outlier``, ``holdout_case`` with the factor that fits it or "not predicted").
+
 The two load defects are placed where they move the readings by a noncentrality between 60 and
 1e4 (whitened, before any refit), as the unlisted defects of the structure are.
 
@@ -50,6 +56,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import json
 import math
 import sys
@@ -71,6 +78,8 @@ DEFECTS = ("drift", "slip", "noisy", "dead", "units", "swapped_cases", "misplace
            "saturated", "reversed_case", "rig_slip", "tilted_sensor", "duplicated_case")
 TILT = 20.0                         # a tilted sensor's angle off its axis, degrees
 LOAD_DEFECTS = ("misplaced_load", "tilted_load")
+CASE_DEFECTS = ("units", "swapped_cases", "misplaced_load", "tilted_load", "reversed_case", "rig_slip",
+                "duplicated_case")    # defects of one case (or two), which --in-holdout puts in a hold-out case
 LAMBDA_RANGE = (60.0, 1e4)          # noncentrality of a planted defect: clearly detectable, not absurd
 
 
@@ -87,17 +96,25 @@ def _write(path: Path, fields: list[str], rows: list[dict]) -> None:
         w.writerows(rows)
 
 
-def plant(folder: Path, defect: str, rng: np.random.Generator) -> dict:
-    """Write ``defect`` into ``folder/measurements.csv``; returns where it went."""
+def plant(folder: Path, defect: str, rng: np.random.Generator, in_holdout: bool = False) -> dict | None:
+    """Write ``defect`` into ``folder/measurements.csv``; returns where it went. ``in_holdout``:
+    a case defect goes into a hold-out case (``None`` when the study has none)."""
     fields, rows = _read(folder / "measurements.csv")
     cases = list(dict.fromkeys(r["case"] for r in rows))
     channels = list(dict.fromkeys((r["grid"], r["component"]) for r in rows))
     if defect == "tilted_sensor":
         return _tilted_sensor(folder, fields, rows, rng)
     if defect in ("units", "swapped_cases", "reversed_case", "rig_slip", "duplicated_case"):
-        pick = fitted_cases(folder, cases)
+        pick = held_cases(folder, cases) if in_holdout else fitted_cases(folder, cases)
+        if not pick:
+            return None
+        if in_holdout and defect in ("duplicated_case", "swapped_cases"):
+            # the case written over (or one of the two) is a hold-out case, the other any other
+            b = str(rng.choice(pick))
+            a = str(rng.choice([c for c in cases if c != b]))
+            pick = [a, b]
         if defect == "duplicated_case":
-            a, b = (str(x) for x in rng.choice(pick, 2, replace=False))
+            a, b = pick if in_holdout else (str(x) for x in rng.choice(pick, 2, replace=False))
             va = {(r["grid"], r["component"]): r["value"] for r in rows if r["case"] == a}
             for r in rows:
                 if r["case"] == b and (r["grid"], r["component"]) in va:
@@ -118,7 +135,7 @@ def plant(folder: Path, defect: str, rng: np.random.Generator) -> dict:
                     r["value"] = repr(float(r["value"]) * 1000.0)
             where = {"case": c}
         else:
-            a, b = (str(x) for x in rng.choice(pick, 2, replace=False))
+            a, b = pick if in_holdout else (str(x) for x in rng.choice(pick, 2, replace=False))
             va = {(r["grid"], r["component"]): r["value"] for r in rows if r["case"] == a}
             vb = {(r["grid"], r["component"]): r["value"] for r in rows if r["case"] == b}
             for r in rows:
@@ -232,6 +249,12 @@ def fitted_cases(folder: Path, cases: list[str]) -> list[str]:
     return [c for c in cases if f'"{c}"' not in hold]
 
 
+def held_cases(folder: Path, cases: list[str]) -> list[str]:
+    """``cases`` (in their order) that are the study's hold-out cases."""
+    fitted = fitted_cases(folder, cases)
+    return [c for c in cases if c not in fitted]
+
+
 def _turned(v: np.ndarray, rng: np.random.Generator, degrees: float) -> np.ndarray:
     """``v`` turned by ``degrees`` about a random axis perpendicular to it."""
     n = float(np.linalg.norm(v))
@@ -287,9 +310,9 @@ def kept_readings(folder: Path, sim, clean) -> float | None:
     return lam
 
 
-def plant_load(st, defect: str, rng: np.random.Generator) -> dict | None:
+def plant_load(st, defect: str, rng: np.random.Generator, in_holdout: bool = False) -> dict | None:
     """Measure the study again with one fitted case's load misplaced or tilted (loads.csv keeps
-    the declared load); ``None`` when no case qualifies."""
+    the declared load; ``in_holdout``: a hold-out case's); ``None`` when no case qualifies."""
     p = st.planted
     truth = read_deck(st.hidden / "truth" / "truth.bdf")
     seed = json.loads((st.hidden / "truth.json").read_text())["seed"]
@@ -298,7 +321,7 @@ def plant_load(st, defect: str, rng: np.random.Generator) -> dict | None:
     cases = list(dict.fromkeys(r[0] for r in loads))
     rest = (p["joints"], p["away_grids"], [], noise, seed)
     clean = gen.simulate_study(truth, loads, *rest)
-    fitted = fitted_cases(st.folder, cases)
+    fitted = held_cases(st.folder, cases) if in_holdout else fitted_cases(st.folder, cases)
     for i in rng.permutation(len(cases)).tolist():
         case = cases[i]
         if case not in fitted:
@@ -332,10 +355,11 @@ def diagnosed(st, family: str, defect: str, where) -> tuple[dict | None, dict | 
                       "error": f"{type(exc).__name__}: {exc}"[:300]}, time.perf_counter() - t0
 
 
-def run_one(index: int, seed: int, family: str, defect: str, out: Path) -> dict | None:
+def run_one(index: int, seed: int, family: str, defect: str, out: Path, in_holdout: bool = False) -> dict | None:
     st = generate_study(index, seed, out / defect, kind=NONE, shape=family, style="plain")
     rng = np.random.default_rng([seed, index, DEFECTS.index(defect)])
-    where = plant_load(st, defect, rng) if defect in LOAD_DEFECTS else plant(st.folder, defect, rng)
+    where = (plant_load(st, defect, rng, in_holdout) if defect in LOAD_DEFECTS
+             else plant(st.folder, defect, rng, in_holdout))
     if where is None:
         return None
     doc, error, wall = diagnosed(st, family, defect, where)
@@ -343,6 +367,10 @@ def run_one(index: int, seed: int, family: str, defect: str, out: Path) -> dict 
         return error
     added = [(a["effect"], a["where"], a.get("of"), a.get("component"), a.get("pattern"), a.get("case"))
              for a in doc["added"]]
+    # what the hold-out check found in the hold-out cases (blackbox.diagnosis.holdout)
+    hc = doc.get("holdout_check") or {}
+    added += [("holdout_outlier", [o["grid"]], "data", o["component"], None, o["case"]) for o in hc.get("outliers", [])]
+    added += [("holdout_case", [c["case"]], c["of"], None, _reads_as(c), c["case"]) for c in hc.get("cases", [])]
     hot = (doc.get("hotspots") or [None])[0]
     return {"study": st.folder.name, "family": family, "defect": defect, "where": where,
             "verdict": doc["verdict"], "added": added,
@@ -351,14 +379,29 @@ def run_one(index: int, seed: int, family: str, defect: str, out: Path) -> dict 
             "hotspot": hot, "wall_s": wall}
 
 
+def _reads_as(c: dict) -> str:
+    """What the hold-out check read a hold-out case as, in a few words."""
+    how = c.get("reads_as")
+    if how in ("load_scale", "readings_scale"):
+        return f"{how.split('_')[0]} x {c['scale']:.3g}"
+    return {"other_case": f"case {c.get('other')}'s readings", "rigid_motion": "rigid motion"}.get(how, "not predicted")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--n", type=int, default=4, help="studies per defect")
     ap.add_argument("--seed", type=int, default=7)
-    ap.add_argument("--defects", nargs="+", choices=DEFECTS, default=list(DEFECTS))
+    ap.add_argument("--defects", nargs="+", choices=DEFECTS, default=None)
+    ap.add_argument("--in-holdout", action="store_true",
+                    help="put each case defect into a hold-out case (studies without one are skipped); "
+                         "the channel defects, which touch every case, are left out")
     args = ap.parse_args(argv)
-    run_defects(run_one, table, DEFECTS, args.defects, args.n, args.seed, args.out, tries=5 * args.n)
+    defects = args.defects or list(CASE_DEFECTS if args.in_holdout else DEFECTS)
+    if args.in_holdout and set(defects) - set(CASE_DEFECTS):
+        ap.error(f"--in-holdout takes the case defects only: {', '.join(CASE_DEFECTS)}")
+    one = functools.partial(run_one, in_holdout=True) if args.in_holdout else run_one
+    run_defects(one, table, DEFECTS, defects, args.n, args.seed, args.out, tries=5 * args.n)
     return 0
 
 
@@ -387,27 +430,30 @@ def run_defects(run_one, table, all_defects, defects, n: int, seed: int, out: Pa
 
 
 def table(rows: list[dict]) -> str:
-    """One line per study: the defect and where, what was added (with the pattern named), the
-    verdict, and whether it was put on the data at the defect's place with nothing of the
-    structure added."""
-    out = ["| study | family | defect | at | added | verdict | on the data, at its place, nothing else |",
-           "|---|---|---|---|---|---|---|"]
+    """One line per study: the defect and where, what was added (with the pattern named; the
+    hold-out check's findings too), the verdict, whether it was put on the data at the defect's
+    place with nothing of the structure added, and whether everything added or found is at the
+    defect's place (of the data or not: a hold-out case found not predicted is located but not
+    said to be the data)."""
+    out = ["| study | family | defect | at | added | verdict | on the data, at its place, nothing else | at its place, nothing else |",
+           "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if r.get("error"):
-            out.append(f"| {r['study']} | {r['family']} | {r['defect']} | {r['where']} | error: {r['error'][:80]} | | no |")
+            out.append(f"| {r['study']} | {r['family']} | {r['defect']} | {r['where']} | error: {r['error'][:80]} | | no | no |")
             continue
         w = r["where"]
         at = f"{w['grid']}/{w['component']}" if "grid" in w else ", ".join(w.get("cases") or [w.get("case")])
         added = "; ".join(f"{a[0]} @ {','.join(map(str, a[1]))}" + (f" ({a[4]})" if a[4] else "") for a in r["added"]) or "nothing"
         if "grid" in w:
-            placed = bool(r["added"]) and all(a[2] == "data" and a[1][:1] == [w["grid"]] for a in r["added"])
+            here = [a[1][:1] == [w["grid"]] for a in r["added"]]
         else:
-            # a data effect of the case: set aside or scaled, or one reading of it an outlier
+            # the case: set aside, scaled or read as another, or one reading of it an outlier
             cases = set(w.get("cases") or [w.get("case")])
-            placed = bool(r["added"]) and all(a[2] == "data" and (set(map(str, a[1])) <= cases or a[5] in cases)
-                                              for a in r["added"])
+            here = [set(map(str, a[1])) <= cases or a[5] in cases for a in r["added"]]
+        located = bool(here) and all(here)
+        placed = located and all(a[2] == "data" for a in r["added"])
         out.append(f"| {r['study']} | {r['family']} | {r['defect']} | {at} | {added} | {r['verdict']} | "
-                   f"{'yes' if placed else 'no'} |")
+                   f"{'yes' if placed else 'no'} | {'yes' if located else 'no'} |")
     return "\n".join(out) + "\n"
 
 

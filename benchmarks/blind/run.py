@@ -202,6 +202,9 @@ def score(planted: dict, doc: dict) -> dict:
         "holdout_rms_after": after.get("holdout_rms"),
         "verdict": doc.get("verdict"),
         "validation": (doc.get("validation") or {}).get("method"),
+        # the hold-out cases read against the final model (blackbox.diagnosis.holdout)
+        "holdout_predicted": (doc.get("holdout_check") or {}).get("predicted"),
+        "holdout_findings": (doc.get("holdout_check") or {}).get("findings"),
         "load_group": next((p.get("group") for p in effects if p["kind"] == "load_scale"), None),
     }
 
@@ -303,6 +306,19 @@ def summarize(results: list[dict]) -> dict:
                             "multiple": r["multiple"], "error": (r.get("error") or "")[:120],
                             "added": [(a["effect"], a["where"]) for a in r.get("added", [])]}
                            for r in eff if r["bin"] in AT_2X and not r["correct"]]
+    # the hold-out check on studies whose final model is the truth (nothing planted and nothing
+    # added, or the planted effects found and nothing else): whatever it says there is a false alarm
+    right = [r for r in rows if r.get("holdout_predicted") is not None and not r.get("error")
+             and (r.get("correct") and not r.get("extra"))]
+    out["holdout_check"] = {
+        "right_model": {"n": len(right), "flagged": sum(1 for r in right if r.get("holdout_findings")),
+                        "not_predicted": sum(1 for r in right if r.get("holdout_predicted") is False)},
+        "other": {"n": sum(1 for r in rows if r.get("holdout_predicted") is not None) - len(right),
+                  "flagged": sum(1 for r in rows if r.get("holdout_findings") and r not in right),
+                  "not_predicted": sum(1 for r in rows if r.get("holdout_predicted") is False and r not in right)},
+        "flagged_studies": [{"study": r["study"], "family": r["family"], "kind": r.get("kind"),
+                             "correct": r.get("correct"), "findings": r["holdout_findings"]}
+                            for r in rows if r.get("holdout_findings")]}
     out["false_alarms"] = [{"study": r["study"], "family": r["family"],
                             "added": [(a["effect"], a["where"]) for a in r["added"]]}
                            for r in tuned if r.get("false_alarm")]
@@ -453,6 +469,19 @@ def markdown(summary: dict, settings: dict) -> str:
                             + [_frac(ab[b]) for b in ALL_BINS] + [""] * 5) + " |")
     nb = summary["none"]
     lines += ["", f"No-effect studies: {nb['n']}; false alarms {_frac(nb['false_alarm'])}; errors {nb['errors']}."]
+    hc = summary.get("holdout_check")
+    if hc and (hc["right_model"]["n"] or hc["other"]["n"]):
+        rm, ot = hc["right_model"], hc["other"]
+        lines += ["", "## Hold-out check", "",
+                  "The hold-out cases read against the final model (an outlier, a case of another size or "
+                  "another case's, a rigid motion, or not predicted; docs/commands.md). On studies whose "
+                  "final model is the truth (nothing planted and nothing added, or the planted effects "
+                  f"found and nothing else) any finding is a false alarm: {rm['flagged']} of {rm['n']} "
+                  f"(not predicted: {rm['not_predicted']}). On the other studies with hold-out cases: "
+                  f"{ot['flagged']} of {ot['n']} with a finding, {ot['not_predicted']} not predicted."]
+        for f in hc["flagged_studies"][:20]:
+            lines.append(f"- {f['study']} ({f['family']}, {f['kind']}, {'right' if f['correct'] else 'wrong'} "
+                         f"model): " + "; ".join(f["findings"])[:300])
     te = summary.get("two_effects")
     if te:
         lines += ["", "## Two effects", "",
