@@ -321,10 +321,10 @@ def plant_load(st, defect: str, rng: np.random.Generator, in_holdout: bool = Fal
     cases = list(dict.fromkeys(r[0] for r in loads))
     rest = (p["joints"], p["away_grids"], [], noise, seed)
     clean = gen.simulate_study(truth, loads, *rest)
-    fitted = held_cases(st.folder, cases) if in_holdout else fitted_cases(st.folder, cases)
+    eligible = held_cases(st.folder, cases) if in_holdout else fitted_cases(st.folder, cases)
     for i in rng.permutation(len(cases)).tolist():
         case = cases[i]
-        if case not in fitted:
+        if case not in eligible:
             continue
         changed = _moved_loads(truth, loads, case, defect, rng)
         if changed is None:
