@@ -70,17 +70,22 @@ class Coord:
         p = np.radians(x[:, 2])
         return x[:, :1] * np.column_stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)])
 
-    def on_axis(self, xyz: np.ndarray) -> np.ndarray:
-        """Which basic points ``(n, 3)`` lie on the polar axis of this cylindrical or spherical
-        system (to rounding; the origin included), where its directions are undefined; none
-        for a rectangular one."""
-        xyz = np.asarray(xyz, float).reshape(-1, 3)
-        if self.kind == "R":
-            return np.zeros(xyz.shape[0], bool)
+    def _polar(self, xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(p, rho, axis)`` of basic points ``(n, 3)``: rectangular along this system's axes,
+        the distance from its z axis, and which lie on that axis (to rounding; the origin
+        included)."""
         p = (xyz - np.asarray(self.origin)) @ np.asarray(self.axes).T
         rho = np.hypot(p[:, 0], p[:, 1])
         scale = np.maximum(np.abs(p).max(axis=1), np.abs(np.asarray(self.origin)).max(initial=0.0))
-        return rho <= 1e-12 * np.maximum(scale, 1e-300)
+        return p, rho, rho <= 1e-12 * np.maximum(scale, 1e-300)
+
+    def on_axis(self, xyz: np.ndarray) -> np.ndarray:
+        """Which basic points ``(n, 3)`` lie on the polar axis of this cylindrical or spherical
+        system, where its directions are undefined; none for a rectangular one."""
+        xyz = np.asarray(xyz, float).reshape(-1, 3)
+        if self.kind == "R":
+            return np.zeros(xyz.shape[0], bool)
+        return self._polar(xyz)[2]
 
     def frames_at(self, xyz: np.ndarray, on_axis: str = "error") -> np.ndarray:
         """The displacement axes at basic points ``(n, 3)``: ``(n, 3, 3)``, rows the unit vectors
@@ -94,9 +99,7 @@ class Coord:
         n = xyz.shape[0]
         if self.kind == "R":
             return np.broadcast_to(ax, (n, 3, 3)).copy()
-        p = (xyz - np.asarray(self.origin)) @ ax.T          # rectangular along the system's axes
-        rho = np.hypot(p[:, 0], p[:, 1])
-        axis = self.on_axis(xyz)
+        p, rho, axis = self._polar(xyz)
         bad = np.flatnonzero(axis)
         if bad.size and on_axis != "basic":
             raise ValueError(bad)

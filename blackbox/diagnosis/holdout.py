@@ -43,6 +43,7 @@ from scipy import linalg, stats
 from blackbox.diagnosis.fit import RANK_RTOL, Fit
 from blackbox.diagnosis.effects.rigid_motion import rigid_weights
 from blackbox.diagnosis.model import AugmentedModel, ObsMap
+from blackbox.diagnosis.validation import inside_bounds
 
 __all__ = ["HoldoutReading", "HoldoutCase", "HoldoutCheck", "check_holdout", "read_holdout", "prediction_basis",
            "free_parameters", "OUTLIERS_PER_CASE", "TESTS"]
@@ -167,9 +168,7 @@ def free_parameters(model: AugmentedModel, fit: Fit) -> np.ndarray:
     """The parameters of ``fit`` strictly inside their bounds (a spring at 0 or at its rigid
     limit is held there)."""
     _, lo, hi = fit.spec.transforms()
-    hi = np.minimum(hi, model.rigid_limits())
-    tol = 1e-9 * np.maximum(np.abs(fit.x), 1.0)
-    return (fit.x > lo + tol) & (fit.x < hi - tol)
+    return inside_bounds(fit.x, lo, np.minimum(hi, model.rigid_limits()))
 
 
 def prediction_basis(J: np.ndarray, Jh: np.ndarray, free: np.ndarray) -> np.ndarray:
@@ -215,14 +214,15 @@ def check_holdout(model: AugmentedModel, fit: Fit, hold: ObsMap, alpha: float,
         if aside is not None:
             use &= ~aside
 
-    # each reading's declared sigma by (grid, component, case), fitted and hold-out rows: a case
-    # that is another's readings carries that case's noise
-    sig = {}
-    for o in ((fitted,) if fitted is not None else ()) + (hold,):
-        for g, c, k, v in zip(o.grid.tolist(), o.comp.tolist(), o.case.tolist(), o.sigma.tolist()):
-            sig[(g, c, k)] = v
+    sig: dict = {}
 
     def other_cases(rows: np.ndarray) -> dict:
+        if not sig:
+            # each reading's declared sigma by (grid, component, case), fitted and hold-out rows:
+            # a case that is another's readings carries that case's noise (built when a case
+            # beyond its level is first tried, not on every diagnosis)
+            for o in ((fitted,) if fitted is not None else ()) + (hold,):
+                sig.update(zip(zip(o.grid.tolist(), o.comp.tolist(), o.case.tolist()), o.sigma.tolist()))
         out = {}
         for k, lab in enumerate(hold.labels):
             om = replace(hold.subset(rows), case=np.full(len(rows), k))
@@ -313,7 +313,7 @@ def _as_case(label: str, rows: np.ndarray, hold: ObsMap, f: np.ndarray, A: np.nd
     y = hold.y[rows] / hold.sigma[rows]
     p = f[rows] / hold.sigma[rows]
     pp = float(p @ p)
-    tries = []                      # (chi2 + k ln n, chi2, k, reads_as, extra)
+    tries = []                      # (chi2 + k ln n, chi2, reads_as, its fields of HoldoutCase)
     lnn = float(np.log(max(n, 2)))
 
     def level(k: int) -> float:

@@ -35,7 +35,7 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["Validation", "KFOLD_MAX", "kfold", "cv_chi2"]
+__all__ = ["Validation", "KFOLD_MAX", "kfold", "cv_chi2", "inside_bounds"]
 
 KFOLD_MAX = 5               # folds at most: each fold's fit keeps >= 80 % of the cases
 
@@ -70,6 +70,13 @@ def kfold(cases: Sequence[int], k_max: int = KFOLD_MAX) -> Validation:
     return Validation("kfold", tuple(tuple(cases[g::k]) for g in range(k)))
 
 
+def inside_bounds(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Which parameters lie strictly inside their bounds (by more than 1e-9 of their size, at
+    least 1e-9): the ones a fit moves; a parameter at a bound is held there."""
+    tol = 1e-9 * np.maximum(np.abs(x), 1.0)
+    return (x > lo + tol) & (x < hi - tol)
+
+
 def cv_chi2(J: np.ndarray, r: np.ndarray, x: np.ndarray, lo: np.ndarray, hi: np.ndarray,
             nominal: np.ndarray, case: np.ndarray, folds: Sequence[Sequence[int]],
             owners: Sequence[slice] = ()) -> tuple[float, list[bool]]:
@@ -81,8 +88,7 @@ def cv_chi2(J: np.ndarray, r: np.ndarray, x: np.ndarray, lo: np.ndarray, hi: np.
     parameter: never reset); ``case``: each row's case index."""
     x = np.asarray(x, float)
     p = len(x)
-    tol = 1e-9 * np.maximum(np.abs(x), 1.0)
-    free = (x > lo + tol) & (x < hi - tol)
+    free = inside_bounds(x, lo, hi)
     scale = np.linalg.norm(J, axis=0)
     tiny = 1e-12 * np.maximum(scale, 1e-300)
     resettable = np.isfinite(nominal)
