@@ -47,12 +47,12 @@ NOT_PASSABLE = {
 KNOWN_UNMODELLED = frozenset({
     # shells, solids, other elements and their properties
     "CQUAD4", "CQUADR", "CQUAD8", "CQUAD", "CQUADX", "CTRIA3", "CTRIAR", "CTRIA6", "CTRIAX",
-    "CTRIAX6", "CSHEAR", "CHEXA", "CPENTA", "CTETRA", "CPYRAM", "CBEND", "CVISC",
-    "CBEAM3", "CDAMP1", "CDAMP2", "CDAMP3", "CDAMP4", "CDAMP5",
+    "CTRIAX6", "CSHEAR", "CHEXA", "CPENTA", "CTETRA", "CPYRAM", "CBEND",
+    "CBEAM3",
     "CWELD", "CFAST", "CSEAM", "CBUSH1D", "CBUSH2D", "CRAC2D", "CRAC3D", "GENEL",
     "CUSER1", "CUSERIN", "CONV", "CHBDYE", "CHBDYG", "CHBDYP",
-    "PSHELL", "PCOMP", "PCOMPG", "PCOMP1", "PSOLID", "PSHEAR", "PBEND", "PVISC",
-    "PBCOMP", "PBEAM3", "PBRSECT", "PBMSECT", "PDAMP", "PDAMP5", "PWELD", "PFAST",
+    "PSHELL", "PCOMP", "PCOMPG", "PCOMP1", "PSOLID", "PSHEAR", "PBEND",
+    "PBCOMP", "PBEAM3", "PBRSECT", "PBMSECT", "PWELD", "PFAST",
     "PBUSH1D", "PBUSH2D", "PELAST", "PLPLANE", "PLSOLID", "PSHLN1", "PSHLN2",
     "PUSER1", "PUSERIN", "PHBDY", "PCONV",
     # materials other than MAT1, and temperature- or stress-dependent material tables
@@ -76,7 +76,7 @@ ELEMENT_GRIDS: dict[str, tuple[int, ...]] = {
     **{k: (4, 5, 6) for k in ("CTRIA3", "CTRIAR")},
     "CQUAD8": tuple(range(4, 12)), "CTRIA6": tuple(range(4, 10)),
     "CHEXA": tuple(range(4, 24)), "CPENTA": tuple(range(4, 19)), "CTETRA": tuple(range(4, 14)),
-    "CPYRAM": tuple(range(4, 17)), "CBEND": (4, 5), "CVISC": (4, 5),
+    "CPYRAM": tuple(range(4, 17)), "CBEND": (4, 5),
 }
 """NASTRAN field numbers of the grids of element cards the reader does not model but knows the
 layout of (MSC QRG: EID PID G1 G2 ...; a solid's midside grids may be blank): shells, solids,

@@ -55,6 +55,8 @@ NO_EFFECT = frozenset({
     # mass: no effect on a linear static solution (GRAV reads the masses it uses from the cards)
     "CONM1", "CONM2", "CMASS1", "CMASS2", "CMASS3", "CMASS4", "PMASS",
     "NSM", "NSM1", "NSMADD", "NSML", "NSML1",
+    # dampers: a viscous force is proportional to a velocity, zero in a static solution
+    "CDAMP1", "CDAMP2", "CDAMP3", "CDAMP4", "CDAMP5", "CVISC", "PDAMP", "PDAMP5", "PDAMPT", "PVISC",
     # eigenvalue extraction, dynamic and nonlinear solution controls
     "EIGR", "EIGRL", "EIGB", "EIGC", "EIGP", "FREQ", "FREQ1", "FREQ2", "FREQ3", "FREQ4", "FREQ5",
     "TSTEP", "TSTEPNL", "NLPARM", "NLPCI", "TABDMP1", "RANDPS", "RANDT1", "TABRND1", "TABRNDG",
