@@ -315,13 +315,13 @@ def test_holdout_veto_is_calibrated():
     from blackbox.diagnosis.search import holdout_worse
     rng = np.random.default_rng(3)
     n = 40
-    hold = SimpleNamespace(sigma=np.ones(n))
     for size in (0.1, 1.0, 3.0, 10.0):
         s = rng.normal(size=n)
         s *= size / np.linalg.norm(s)
         vetoed = 0
         for _ in range(1000):
             y = s + rng.normal(size=n)
+            hold = SimpleNamespace(sigma=np.ones(n), y=y, case=np.zeros(n, int))
             fit = SimpleNamespace(holdout_predicted=np.zeros(n), holdout_chi2=float(y @ y))
             f2 = SimpleNamespace(holdout_predicted=s, holdout_chi2=float((y - s) @ (y - s)))
             vetoed += holdout_worse(fit, f2, hold) is not None
@@ -331,6 +331,7 @@ def test_holdout_veto_is_calibrated():
     vetoed = 0
     for _ in range(1000):
         y = rng.normal(size=n)
+        hold = SimpleNamespace(sigma=np.ones(n), y=y, case=np.zeros(n, int))
         fit = SimpleNamespace(holdout_predicted=np.zeros(n), holdout_chi2=float(y @ y))
         f2 = SimpleNamespace(holdout_predicted=d, holdout_chi2=float((y - d) @ (y - d)))
         vetoed += holdout_worse(fit, f2, hold) is not None

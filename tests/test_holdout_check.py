@@ -188,12 +188,34 @@ def test_a_case_that_is_another_cases_readings_reads_as_that_case():
     hold = _hold(yh)
     # the model's prediction of case k at the channels of the rows asked for: here each case's
     # channels are the same twelve, in the same order
-    by_case = {lab: (f[k * PER_CASE:(k + 1) * PER_CASE], np.ones(PER_CASE)) for k, lab in enumerate(hold.labels)}
+    by_case = [(lab, f[k * PER_CASE:(k + 1) * PER_CASE], np.ones(PER_CASE), False) for k, lab in enumerate(hold.labels)]
     yh[2 * PER_CASE:] = yh[:PER_CASE] + 0.0
     hc = read_holdout(_hold(yh), f, A, np.ones(len(yh), bool), ALPHA, other_cases=lambda rows: by_case)
     (c,) = hc.cases
     assert c.case == "H3" and c.reads_as == "other_case" and c.other == "H1" and hc.predicted
     assert "H1's readings" in c.sentence()
+
+
+def test_readings_swapped_between_a_fitted_and_a_hold_out_case(tmp_path):
+    """Seed 43's portal (unlisted_defects --in-holdout): the readings of fitted case L12 and
+    hold-out case L4 exchanged. The search sets L12 aside, which the corrupted hold-out case
+    used to veto (its chi2, 1e7 under either fit, moved by 3.5e4: the hold-out cases are now
+    weighed by their misfit, search.holdout_case_weights), and the hold-out check reads L4 as
+    the model's response to L12's load, its own readings set aside. Before: a member factor
+    added and "unexplained" at reduced chi2 123."""
+    import benchmarks.unlisted_defects as ud
+    from benchmarks.blind.generate import NONE, generate_study
+    from blackbox.commands.diagnose import run
+
+    st = generate_study(0, 43, tmp_path / "swapped", kind=NONE, shape="portal", style="plain")
+    rng = np.random.default_rng([43, 0, ud.DEFECTS.index("swapped_cases")])
+    assert ud.plant(st.folder, "swapped_cases", rng, in_holdout=True) == {"cases": ["L12", "L4"]}
+    doc = json.loads(json.dumps(run(st.folder, plots=False).document, default=float))
+    assert [(a["effect"], a["where"]) for a in doc["added"]] == [("bad_case", ["L12"])]
+    (c,) = doc["holdout_check"]["cases"]
+    assert (c["case"], c["reads_as"], c["other"], c["other_response"]) == ("L4", "other_case", "L12", True)
+    assert doc["verdict"] == "explained"
+    shutil.rmtree(tmp_path / "swapped", ignore_errors=True)
 
 
 def test_a_case_the_specimen_slid_in_reads_as_a_rigid_motion():

@@ -41,6 +41,7 @@ import numpy as np
 from scipy import linalg, stats
 
 from blackbox.diagnosis.fit import RANK_RTOL, Fit
+from blackbox.diagnosis.effects.base import SetAsideEffect
 from blackbox.diagnosis.effects.rigid_motion import rigid_weights
 from blackbox.diagnosis.model import AugmentedModel, ObsMap
 from blackbox.diagnosis.validation import inside_bounds
@@ -85,6 +86,7 @@ class HoldoutCase:
     scale: float | None = None
     scale_std: float | None = None
     other: str | None = None
+    other_response: bool = False            # the other case's response, its own readings set aside
     motion: tuple[float, ...] | None = None
 
     @property
@@ -97,7 +99,9 @@ class HoldoutCase:
                     f"beyond {self.limit:.4g}); no factor on its load or readings, no other case's prediction and "
                     "no rigid motion of the specimen fits it")
         if self.reads_as == "other_case":
-            how = (f"case {self.other}'s readings (the files of two cases mixed up, or one saved twice)")
+            how = (f"the model's response to case {self.other}'s load, whose own readings the diagnosis set aside "
+                   f"(the readings of cases {self.case} and {self.other} exchanged)" if self.other_response else
+                   f"case {self.other}'s readings (the files of two cases mixed up, or one saved twice)")
         elif self.reads_as == "rigid_motion":
             t, w = self.motion[:3], self.motion[3:]
             how = ("its prediction plus one rigid motion of the whole specimen (a support base or the "
@@ -116,7 +120,7 @@ class HoldoutCase:
     def to_json(self) -> dict:
         return {"case": self.case, "n": self.n, "chi2": self.chi2, "limit": self.limit, "reads_as": self.reads_as,
                 "fitted_chi2": self.fitted_chi2, "scale": self.scale, "scale_std": self.scale_std,
-                "other": self.other, "motion": None if self.motion is None else list(self.motion),
+                "other": self.other, "other_response": self.other_response, "motion": None if self.motion is None else list(self.motion),
                 "of": "data" if self.explained else "unknown", "finding": self.sentence()}
 
 
@@ -216,19 +220,33 @@ def check_holdout(model: AugmentedModel, fit: Fit, hold: ObsMap, alpha: float,
 
     sig: dict = {}
 
-    def other_cases(rows: np.ndarray) -> dict:
+    # a case whose readings an effect sets aside (bad_case) is predicted with and without its
+    # offsets: with them its prediction is its readings as read (a hold-out case saved from it
+    # twice), without them the model's response to its load (a hold-out case it was swapped with)
+    x_resp = fit.x.copy()
+    for e, sl in zip(fit.spec.effects, fit.spec.effect_slices()):
+        if isinstance(e, SetAsideEffect):
+            x_resp[sl] = e.nominal
+    st_resp = st if np.array_equal(x_resp, fit.x) else model.state(x_resp)
+
+    def other_cases(rows: np.ndarray) -> list:
         if not sig:
             # each reading's declared sigma by (grid, component, case), fitted and hold-out rows:
             # a case that is another's readings carries that case's noise (built when a case
             # beyond its level is first tried, not on every diagnosis)
             for o in ((fitted,) if fitted is not None else ()) + (hold,):
                 sig.update(zip(zip(o.grid.tolist(), o.comp.tolist(), o.case.tolist()), o.sigma.tolist()))
-        out = {}
+        out = []
         for k, lab in enumerate(hold.labels):
             om = replace(hold.subset(rows), case=np.full(len(rows), k))
             s_k = np.array([sig.get((g, c, k), s) for g, c, s in
                             zip(hold.grid[rows].tolist(), hold.comp[rows].tolist(), hold.sigma[rows].tolist())])
-            out[lab] = (model.predict(fit.x, om, st), s_k)
+            fo = model.predict(fit.x, om, st)
+            out.append((lab, fo, s_k, False))
+            if st_resp is not st:
+                fr = model.predict(x_resp, om, st_resp)
+                if not np.array_equal(fr, fo):
+                    out.append((lab, fr, s_k, True))
         return out
 
     rigid = None
@@ -300,8 +318,9 @@ def _as_case(label: str, rows: np.ndarray, hold: ObsMap, f: np.ndarray, A: np.nd
       *load* (``s`` times as declared: the noise as declared, the prediction's error times ``s``)
       or on the *readings* (``s`` times what was measured, noise and all: another unit, a gain
       of the whole acquisition); ``s``'s standard error from both errors;
-    * another case's prediction at the same channels (``other_cases(rows)``: label ->
-      ``(predictions, that case's declared sigma there)``; no parameter): the files of two cases
+    * another case's prediction at the same channels (``other_cases(rows)``: ``(label,
+      predictions, that case's declared sigma there, whether the predictions leave out the
+      offsets that set that case's readings aside)``; no parameter): the files of two cases
       mixed up, or one saved twice;
     * its prediction plus one rigid motion of the specimen (``rigid(rows)``: the readings per
       unit translation and rotation, :func:`blackbox.diagnosis.effects.rigid_motion.rigid_weights`;
@@ -327,12 +346,12 @@ def _as_case(label: str, rows: np.ndarray, hold: ObsMap, f: np.ndarray, A: np.nd
             if qs <= level(1):
                 tries.append((qs + lnn, qs, how, {"scale": s, "scale_std": std}))
     if other_cases is not None:
-        for other, (fo, so) in other_cases(rows).items():
+        for other, fo, so, response in other_cases(rows):
             if other == label:
                 continue
             qo = float(np.sum(((hold.y[rows] - fo) / so) ** 2))
             if qo <= level(0):
-                tries.append((qo, qo, "other_case", {"other": other}))
+                tries.append((qo, qo, "other_case", {"other": other, "other_response": response}))
     if rigid is not None:
         W = rigid(rows) / hold.sigma[rows, None]
         seen = np.linalg.norm(W, axis=0) > 0

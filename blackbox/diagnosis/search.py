@@ -350,21 +350,46 @@ def holdout_worse(fit: Fit, f2: Fit, hold: ObsMap | None, keep: np.ndarray | Non
     kept, however much it improves the fit (a load scale or sensor offset that absorbs the
     misfit of an effect no candidate describes). An addition the hold-out cases hardly see
     (``|d|`` ~ 0) cannot be vetoed by their noise. ``keep``: the hold-out rows compared (default
-    all; an addition that sets readings aside is judged on the others)."""
+    all; an addition that sets readings aside is judged on the others). Each case's rows are
+    weighed by :func:`holdout_case_weights`: a hold-out case neither fit predicts does not
+    follow the noise this rule assumes."""
     if hold is None or fit.holdout_predicted is None or f2.holdout_predicted is None:
         return None
-    d = (f2.holdout_predicted - fit.holdout_predicted) / hold.sigma
-    if keep is None:
-        dh = f2.holdout_chi2 - fit.holdout_chi2
-    else:
-        d = d[keep]
-        dh = holdout_chi2(f2, hold, keep) - holdout_chi2(fit, hold, keep)
+    keep = np.ones(len(hold.sigma), bool) if keep is None else keep
+    w = holdout_case_weights(fit, f2, hold, keep)[keep]
+    d = ((f2.holdout_predicted - fit.holdout_predicted) / hold.sigma)[keep] * np.sqrt(w)
+    dh = float(np.sum(w * (_whitened_sq(f2, hold) - _whitened_sq(fit, hold))[keep]))
     dn = float(np.linalg.norm(d))
     limit = max(-dn * dn + HOLDOUT_Z * 2.0 * dn, 1e-9 * max(1.0, fit.holdout_chi2))
     if dh > limit:
         return (f"it predicts the hold-out cases worse (hold-out chi2 {dh:+.4g}, beyond the {limit:+.3g} "
-                f"that chance allows for an addition that changes their prediction by {dn:.3g} sigma)")
+                f"that chance allows for an addition that changes their prediction by {dn:.3g} sigma"
+                + (")" if np.all(w == 1.0) else ", cases neither fit predicts weighed down by their misfit)"))
     return None
+
+
+def _whitened_sq(fit: Fit, hold: ObsMap) -> np.ndarray:
+    return ((hold.y - fit.holdout_predicted) / hold.sigma) ** 2
+
+
+def holdout_case_weights(fit: Fit, f2: Fit, hold: ObsMap, keep: np.ndarray) -> np.ndarray:
+    """The weight of each hold-out row when two fits are compared on the hold-out cases: one
+    over its case's dispersion, the case's chi2 under the fit that predicts it better over the
+    upper end of its 99 % band (at least 1; :func:`holdout_dispersion`). A case either fit
+    predicts within its band keeps its whole chi2 change, so a case an addition spoils still
+    vetoes it. A case neither fit predicts, by many times its noise (its readings another
+    case's, in other units, a load put in elsewhere), changes its chi2 with every move of the
+    model by amounts that say how its defect projects on the move, not whether the addition is
+    right; weighed down, it counts as a change of that size would in a case predicted to its
+    noise. Rows outside ``keep`` get weight 0."""
+    w = np.zeros(len(hold.sigma))
+    r1, r2 = _whitened_sq(fit, hold), _whitened_sq(f2, hold)
+    case = getattr(hold, "case", None)
+    case = np.zeros(len(w), int) if case is None else case
+    for k in np.unique(case[keep]):
+        rows = keep & (case == k)
+        w[rows] = 1.0 / holdout_dispersion(min(float(r1[rows].sum()), float(r2[rows].sum())), int(rows.sum()))
+    return w
 
 
 def holdout_chi2(fit: Fit, hold: ObsMap, keep: np.ndarray) -> float:
@@ -447,9 +472,15 @@ class Checks:
             h2 = f2.holdout_chi2 if keep is None else holdout_chi2(f2, self.hold, keep)
             dh = h2 - (fit.holdout_chi2 if keep is None else holdout_chi2(fit, self.hold, keep))
             disp = holdout_dispersion(h2, len(self.hold.y) if keep is None else int(keep.sum()))
-            if dbic < 0 and not evidence(dbic, dh) < 0:
+            # the veto weighs each hold-out case by its misfit (holdout_case_weights)
+            mask = np.ones(len(self.hold.sigma), bool) if keep is None else keep
+            w = holdout_case_weights(fit, f2, self.hold, mask)
+            dhw = float(np.sum(w * (_whitened_sq(f2, self.hold) - _whitened_sq(fit, self.hold))))
+            if dbic < 0 and not evidence(dbic, dhw) < 0:
                 reasons.append(f"the hold-out prediction gets worse by more than the fit improves "
-                               f"(delta BIC {dbic:+.4g}, hold-out chi2 {dh:+.4g})")
+                               f"(delta BIC {dbic:+.4g}, hold-out chi2 {dh:+.4g}"
+                               + (")" if np.all(w[mask] == 1.0) else f", {dhw:+.4g} with cases neither fit "
+                                                                     f"predicts weighed down)"))
             elif (worse := holdout_worse(fit, f2, self.hold, keep)) is not None:
                 reasons.append(worse)
         elif self.val.kind == "kfold":
