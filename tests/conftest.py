@@ -8,6 +8,7 @@ and request the fixtures by name.
 from __future__ import annotations
 
 import importlib.util
+import json
 import shutil
 import tempfile
 from pathlib import Path
@@ -99,6 +100,27 @@ def runs_under_tmp_path(tmp_path, monkeypatch):
     system temporary folder. Modules that run external codes use it for every test:
     ``pytestmark = pytest.mark.usefixtures("runs_under_tmp_path")``."""
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+
+
+_DIAGNOSES: dict = {}
+
+
+def fixture_diagnosis(folder: Path, adapter: str | None = None) -> dict:
+    """``diagnosis.json`` of ``blackbox diagnose folder`` with default settings (``adapter``:
+    the study's own when ``None``), as JSON reads it back, plus ``"cases"`` (the study's load
+    cases); computed once per test session and folder, so that the modules which check the same
+    fixture's diagnosis (test_diagnose, test_mystran_decks) share one run. Callers must not
+    change the returned document."""
+    from blackbox.commands import diagnose as diagnose_command
+    from blackbox.study import load_study
+
+    folder = Path(folder).resolve()
+    key = (folder, adapter or load_study(folder).config.solver.adapter)
+    if key not in _DIAGNOSES:
+        run = diagnose_command.run(folder, adapter=adapter, plots=False)
+        doc = json.loads(json.dumps(run.document, default=float))
+        _DIAGNOSES[key] = doc | {"cases": list(run.study.loads.cases)}
+    return _DIAGNOSES[key]
 
 
 def adapter_of(f: FrameBuilder) -> ReferenceAdapter:

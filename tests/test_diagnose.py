@@ -44,7 +44,7 @@ from solver_adapters.bdf_write import write_deck
 from solver_adapters.protocol import LoadMatrix
 from solver_adapters.reference import ReferenceAdapter
 
-from conftest import MYSTRAN_MARKS
+from conftest import MYSTRAN_MARKS, fixture_diagnosis
 
 FIXTURES = Path(__file__).resolve().parents[1] / "fixtures" / "undeclared"
 FOLDERS = sorted(p.name for p in FIXTURES.iterdir() if (p / "planted.json").exists())
@@ -66,15 +66,10 @@ def _matches(added: dict, planted: dict, cases: list[str]) -> bool:
 
 
 @pytest.fixture(scope="module")
-def diagnosed(tmp_path_factory):
-    cache: dict[str, dict] = {}
-
-    def get(folder: str) -> dict:
-        if folder not in cache:
-            run = diagnose_command.run(FIXTURES / folder, plots=False)
-            cache[folder] = run.document | {"cases": list(run.study.loads.cases)}
-        return cache[folder]
-    return get
+def diagnosed():
+    """A fixture folder's diagnosis (default settings), shared with the other modules that
+    check it (``conftest.fixture_diagnosis``)."""
+    return lambda folder: fixture_diagnosis(FIXTURES / folder)
 
 
 # --------------------------------------------------------------------------------------------

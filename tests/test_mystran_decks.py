@@ -28,7 +28,7 @@ from solver_adapters.protocol import DeckFormatError, LoadMatrix, ScalarSpring
 from solver_adapters.reference import ReferenceAdapter
 from solver_adapters.subprocess import BaseDeck, run_solver
 
-from conftest import needs_mystran
+from conftest import fixture_diagnosis, needs_mystran
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(__file__).parent / "data"
@@ -391,9 +391,14 @@ def _bench():
 
 
 def _diagnose_agrees(name: str) -> None:
+    """benchmarks/diagnose_mystran.py's comparison of one folder, the reference diagnosis shared
+    with test_diagnose (``conftest.fixture_diagnosis``)."""
     bench = _bench()
-    row = bench.run_folder(ROOT / "fixtures" / "undeclared" / name, VALLEY_SIGMA.get(name, bench.PARAM_SIGMA))
-    assert row["agree"], row
+    folder = ROOT / "fixtures" / "undeclared" / name
+    ref = fixture_diagnosis(folder, "reference")
+    mys, _ = bench.diagnose_doc(folder, "mystran")
+    c = bench.compare(ref, mys, VALLEY_SIGMA.get(name, bench.PARAM_SIGMA))
+    assert c["agree"], (name, bench._effects_text(ref), bench._effects_text(mys), c)
 
 
 @needs_mystran
