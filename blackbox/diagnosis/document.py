@@ -6,7 +6,9 @@ in the order added), ``removed`` (effects a later addition made unnecessary), ``
 statistics, the 25 best candidates, joint parameters and residual structure before and after),
 ``stop_reason``, ``joint_parameters``, ``holdout``, ``holdout_check`` (the hold-out cases read
 against the final model: outliers, cases of another size, whether the rest is predicted;
-:mod:`blackbox.diagnosis.holdout`), ``validation`` (hold-out cases or K-fold over
+:mod:`blackbox.diagnosis.holdout`), ``noise_level`` (above the noise band: whether the misfit looks
+like noise larger than declared, :mod:`blackbox.diagnosis.noise_level`; ``null`` within it),
+``validation`` (hold-out cases or K-fold over
 the load cases, :mod:`blackbox.diagnosis.validation`), ``settings``, ``identify_check``, ``solver``,
 ``warnings``, ``method_wall_s`` (and ``wall_s``, the whole command, and ``notes``, what the
 diagnosis leaves aside on a deck with shells or solids, added by the command);
@@ -164,6 +166,7 @@ def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: li
         "joint_parameters": {"declared": _joint_params(diag.declared), "final": _joint_params(diag.final)},
         "holdout": {"cases": list(holdout), "declared_in_study": declared_holdout},
         "holdout_check": None if diag.holdout_check is None else diag.holdout_check.to_json(),
+        "noise_level": None if diag.noise_level is None else diag.noise_level.to_json(),
         "validation": {"method": diag.validation.kind, "description": diag.validation.describe(),
                        **({} if diag.kfold is None else
                           {"k": diag.kfold["k"], "folds": diag.kfold["folds"],
@@ -232,8 +235,10 @@ def verdict_detail(diag: Diagnosis) -> str:
         return (f"{n} effect(s) added{which}; the reduced chi2 is back within the noise band ({r:.4g}, 99 % band "
                 f"{lo:.4g}..{hi:.4g}){held}")
     what = f"after {n} added effect(s)" if n else "and no candidate effect is supported"
+    noise = ("" if diag.noise_level is None or not diag.noise_level.noise_like else
+             f"; {diag.noise_level.sentence()}")
     return (f"the reduced chi2 stays at {r:.4g}, above the 99 % band {lo:.4g}..{hi:.4g}, {what}; "
-            f"the misfit sits at {misfit_location(diag.hotspots)}")
+            f"the misfit sits at {misfit_location(diag.hotspots)}{noise}")
 
 
 def _trim(st: dict) -> dict:

@@ -199,12 +199,16 @@ def _chi2(r: np.ndarray, A: np.ndarray) -> float:
 
 
 def check_holdout(model: AugmentedModel, fit: Fit, hold: ObsMap, alpha: float,
-                  geometry: tuple | None = None, fitted: ObsMap | None = None) -> HoldoutCheck:
+                  geometry: tuple | None = None, fitted: ObsMap | None = None,
+                  noise_factor: float = 1.0) -> HoldoutCheck:
     """The tests of the module docstring on ``fit``'s predictions of the rows ``hold``
     (``model``: the final model, ``fit`` its fit). ``geometry``: ``(grid -> (xyz, frame),
     centre)`` of the measured grids (as :class:`~blackbox.diagnosis.effects.rigid_motion.RigidMotion`
     holds them), to try a case as a rigid motion of the specimen; ``None``: not tried.
-    ``fitted``: the fitted rows, whose declared sigma a case read as another's takes."""
+    ``fitted``: the fitted rows, whose declared sigma a case read as another's takes.
+    ``noise_factor``: the readings' noise taken as that many times the declared sigma, every
+    reading's, fitted or not (the parameters' error then grows by the same factor, so the
+    prediction basis, in units of the noise, is the declared one)."""
     st = model.state(fit.x)
     f = model.predict(fit.x, hold, st)
     if model.p:
@@ -212,6 +216,9 @@ def check_holdout(model: AugmentedModel, fit: Fit, hold: ObsMap, alpha: float,
         A = prediction_basis(fit.J, Jh, free_parameters(model, fit))
     else:
         A = np.zeros((len(hold.y), 0))
+    if noise_factor != 1.0:
+        hold = replace(hold, sigma=hold.sigma * noise_factor)
+        fitted = None if fitted is None else replace(fitted, sigma=fitted.sigma * noise_factor)
     use = np.ones(len(hold.y), bool)
     for e in fit.spec.effects:
         aside = e.set_aside_rows(hold)

@@ -67,9 +67,10 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy import special, stats
 
-from blackbox.diagnosis.effects.base import Effect, proximity
+from blackbox.diagnosis.effects.base import Effect, SetAsideEffect, proximity
 from blackbox.diagnosis.fit import Fit, chi2_band, fit_model
-from blackbox.diagnosis.holdout import HoldoutCheck, check_holdout
+from blackbox.diagnosis.holdout import HoldoutCheck, check_holdout, free_parameters
+from blackbox.diagnosis.noise_level import NoiseLevel, leverages, noise_level
 from blackbox.diagnosis.model import RIGID_RATIO, AugmentedModel, ModelSpec, ObsMap
 from blackbox.diagnosis.residuals import hotspots, residual_structure
 from blackbox.diagnosis.runs import RunRecord
@@ -162,6 +163,7 @@ class Diagnosis:
     validation: Validation = Validation("holdout")
     kfold: dict | None = None           # K-fold: the folds' case labels and the cv chi2 before / after
     holdout_check: HoldoutCheck | None = None   # the hold-out cases read against the final model
+    noise_level: NoiseLevel | None = None       # above the band: whether the misfit looks like noise
 
     @property
     def added(self) -> list[CandidateScore]:
@@ -1175,11 +1177,27 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         if isinstance(j, ComplexJoint) and not j.is_admissible(fit.x[sl]):
             warnings.append(f"joint {j.name}: the fitted K_C is not positive semi-definite")
     hc = None
+    final_model = AugmentedModel(base, fit.spec, boundary, K_deck, o_dofs)
+    rig = next((e for e in candidates if e.kind == "rigid_motion"), None)     # its measured-grid geometry
+    geometry = None if rig is None else (rig.geometry, rig.centre)
     if hold is not None:
-        rig = next((e for e in candidates if e.kind == "rigid_motion"), None)     # its measured-grid geometry
-        hc = check_holdout(AugmentedModel(base, fit.spec, boundary, K_deck, o_dofs), fit, hold, alpha,
-                           None if rig is None else (rig.geometry, rig.centre), om)
+        hc = check_holdout(final_model, fit, hold, alpha, geometry, om)
         warnings += [f"hold-out check: {w}" for w in hc.sentences()]
+    nl = None
+    if fit.reduced_chi2 > hi:
+        # readings an offset of their own takes (set aside, outliers) say nothing of the noise
+        taken = np.zeros(len(om.y), bool)
+        for e in fit.spec.effects:
+            if isinstance(e, SetAsideEffect) or e.kind == "outlier":
+                for _, rows in e.offset_rows(om):
+                    taken |= np.asarray(rows, bool)
+        kept = ~taken
+        h = leverages(fit.J[:, free_parameters(final_model, fit)])
+        nl = noise_level(fit.residuals[kept], h[kept], om.grid[kept], om.case[kept], om.comp[kept],
+                         om.sigma[kept], alpha,
+                         None if hold is None else
+                         (lambda c: check_holdout(final_model, fit, hold, alpha, geometry, om, noise_factor=c).predicted))
+        warnings.append(nl.sentence())
     kf = None
     if val.kind == "kfold":
         kf = {"k": val.k, "folds": [[obs_fit.case_labels[c] for c in f] for f in val.folds],
@@ -1187,4 +1205,4 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
     return Diagnosis(declared, fit, tuple(steps), counts, alpha, (lo, hi),
                      tuple(obs_hold.case_labels[c] for c in obs_hold.cases) if obs_hold is not None else (),
                      nest, tuple(base.log), time.perf_counter() - t0, stop, tuple(warnings),
-                     hotspots(obs_fit, fit.residuals), val, kf, hc)
+                     hotspots(obs_fit, fit.residuals), val, kf, hc, nl)

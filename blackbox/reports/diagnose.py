@@ -72,6 +72,12 @@ def diagnosis_report(study: Study, doc: dict, files: list[str]) -> str:
     verdict = doc.get("verdict")
     if verdict is not None:
         out += ["## Verdict", "", f"**{verdict}**: {doc.get('verdict_detail', '')}.", ""]
+        nl = doc.get("noise_level")
+        if nl is not None:
+            out += ["Is it noise larger than declared? The final residuals were tested against noise "
+                    f"{_g(nl['factor'], 3)} times the declared sigma (evenly over grids, cases, components and "
+                    "quarters of the declared sigmas; no gross reading; the hold-out cases predicted at that "
+                    f"noise): {nl['sentence']}.", ""]
         if verdict == "unexplained":
             out += ["The model still lacks something that no candidate effect describes, or the data cannot "
                     "say which. Where the remaining misfit sits (share of the chi-square excess, "
