@@ -49,9 +49,10 @@ def test_noise_larger_than_declared_is_said_to_be_noise_and_sized():
     X = rng.normal(size=(len(grid), 5))
     X[:, 0] *= 30.0 * (grid == 0)                    # one parameter pinned by one grid's readings
     other = 0
+    response = 50.0 * rng.normal(size=len(grid))
     for i in range(500):
         z, h = _fit_residuals(rng, 2.0 * rng.normal(size=len(grid)), X)
-        nl = noise_level(z, h, grid, case, comp, sigma)
+        nl = noise_level(z, h, grid, case, comp, sigma, response)
         if i == 0:
             assert nl.noise_like and abs(nl.factor - 2.0) < 4 * 2.0 / np.sqrt(2 * nl.dof), nl
             assert f"noise {nl.factor:.3g} times" in nl.sentence() and "understates the noise" in nl.sentence()
@@ -72,6 +73,22 @@ def test_a_misfit_at_one_grid_is_not_noise():
     assert 3.0 < nl.factor ** 2 < 5.5 and not nl.noise_like
     assert ("grid", "5") in [(g, k) for g, k, *_ in nl.uneven]
     assert "not noise" in nl.sentence() and "grid 5" in nl.sentence()
+
+
+def test_a_misfit_that_grows_with_the_response_is_not_noise():
+    """Hysteresis (the loading and unloading branches of a record apart by 40 % of the response
+    there, the response 1 to 10 sigma, one grid and component, as in the measured column on its
+    base, fixtures/measured/rc_column): no grid, case or component carries it, the largest
+    responses do, and the response grouping says so; without the predictions it passes."""
+    rng = np.random.default_rng(5)
+    n = 400
+    u = np.linspace(1.0, 10.0, n) * np.sign(rng.normal(size=n))
+    branch = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
+    z, h = _fit_residuals(rng, u + rng.normal(size=n) + 0.2 * np.abs(u) * branch, u[:, None])
+    one = np.zeros(n, int)
+    nl = noise_level(z, h, one, np.arange(n), one + 1, np.ones(n), u)
+    assert not nl.noise_like and "response quarter" in {g for g, *_ in nl.uneven}, nl
+    assert noise_level(z, h, one, np.arange(n), one + 1, np.ones(n)).noise_like
 
 
 def test_hold_out_cases_not_predicted_at_that_noise_rule_it_out():

@@ -125,6 +125,9 @@ def test_diagnose_on_the_whole_record_says_unexplained(tmp_path, capsys):
     assert doc["settings"]["candidates_by_effect"]["p_delta"] == 1
     assert doc["after"]["reduced_chi2"] < 0.5 * doc["before"]["reduced_chi2"]
     assert doc["hotspot_cases"] and all("-a78-" in h["case"] for h in doc["hotspot_cases"][:3])
+    # hysteresis, not noise larger than declared: the misfit sits with the size of the response
+    nl = doc["noise_level"]
+    assert not nl["noise_like"] and {u["grouping"] for u in nl["uneven"]} == {"response quarter"}
     report = (tmp_path / "dg" / "report.md").read_text()
     rows = report.split("## Residual by amplitude", 1)[1].split("|---|")[-1].strip().splitlines()
     before = [float(r.split("|")[5]) for r in rows]                # chi2/n of the declared model

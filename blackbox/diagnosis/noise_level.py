@@ -9,8 +9,10 @@ When the final fit is above its band, the whitened residuals ``z`` (``chi2 / (n 
 are tested against noise of ``c`` times the declared sigma, at ``alpha`` split equally among
 three tests:
 
-* **even**: each group of readings (per grid, per case, per component, and per quarter of the
-  declared sigmas: a floor or a proportional part misjudged alone shows there) has
+* **even**: each group of readings (per grid, per case, per component, per quarter of the
+  declared sigmas: a floor or a proportional part misjudged alone shows there, and per quarter
+  of the predicted response in units of its sigma: a model error grows with the response, at
+  the largest loads most, where noise of any declared form is the same in those units) has
   ``chi2_g / c^2`` within the two-sided ``chi2(nu_g)`` bounds, ``nu_g`` the group's readings less
   their leverages (what the fit takes from each reading: a reading that pins a parameter keeps
   little residual), Bonferroni over all groups of the four groupings. A model error concentrates where the model is wrong (its
@@ -36,7 +38,7 @@ from scipy import special, stats
 
 __all__ = ["NoiseLevel", "noise_level", "leverages", "GROUPINGS"]
 
-GROUPINGS = ("grid", "case", "component", "sigma quarter")
+GROUPINGS = ("grid", "case", "component", "sigma quarter", "response quarter")
 
 
 @dataclass(frozen=True)
@@ -63,8 +65,8 @@ class NoiseLevel:
         if self.noise_like:
             held = "" if self.holdout is None else ", and the hold-out cases are predicted at that noise"
             return (f"the misfit looks like noise {c} times the declared sigma: it is spread evenly over the "
-                    f"grids, cases, components and sizes of the readings, no reading is gross at that noise{held}; "
-                    f"either the declared sigma understates the noise by about {c} (then the model fits), or the "
+                    "grids, cases, components, sigmas and sizes of the response, no reading is gross at that "
+                    f"noise{held}; either the declared sigma understates the noise by about {c} (then the model fits), or the "
                     "model lacks something spread evenly over the whole test")
         why = []
         if self.uneven:
@@ -84,15 +86,15 @@ class NoiseLevel:
                 "alpha": self.alpha, "sentence": self.sentence()}
 
 
-def _quarters(sigma: np.ndarray) -> np.ndarray:
-    """Each reading's quarter of the declared sigmas (0..3; ties kept together)."""
-    ranks = np.argsort(np.argsort(sigma, kind="stable"), kind="stable")
-    q = np.minimum(4 * ranks // max(len(sigma), 1), 3)
-    # readings of the same sigma go to the quarter of the first of them
+def _quarters(v: np.ndarray) -> np.ndarray:
+    """Each value's quarter of the values ``v`` (0..3; equal values kept together)."""
+    ranks = np.argsort(np.argsort(v, kind="stable"), kind="stable")
+    q = np.minimum(4 * ranks // max(len(v), 1), 3)
+    # equal values go to the quarter of the first of them
     first: dict = {}
-    for s, k in sorted(zip(sigma.tolist(), q.tolist())):
+    for s, k in sorted(zip(v.tolist(), q.tolist())):
         first.setdefault(s, k)
-    return np.array([first[s] for s in sigma.tolist()], int)
+    return np.array([first[s] for s in v.tolist()], int)
 
 
 def leverages(J: np.ndarray, rtol: float = 1e-10) -> np.ndarray:
@@ -109,11 +111,13 @@ def leverages(J: np.ndarray, rtol: float = 1e-10) -> np.ndarray:
 
 
 def noise_level(z: np.ndarray, h: np.ndarray, grid: np.ndarray, case: np.ndarray, comp: np.ndarray,
-                sigma: np.ndarray, alpha: float = 0.01, holdout=None) -> NoiseLevel:
+                sigma: np.ndarray, predicted: np.ndarray | None = None, alpha: float = 0.01,
+                holdout=None) -> NoiseLevel:
     """The tests of the module docstring on the whitened residuals ``z`` of a fit, ``h`` their
-    leverages (:func:`leverages`); ``grid``, ``case``, ``comp``, ``sigma``: each row's grid,
-    case, component and declared sigma. ``holdout``: a callable ``factor -> bool`` (are the
-    hold-out cases predicted at noise ``factor`` times declared), or ``None``."""
+    leverages (:func:`leverages`); ``grid``, ``case``, ``comp``, ``sigma``, ``predicted``: each
+    row's grid, case, component, declared sigma and the fit's prediction (``None``: no response
+    grouping). ``holdout``: a callable ``factor -> bool`` (are the hold-out cases predicted at
+    noise ``factor`` times declared), or ``None``."""
     z = np.asarray(z, float)
     free = 1.0 - np.clip(np.asarray(h, float), 0.0, 1.0)
     n = len(z)
@@ -121,7 +125,9 @@ def noise_level(z: np.ndarray, h: np.ndarray, grid: np.ndarray, case: np.ndarray
     c2 = float(z @ z) / dof
     c = math.sqrt(max(c2, 0.0))
     keys = {"grid": np.asarray(grid), "case": np.asarray(case), "component": np.asarray(comp),
-            "sigma quarter": _quarters(np.asarray(sigma, float))}
+            "sigma quarter": _quarters(np.asarray(sigma, float)),
+            "response quarter": (np.zeros(n, int) if predicted is None else
+                                 _quarters(np.abs(np.asarray(predicted, float)) / np.asarray(sigma, float)))}
     groups = [(name, k, keys[name] == k) for name in GROUPINGS for k in np.unique(keys[name])]
     a = alpha / (3 if holdout is not None else 2)
     a_group = a / max(len(groups), 1)

@@ -1193,8 +1193,9 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
                     taken |= np.asarray(rows, bool)
         kept = ~taken
         h = leverages(fit.J[:, free_parameters(final_model, fit)])
+        predicted = om.y - fit.residuals * om.sigma
         nl = noise_level(fit.residuals[kept], h[kept], om.grid[kept], om.case[kept], om.comp[kept],
-                         om.sigma[kept], alpha,
+                         om.sigma[kept], predicted[kept], alpha,
                          None if hold is None else
                          (lambda c: check_holdout(final_model, fit, hold, alpha, geometry, om, noise_factor=c).predicted))
         warnings.append(nl.sentence())
