@@ -205,6 +205,9 @@ def score(planted: dict, doc: dict) -> dict:
         # the hold-out cases read against the final model (blackbox.diagnosis.holdout)
         "holdout_predicted": (doc.get("holdout_check") or {}).get("predicted"),
         "holdout_findings": (doc.get("holdout_check") or {}).get("findings"),
+        # above the band: whether the misfit looked like noise larger than declared
+        "noise_like": (doc.get("noise_level") or {}).get("noise_like"),
+        "noise_factor": (doc.get("noise_level") or {}).get("factor"),
         "load_group": next((p.get("group") for p in effects if p["kind"] == "load_scale"), None),
     }
 
@@ -319,6 +322,12 @@ def summarize(results: list[dict]) -> dict:
         "flagged_studies": [{"study": r["study"], "family": r["family"], "kind": r.get("kind"),
                              "correct": r.get("correct"), "findings": r["holdout_findings"]}
                             for r in rows if r.get("holdout_findings")]}
+    # every study of this benchmark has its declared sigma right: a misfit above the band said to
+    # look like noise larger than declared is the model's (a planted effect not found), a false reading
+    above = [r for r in rows if r.get("noise_like") is not None and not r.get("error")]
+    out["noise_level"] = {"above_band": len(above), "noise_like": sum(1 for r in above if r["noise_like"]),
+                          "studies": [{"study": r["study"], "family": r["family"], "kind": r.get("kind"),
+                                       "factor": r.get("noise_factor")} for r in above if r["noise_like"]]}
     out["false_alarms"] = [{"study": r["study"], "family": r["family"],
                             "added": [(a["effect"], a["where"]) for a in r["added"]]}
                            for r in tuned if r.get("false_alarm")]
@@ -482,6 +491,14 @@ def markdown(summary: dict, settings: dict) -> str:
         for f in hc["flagged_studies"][:20]:
             lines.append(f"- {f['study']} ({f['family']}, {f['kind']}, {'right' if f['correct'] else 'wrong'} "
                          f"model): " + "; ".join(f["findings"])[:300])
+    nlv = summary.get("noise_level")
+    if nlv and nlv["above_band"]:
+        lines += ["", "## Noise larger than declared?", "",
+                  f"Studies ending above their noise band: {nlv['above_band']}. Every study here declares its "
+                  "sigma right, so a misfit said to look like noise larger than declared is a model's misfit "
+                  f"read as noise: {nlv['noise_like']} of {nlv['above_band']}"
+                  + (": " + ", ".join(f"{x['study']} ({x['family']}, {x['kind']}, factor {x['factor']:.3g})"
+                                      for x in nlv["studies"][:20]) if nlv["studies"] else "") + "."]
     te = summary.get("two_effects")
     if te:
         lines += ["", "## Two effects", "",

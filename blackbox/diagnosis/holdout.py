@@ -28,6 +28,15 @@ singular basis: ``(J^T J)^+`` restricted to the free parameters that the fit row
 A parameter at a bound (a spring at 0, a rigid joint) is held there. Readings an effect of the
 final model sets aside in every case (a bad channel's) are left out.
 
+That linear error is blind where the fit rows leave parameters loose (a spring at a bound, or
+so undetermined that its error is not linear over its range): a hold-out case that loads such a
+parameter can be far off the prediction while a model the fit rows cannot tell from the fitted
+one predicts it. So a case beyond its level is first fitted together with the fit rows
+(:func:`~blackbox.diagnosis.fit.fit_model` from the final fit): when the fit rows' chi2 rises by
+no more than ``chi2(p)`` at ``alpha`` (``p`` the model's parameters other than offsets that set
+readings aside: Scheffe's simultaneous region) and the case is then within its level, it is
+*predicted with loose parameters*, which the report names, and no finding.
+
 An outlier or a case read as one of those descriptions is a defect of the data and the
 diagnosis says so; a case or a rest that is not predicted leaves the verdict "unexplained", since
 the model does not describe data it was not fitted to (:func:`blackbox.diagnosis.search.verdict`).
@@ -40,11 +49,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import linalg, stats
 
-from blackbox.diagnosis.fit import RANK_RTOL, Fit
+from blackbox.diagnosis.fit import RANK_RTOL, Fit, fit_model
 from blackbox.diagnosis.effects.base import SetAsideEffect
 from blackbox.diagnosis.effects.rigid_motion import rigid_weights
 from blackbox.diagnosis.model import AugmentedModel, ObsMap
 from blackbox.diagnosis.validation import inside_bounds
+from blackbox.errors import IdentificationError
 
 __all__ = ["HoldoutReading", "HoldoutCase", "HoldoutCheck", "check_holdout", "read_holdout", "prediction_basis",
            "free_parameters", "OUTLIERS_PER_CASE", "TESTS"]
@@ -138,6 +148,7 @@ class HoldoutCheck:
     alpha: float = 0.01
     set_aside: int = 0                  # rows an effect of the model sets aside, not checked
     per_case: dict = field(default_factory=dict)    # case -> (chi2, n)
+    loose: tuple = ()                   # (case, fit rows' chi2 rise, its limit, case chi2 then, its level)
 
     @property
     def predicted(self) -> bool:
@@ -149,6 +160,12 @@ class HoldoutCheck:
     def findings(self) -> int:
         """Defects of the data found in the hold-out cases."""
         return len(self.readings) + sum(c.explained for c in self.cases)
+
+    def notes(self) -> list[str]:
+        """What is said of the hold-out cases and is no finding."""
+        return [f"hold-out case {c} is predicted only with parameters the fitted cases leave loose (fitted with "
+                f"them: fitted chi2 {d:+.4g}, within {dl:.4g}; the case's chi2 {q:.4g}, within {ql:.4g})"
+                for c, d, dl, q, ql in self.loose]
 
     def sentences(self) -> list[str]:
         out = [f"hold-out reading at grid {r.grid}, component {r.component}, case {r.case} is an outlier "
@@ -165,7 +182,9 @@ class HoldoutCheck:
                 "alpha": self.alpha, "set_aside_by_effects": self.set_aside,
                 "outliers": [r.to_json() for r in self.readings], "cases": [c.to_json() for c in self.cases],
                 "per_case": {k: {"chi2": v[0], "n": v[1]} for k, v in self.per_case.items()},
-                "findings": self.sentences()}
+                "loose": [{"case": c, "fitted_chi2_rise": d, "rise_limit": dl, "chi2": q, "limit": ql}
+                          for c, d, dl, q, ql in self.loose],
+                "findings": self.sentences(), "notes": self.notes()}
 
 
 def free_parameters(model: AugmentedModel, fit: Fit) -> np.ndarray:
@@ -266,14 +285,33 @@ def check_holdout(model: AugmentedModel, fit: Fit, hold: ObsMap, alpha: float,
             W[known] = rigid_weights(hold.grid[rows][known], hold.comp[rows][known], grid_map,
                                      np.asarray(centre, float), 1.0)
             return W
-    return read_holdout(hold, f, A, use, alpha, other_cases, rigid)
+    loose = None
+    if fitted is not None and model.p:
+        p_model = len(fit.x) - sum(len(e.names) for e in fit.spec.effects
+                                   if isinstance(e, SetAsideEffect) or e.kind == "outlier")
+        rise_limit = float(stats.chi2.isf(alpha, max(p_model, 1)))
+
+        def loose(rows: np.ndarray) -> tuple[float, float, float] | None:
+            both = ObsMap(*(np.concatenate([getattr(fitted, k), getattr(hold, k)[rows]]) for k in
+                            ("row", "ref", "case", "grid", "y", "sigma", "comp")), hold.labels)
+            try:
+                g = fit_model(model, both, None, fit.x)
+            except (np.linalg.LinAlgError, IdentificationError):
+                return None
+            r = g.residuals
+            nf = len(fitted.y)
+            # the final fit's chi2 in the noise the rows now carry
+            return float(r[:nf] @ r[:nf]) - fit.chi2 / noise_factor ** 2, rise_limit, float(r[nf:] @ r[nf:])
+    return read_holdout(hold, f, A, use, alpha, other_cases, rigid, loose)
 
 
 def read_holdout(hold: ObsMap, f: np.ndarray, A: np.ndarray, use: np.ndarray, alpha: float,
-                 other_cases=None, rigid=None) -> HoldoutCheck:
+                 other_cases=None, rigid=None, loose=None) -> HoldoutCheck:
     """The tests of the module docstring: the readings ``hold`` (rows ``use``) against the
     predictions ``f``, whose whitened covariance is ``A A^T`` (:func:`prediction_basis`);
-    ``other_cases``, ``rigid``: what a case beyond its level is tried as (:func:`_as_case`)."""
+    ``other_cases``, ``rigid``: what a case beyond its level is tried as (:func:`_as_case`);
+    ``loose(rows)``: the case refitted with the fit rows, ``(their chi2 rise, its limit, the
+    case's chi2)`` or ``None`` (module docstring)."""
     r_all = (hold.y - f) / hold.sigma
     n = int(use.sum())
     labels = hold.labels
@@ -286,11 +324,18 @@ def read_holdout(hold: ObsMap, f: np.ndarray, A: np.ndarray, use: np.ndarray, al
     readings: list[HoldoutReading] = []
     cases: list[HoldoutCase] = []
     per_case = {}
+    loosely: list[tuple] = []
     for c in case_ids:
         rows = np.flatnonzero(use & (hold.case == c))
         q = _chi2(r_all[rows], A[rows])
         per_case[labels[c]] = (q, len(rows))
         limit = float(stats.chi2.isf(a_case, len(rows)))
+        if q > limit and loose is not None:
+            lf = loose(rows)
+            if lf is not None and lf[0] <= lf[1] and lf[2] <= limit:
+                loosely.append((labels[c], *lf, limit))
+                rest[rows] = False
+                continue
         beyond = rows[np.abs(z[rows]) > z_lim]
         beyond = beyond[np.argsort(-np.abs(z[beyond]))]
         out = beyond                                        # a case within its level: its readings beyond theirs
@@ -312,7 +357,7 @@ def read_holdout(hold: ObsMap, f: np.ndarray, A: np.ndarray, use: np.ndarray, al
     chi2_rest = _chi2(r_all[rest], A[rest]) if n_rest else 0.0
     limit_rest = float(stats.chi2.isf(alpha / TESTS, n_rest)) if n_rest else 0.0
     return HoldoutCheck(n, _chi2(r_all[use], A[use]), n_rest, chi2_rest, limit_rest, z_lim, tuple(readings),
-                        tuple(cases), alpha, int(len(use) - n), per_case)
+                        tuple(cases), alpha, int(len(use) - n), per_case, tuple(loosely))
 
 
 def _as_case(label: str, rows: np.ndarray, hold: ObsMap, f: np.ndarray, A: np.ndarray, q: float, limit: float,

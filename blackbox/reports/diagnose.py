@@ -101,6 +101,7 @@ def diagnosis_report(study: Study, doc: dict, files: list[str]) -> str:
                    "They are predicted once the defects of the data below are set aside." if hc["predicted"]
                    else "They are **not** predicted."), ""]
         out += [f"- {f}" for f in hc["findings"]]
+        out += [f"- (no finding) {n}" for n in hc.get("notes", [])]
         out += ["", "| case | readings | chi2 |", "|---|---|---|"]
         out += [f"| {c} | {v['n']} | {_g(v['chi2'])} |" for c, v in hc["per_case"].items()]
         out.append("")
