@@ -15,8 +15,8 @@ larger than declared (:mod:`blackbox.diagnosis.noise_level`). This measures how 
   lacks something no candidate describes. It should not call that misfit noise (its false
   alarms).
 
-Seed 61 was run on the code as first written (the leverage-corrected group counts) and nothing
-was changed after it; seed 62 is the second run.
+Seed 61 is in docs/measurements.md ("Noise larger than declared"): run on the final code, nothing
+changed after it.
 """
 
 from __future__ import annotations

@@ -384,7 +384,8 @@ def _reads_as(c: dict) -> str:
     how = c.get("reads_as")
     if how in ("load_scale", "readings_scale"):
         return f"{how.split('_')[0]} x {c['scale']:.3g}"
-    return {"other_case": f"case {c.get('other')}'s readings", "rigid_motion": "rigid motion"}.get(how, "not predicted")
+    other = f"case {c.get('other')}'s " + ("response, its readings set aside" if c.get("other_response") else "readings")
+    return {"other_case": other, "rigid_motion": "rigid motion"}.get(how, "not predicted")
 
 
 def main(argv: list[str] | None = None) -> int:
