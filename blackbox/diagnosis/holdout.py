@@ -50,7 +50,7 @@ import numpy as np
 from scipy import linalg, stats
 
 from blackbox.diagnosis.fit import RANK_RTOL, Fit, fit_model
-from blackbox.diagnosis.effects.base import SetAsideEffect
+from blackbox.diagnosis.effects.base import SetAsideEffect, takes_readings
 from blackbox.diagnosis.effects.rigid_motion import rigid_weights
 from blackbox.diagnosis.model import AugmentedModel, ObsMap
 from blackbox.diagnosis.validation import inside_bounds
@@ -130,7 +130,8 @@ class HoldoutCase:
     def to_json(self) -> dict:
         return {"case": self.case, "n": self.n, "chi2": self.chi2, "limit": self.limit, "reads_as": self.reads_as,
                 "fitted_chi2": self.fitted_chi2, "scale": self.scale, "scale_std": self.scale_std,
-                "other": self.other, "other_response": self.other_response, "motion": None if self.motion is None else list(self.motion),
+                "other": self.other, "other_response": self.other_response,
+                "motion": None if self.motion is None else list(self.motion),
                 "of": "data" if self.explained else "unknown", "finding": self.sentence()}
 
 
@@ -287,8 +288,7 @@ def check_holdout(model: AugmentedModel, fit: Fit, hold: ObsMap, alpha: float,
             return W
     loose = None
     if fitted is not None and model.p:
-        p_model = len(fit.x) - sum(len(e.names) for e in fit.spec.effects
-                                   if isinstance(e, SetAsideEffect) or e.kind == "outlier")
+        p_model = len(fit.x) - sum(len(e.names) for e in fit.spec.effects if takes_readings(e))
         rise_limit = float(stats.chi2.isf(alpha, max(p_model, 1)))
 
         def loose(rows: np.ndarray) -> tuple[float, float, float] | None:

@@ -15,8 +15,9 @@ three tests:
   the largest loads most, where noise of any declared form is the same in those units) has
   ``chi2_g / c^2`` within the two-sided ``chi2(nu_g)`` bounds, ``nu_g`` the group's readings less
   their leverages (what the fit takes from each reading: a reading that pins a parameter keeps
-  little residual), Bonferroni over all groups of the four groupings. A model error concentrates where the model is wrong (its
-  hotspots); noise spreads as its sigmas say;
+  little residual), Bonferroni over all groups of the five groupings. A model error
+  concentrates where the model is wrong (its hotspots), and grows with the response; noise
+  spreads as its sigmas say;
 * **no gross reading**: the largest ``|z| / c`` within the two-sided Bonferroni normal bound;
 * **the hold-out cases** (when there are any): predicted at noise ``c`` times declared by the
   hold-out check (:mod:`blackbox.diagnosis.holdout`), which is data the fit never saw.
@@ -66,8 +67,8 @@ class NoiseLevel:
             held = "" if self.holdout is None else ", and the hold-out cases are predicted at that noise"
             return (f"the misfit looks like noise {c} times the declared sigma: it is spread evenly over the "
                     "grids, cases, components, sigmas and sizes of the response, no reading is gross at that "
-                    f"noise{held}; either the declared sigma understates the noise by about {c} (then the model fits), or the "
-                    "model lacks something spread evenly over the whole test")
+                    f"noise{held}; either the declared sigma understates the noise by about {c} (then the model "
+                    "fits), or the model lacks something spread evenly over the whole test")
         why = []
         if self.uneven:
             g, k, q, n = max(self.uneven, key=lambda u: abs(u[2] / max(u[3], 1) - 1.0))

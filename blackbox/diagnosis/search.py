@@ -67,7 +67,7 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy import special, stats
 
-from blackbox.diagnosis.effects.base import Effect, SetAsideEffect, proximity
+from blackbox.diagnosis.effects.base import Effect, proximity, takes_readings
 from blackbox.diagnosis.fit import Fit, chi2_band, fit_model
 from blackbox.diagnosis.holdout import HoldoutCheck, check_holdout, free_parameters
 from blackbox.diagnosis.noise_level import NoiseLevel, leverages, noise_level
@@ -1188,7 +1188,7 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         # readings an offset of their own takes (set aside, outliers) say nothing of the noise
         taken = np.zeros(len(om.y), bool)
         for e in fit.spec.effects:
-            if isinstance(e, SetAsideEffect) or e.kind == "outlier":
+            if takes_readings(e):
                 for _, rows in e.offset_rows(om):
                     taken |= np.asarray(rows, bool)
         kept = ~taken
@@ -1196,8 +1196,8 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         predicted = om.y - fit.residuals * om.sigma
         nl = noise_level(fit.residuals[kept], h[kept], om.grid[kept], om.case[kept], om.comp[kept],
                          om.sigma[kept], predicted[kept], alpha,
-                         None if hold is None else
-                         (lambda c: check_holdout(final_model, fit, hold, alpha, geometry, om, noise_factor=c).predicted))
+                         None if hold is None else (lambda c: check_holdout(final_model, fit, hold, alpha, geometry,
+                                                                            om, noise_factor=c).predicted))
         warnings.append(nl.sentence())
     kf = None
     if val.kind == "kfold":

@@ -54,7 +54,7 @@ if TYPE_CHECKING:
     from solver_adapters.protocol import Deck, LoadMatrix
 
 __all__ = ["CandidateContext", "CandidateLimit", "Effect", "FreeOffsets", "JointCaseEffect", "OnChannel", "ReadsAnother", "SetAsideEffect", "finite_or_none",
-           "kept_parameters", "proximity"]
+           "kept_parameters", "proximity", "takes_readings"]
 
 
 @dataclass(frozen=True)
@@ -135,6 +135,12 @@ class CandidateContext:
         score = proximity(X, P, w, ell)
         chosen = set(np.argsort(-score, kind="stable")[:limit].tolist())
         return [k for i, k in enumerate(keys) if i in chosen]
+
+
+def takes_readings(e: "Effect") -> bool:
+    """Whether ``e``'s parameters are offsets that each take readings wholly (a bad channel's,
+    a bad case's, an outlier's): those readings then say nothing of the model or the noise."""
+    return isinstance(e, SetAsideEffect) or e.kind == "outlier"
 
 
 def proximity(X: np.ndarray, P: np.ndarray, w: np.ndarray, ell: float) -> np.ndarray:
