@@ -342,7 +342,8 @@ HOLDOUT_Z = 3.0
 addition counts as predicting the hold-out cases worse (:func:`holdout_worse`)."""
 
 
-def holdout_worse(fit: Fit, f2: Fit, hold: ObsMap | None, keep: np.ndarray | None = None) -> str | None:
+def holdout_worse(fit: Fit, f2: Fit, hold: ObsMap | None, keep: np.ndarray | None = None,
+                  weights: np.ndarray | None = None) -> str | None:
     """Why ``f2`` predicts the hold-out cases worse than ``fit`` beyond chance, or ``None``.
 
     With ``d`` the whitened change of the hold-out predictions, an addition that is right
@@ -353,12 +354,12 @@ def holdout_worse(fit: Fit, f2: Fit, hold: ObsMap | None, keep: np.ndarray | Non
     misfit of an effect no candidate describes). An addition the hold-out cases hardly see
     (``|d|`` ~ 0) cannot be vetoed by their noise. ``keep``: the hold-out rows compared (default
     all; an addition that sets readings aside is judged on the others). Each case's rows are
-    weighed by :func:`holdout_case_weights`: a hold-out case neither fit predicts does not
-    follow the noise this rule assumes."""
+    weighed by :func:`holdout_case_weights` (``weights``: those weights, when the caller has
+    them): a hold-out case neither fit predicts does not follow the noise this rule assumes."""
     if hold is None or fit.holdout_predicted is None or f2.holdout_predicted is None:
         return None
     keep = np.ones(len(hold.sigma), bool) if keep is None else keep
-    w = holdout_case_weights(fit, f2, hold, keep)[keep]
+    w = (holdout_case_weights(fit, f2, hold, keep) if weights is None else weights)[keep]
     d = ((f2.holdout_predicted - fit.holdout_predicted) / hold.sigma)[keep] * np.sqrt(w)
     dh = float(np.sum(w * (_whitened_sq(f2, hold) - _whitened_sq(fit, hold))[keep]))
     dn = float(np.linalg.norm(d))
@@ -396,7 +397,7 @@ def holdout_case_weights(fit: Fit, f2: Fit, hold: ObsMap, keep: np.ndarray) -> n
 
 def holdout_chi2(fit: Fit, hold: ObsMap, keep: np.ndarray) -> float:
     """The hold-out chi2 of ``fit`` over the rows ``keep``."""
-    return float(np.sum(((hold.y - fit.holdout_predicted) / hold.sigma)[keep] ** 2))
+    return float(np.sum(_whitened_sq(fit, hold)[keep]))
 
 
 def holdout_dispersion(chi2: float, n: int) -> float:
@@ -483,7 +484,7 @@ class Checks:
                                f"(delta BIC {dbic:+.4g}, hold-out chi2 {dh:+.4g}"
                                + (")" if np.all(w[mask] == 1.0) else f", {dhw:+.4g} with cases neither fit "
                                                                      f"predicts weighed down)"))
-            elif (worse := holdout_worse(fit, f2, self.hold, keep)) is not None:
+            elif (worse := holdout_worse(fit, f2, self.hold, keep, w)) is not None:
                 reasons.append(worse)
         elif self.val.kind == "kfold":
             cv0, _ = self.cv(fit)
