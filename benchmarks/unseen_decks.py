@@ -3,6 +3,7 @@ and how the solution agrees with MYSTRAN's (issue 20's last target).
 
     python benchmarks/unseen_decks.py --collect FOLDER --mirror OWNER/NAME=GITDIR ...
     python benchmarks/unseen_decks.py FOLDER [--half tuning|held-out] [--no-mystran]
+    python benchmarks/unseen_decks.py FOLDER2 --second [--no-mystran]
 
 The decks (``DECKS`` below) are every whole input file (a CEND and a BEGIN BULK) of four public
 repositories, at the commits of ``COMMITS``, that has a line element (CBAR, CBEAM, CROD, CONROD,
@@ -17,6 +18,16 @@ repositories (``git show COMMIT:PATH``) into ``FOLDER/OWNER+NAME/PATH``.
 The list is split once, before any change to the import was made for it, into a tuning half and a
 held-out half: ``random.Random(20).shuffle`` of the list, the first half tuning (``split()``).
 The import was changed looking at the tuning half's failures only.
+
+A second corpus, ``--second`` (``decks_second.csv``: repository, commit, path), was collected on
+2026-11-27, after the import had been changed for both halves above, and was run once before
+any change for it: every whole input file with a line element and no shell or solid (as above)
+of ten further public repositories (NASA's COSMIC NASTRAN-95 and -93 demonstration decks, a
+MATLAB NASTRAN clone's verification decks, FEMAP exports, an FE library's and a structural
+dynamics toolbox's test decks, ...), at most 40 per repository in sorted path order, less exact
+copies of the first corpus and of each other (line endings and trailing blanks aside). Its
+decks are copied to ``FOLDER2/OWNER+NAME/PATH`` (with their INCLUDEd files) by whoever collects
+them; the list names the commit of each.
 
 For each deck, one row: the half, whether ``blackbox import`` accepts it (else the first line of
 its message), the subcases imported, and the largest difference of the reference solver's
@@ -356,15 +367,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--half", choices=("tuning", "held-out"))
     ap.add_argument("--no-mystran", action="store_true")
     ap.add_argument("--only", help="decks whose path contains this text")
+    ap.add_argument("--second", action="store_true", help="the second corpus (decks_second.csv)")
     a = ap.parse_args(argv)
     if a.collect:
         collect(a.folder, dict(m.split("=", 1) for m in a.mirror))
         return 0
     halves = split()
+    decks = DECKS
+    if a.second:
+        import csv
+        with open(Path(__file__).with_name("decks_second.csv"), newline="") as f:
+            decks = [(r["repo"], r["path"], ()) for r in csv.DictReader(f)]
+        halves = {(r, p): "second" for r, p, _ in decks}
     print("| deck | source | half | accepted | subcases | agreement |\n|---|---|---|---|---|---|")
     tally: dict[str, list[int]] = {}
     bad = []
-    for repo, p, _ in DECKS:
+    for repo, p, _ in decks:
         half = halves[(repo, p)]
         if (a.half and half != a.half) or (a.only and a.only not in p):
             continue

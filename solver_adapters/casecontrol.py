@@ -151,13 +151,16 @@ class Subcase:
     analysis: str = ""              # ANALYSIS = ... (SOL 200, SOL 400): the subcase's own analysis
     k2gg: str | None = None         # K2GG = NAME: the DMIG matrix added to the stiffness
     k2gg_line: int = 0
+    enforced_only: bool = False     # no load set, but its constraint set enforces displacements
+                                    # (SPC values: blackbox import sets this from the bulk data)
 
     @property
     def static(self) -> bool:
-        """The subcase has a static load (a LOAD set or a thermal load) and its ANALYSIS, if it
-        names one, is a static analysis (STATICS; SOL 400's NLSTATIC, whose load steps are
-        imported as linear static cases like SOL 106's)."""
-        return (self.load is not None or self.temp_load is not None) and self.analysis_static
+        """The subcase has a static load (a LOAD set, a thermal load, or displacements its
+        constraint set enforces) and its ANALYSIS, if it names one, is a static analysis
+        (STATICS; SOL 400's NLSTATIC, whose load steps are imported as linear static cases like
+        SOL 106's)."""
+        return (self.load is not None or self.temp_load is not None or self.enforced_only) and self.analysis_static
 
     @property
     def analysis_static(self) -> bool:

@@ -16,12 +16,16 @@ subcase selects with ``LOAD = n`` into nodal forces and moments in the basic sys
 * ``LOAD SID S S1 L1 S2 L2 ...``: the set S * sum(Si * set Li), the Li being sets of the cards
   above (a LOAD set may not name another LOAD set, as in NASTRAN; a pair left blank, as the
   trailing fields of a line, is skipped).
+* ``SPCD SID G1 C1 D1 G2 C2 D2``: the displacement Di enforced on components Ci of grid Gi (in
+  its CD system) in the subcases whose load set holds it, scaled in a LOAD combination as a
+  load is (:meth:`LoadCards.enforced`); it is not a force, so :meth:`LoadCards.resolve` leaves it
+  out. ``blackbox import`` makes it a load (docs/import.md, enforced displacements).
 
 Several cards of one set add up. A CID other than 0 gives the vector in that coordinate system (CORD1R/C/S,
 CORD2R/C/S of the deck; for a cylindrical or spherical system, along its directions at the
 grid). The resolved loads are returned in each grid's displacement system (its CD; the basic
 system for CD 0), the components loads.csv holds.
-Other load cards (PLOAD, PLOAD2, PLOAD4, TEMPP1, SPCD, RFORCE, ...) are recorded by set: selecting
+Other load cards (PLOAD, PLOAD2, PLOAD4, TEMPP1, RFORCE, ...) are recorded by set: selecting
 such a set is an error naming the card. A subcase's thermal load (``TEMPERATURE(LOAD) = n``: TEMP,
 TEMPD, TEMPRB) is resolved by :meth:`LoadCards.resolve_thermal` (:mod:`solver_adapters.thermalloads`);
 a LOAD set does not include temperature cards (NASTRAN selects them with TEMPERATURE only).
@@ -34,20 +38,22 @@ from dataclasses import dataclass, field
 import numpy as np
 
 # the field readers every load card shares (located errors for blank, bad or extra fields)
+from solver_adapters.bdf.fields import valid_components
 from solver_adapters.elementloads import MassReader, _int, _max_fields, _real, read_grav, read_pload1
 from solver_adapters.protocol import DeckFormatError
 from solver_adapters.thermalloads import TEMPERATURE_CARDS, ThermalCards, read_thermal_cards
 
-__all__ = ["LOAD_CARDS", "OTHER_LOAD_CARDS", "PointLoad", "LoadCombination", "LoadCards", "read_load_cards",
+__all__ = ["LOAD_CARDS", "OTHER_LOAD_CARDS", "PointLoad", "EnforcedValue", "LoadCombination", "LoadCards",
+           "read_load_cards",
            "InputFile", "read_input_file"]
 
 LOAD_CARDS = frozenset({"FORCE", "MOMENT", "FORCE1", "MOMENT1", "FORCE2", "MOMENT2", "LOAD",
-                        "PLOAD1", "GRAV", "SLOAD"})
+                        "PLOAD1", "GRAV", "SLOAD", "SPCD"})
 """The load cards this module reads (PLOAD1 and GRAV through :mod:`solver_adapters.elementloads`)."""
 
 OTHER_LOAD_CARDS = frozenset({
     "ACCEL", "ACCEL1", "RFORCE", "RFORCE1", "PLOAD", "PLOAD2", "PLOAD4", "PLOADX1",
-    "PLOADB3", "SPCD", "DEFORM", "TEMP", "TEMPD", "TEMPP1", "TEMPRB", "QBDY1", "QVOL",
+    "PLOADB3", "DEFORM", "TEMP", "TEMPD", "TEMPP1", "TEMPRB", "QBDY1", "QVOL",
     "DAREA", "LSEQ", "CLOAD", "PRESAX", "FORCEAX", "MOMAX",
 })
 """Load cards of other kinds: dropped from the model, an error when a selected set uses them."""
@@ -76,6 +82,19 @@ class PointLoad:
 
 
 @dataclass(frozen=True)
+class EnforcedValue:
+    """One G C D triple of an SPCD card: ``value`` enforced on each of ``components`` (digits)
+    of ``grid``, in the grid's displacement system; ``field`` the NASTRAN field of G."""
+    sid: int
+    grid: int
+    components: str
+    value: float
+    src: str = ""
+    raw: object = None
+    field: int = 3
+
+
+@dataclass(frozen=True)
 class LoadCombination:
     """LOAD: SID, overall scale S and the (Si, Li) terms."""
     sid: int
@@ -94,6 +113,7 @@ class LoadCards:
     other: dict[int, list[object]] = field(default_factory=dict)   # SID -> cards of other kinds
     bar: dict[int, list] = field(default_factory=dict)              # SID -> PLOAD1 (BarLoad)
     gravity: dict[int, list] = field(default_factory=dict)          # SID -> GRAV (Gravity)
+    spcd: dict[int, list[EnforcedValue]] = field(default_factory=dict)  # SID -> SPCD triples
     masses: object = None                                            # elementloads.MassReader
     cards: list = field(default_factory=list)                       # every bulk card (thermal)
     _thermal: ThermalCards | None = None
@@ -108,10 +128,30 @@ class LoadCards:
 
     @property
     def set_ids(self) -> set[int]:
-        return set(self.point) | set(self.combinations) | set(self.other) | set(self.bar) | set(self.gravity)
+        return (set(self.point) | set(self.combinations) | set(self.other) | set(self.bar) | set(self.gravity)
+                | set(self.spcd))
 
     def _has(self, sid: int) -> bool:
-        return sid in self.point or sid in self.other or sid in self.bar or sid in self.gravity
+        return (sid in self.point or sid in self.other or sid in self.bar or sid in self.gravity
+                or sid in self.spcd)
+
+    def enforced(self, sid: int) -> dict[tuple[int, int], tuple[float, EnforcedValue]]:
+        """The displacements set ``sid`` enforces (its SPCD cards, through a LOAD combination
+        scaled by S * Si): ``{(grid, component): (value, the SPCD triple)}``, components in the
+        grid's displacement system. Two SPCD entries on one DOF of a set add up, as loads do."""
+        if sid in self.combinations:
+            combo = self.combinations[sid]
+            terms = [(combo.scale * si, li) for si, li in combo.terms]
+        else:
+            terms = [(1.0, sid)]
+        out: dict[tuple[int, int], tuple[float, EnforcedValue]] = {}
+        for scale, li in terms:
+            for e in self.spcd.get(li, ()):
+                for ch in e.components:
+                    dof = (e.grid, int(ch))
+                    before = out.get(dof, (0.0, e))[0]
+                    out[dof] = (before + scale * e.value, e)
+        return out
 
     def resolve(self, sid: int, deck, *, where: str = "") -> dict[tuple[int, int], float]:
         """The nodal loads of set ``sid``: ``{(grid, component): value}`` in the basic system
@@ -284,6 +324,28 @@ def _sload(c) -> list[PointLoad]:
     return out
 
 
+def _spcd(c) -> list[EnforcedValue]:
+    """SPCD SID G1 C1 D1 G2 C2 D2 (MSC QRG SPCD): one value per triple; a triple left blank is
+    skipped. Components are digits 1-6 of a grid (a scalar point's enforced value is not read)."""
+    _max_fields(c, 8)
+    sid = _int(c, 2)
+    out = []
+    for i in (3, 6):
+        if not any(c.text(k) for k in (i, i + 1, i + 2)):
+            continue
+        g = _int(c, i)
+        comps = c.text(i + 1)
+        if comps in ("", "0"):
+            raise c.error(i + 1, "an enforced value at a scalar point (component 0 or blank) is not "
+                                 "imported: only grid components 1-6")
+        if not valid_components(comps):
+            raise c.error(i + 1, "components must be unique digits 1-6")
+        out.append(EnforcedValue(sid, g, comps, _real(c, i + 2, 0.0), c.src, c, i))
+    if not out:
+        raise c.error(3, "SPCD needs at least one triple G1 C1 D1")
+    return out
+
+
 def _combination(c) -> LoadCombination:
     sid, s = _int(c, 2), _real(c, 3)
     terms: list[tuple[float, int]] = []
@@ -356,6 +418,9 @@ def read_load_cards(cards) -> LoadCards:
         elif c.name == "GRAV":
             g = read_grav(c)
             out.gravity.setdefault(g.sid, []).append(g)
+        elif c.name == "SPCD":
+            for e in _spcd(c):
+                out.spcd.setdefault(e.sid, []).append(e)
         elif c.name == "SLOAD":
             for p in _sload(c):
                 out.point.setdefault(p.sid, []).append(p)
@@ -367,7 +432,8 @@ def read_load_cards(cards) -> LoadCards:
             out.other.setdefault(sid, []).append(c)
     for sid, combo in out.combinations.items():
         if out._has(sid):
-            first = (out.point.get(sid) or out.bar.get(sid) or out.gravity.get(sid) or [None])[0]
+            first = (out.point.get(sid) or out.bar.get(sid) or out.gravity.get(sid) or out.spcd.get(sid)
+                     or [None])[0]
             where = first.raw.src if first is not None else out.other[sid][0].src
             raise combo.raw.error(2, f"set ID {sid} is both a LOAD combination and a load set "
                                      f"({where}); NASTRAN requires LOAD set IDs to be unique")

@@ -76,8 +76,12 @@ CORPUS = {
                            **{(601, c + 1): 5.04 * v for c, v in enumerate((4.5, 6.0, 3.0))},
                            (601, 4): -7.5, (601, 5): 6.0, (601, 6): -0.75}},
 }
-REJECTED = {  # deck -> what the message must name
-    "RODDISPL-W-LOAD.dat": ("RODDISPL-W-LOAD.dat:24", "card SPC", "field 5", "enforced displacement"),
+# decks with enforced displacements, imported by the large-spring method (docs/import.md): their
+# forces by hand; each enforced value is K x D at a handle grid (tests/test_enforced_displacement.py)
+ENFORCED = {
+    # SPC 1: grid 401 x held at .008, 501 x at .006 in both subcases; FORCE 1, FORCE 2 along x
+    "RODDISPL-W-LOAD.dat": {"1": {(601, 1): 100.0, (701, 1): 120.0},
+                            "2": {(201, 1): 240.0, (301, 1): 150.0, (401, 1): 200.0}},
 }
 
 
@@ -133,7 +137,7 @@ def test_corpus_study_loads(name, tmp_path):
     read_deck(study.root / "model.bdf")       # the reader of every study accepts the model
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=MYSTRAN_MARKS) for n in sorted(CORPUS)])
+@pytest.mark.parametrize("name", [pytest.param(n, marks=MYSTRAN_MARKS) for n in sorted(CORPUS) + sorted(ENFORCED)])
 def test_corpus_reference_agrees_with_mystran_on_the_original_deck(name, tmp_path):
     study = load_study(_study(import_deck.run(DECKS / name), tmp_path))
     adapter = make_adapter_for(study, "reference")
@@ -160,12 +164,19 @@ def test_corpus_reference_agrees_with_mystran_on_the_original_deck(name, tmp_pat
     assert compared >= min(len(out.cases), 2)
 
 
-@pytest.mark.parametrize("name", sorted(REJECTED))
-def test_corpus_rejected_with_a_located_message(name):
-    with pytest.raises(DeckFormatError) as exc:
-        import_deck.run(DECKS / name)
-    for part in REJECTED[name]:
-        assert part in str(exc.value)
+def test_enforced_deck_forces_as_computed_by_hand_and_k_d_at_its_handles():
+    """RODDISPL-W-LOAD.dat: the FORCE cards at their grids as in ENFORCED; each SPC value D on a
+    handle grid tied to its DOF by an MPC, loaded by its spring's K x D in both cases."""
+    name = "RODDISPL-W-LOAD.dat"
+    result = import_deck.run(DECKS / name)
+    got = _loads(result)
+    lines = result.model_bdf.splitlines()
+    handle = {(int(f[2]), int(f[3])): int(f[5]) for f in (ln.split(",") for ln in lines if ln.startswith("MPC,"))}
+    k = {int(f[3]): float(f[2]) for f in (ln.split(",") for ln in lines if ln.startswith("CELAS2,"))}
+    assert handle.keys() == {(401, 1), (501, 1)}
+    for case, forces in ENFORCED[name].items():
+        enforced = {(handle[(401, 1)], 1): k[handle[(401, 1)]] * 0.008, (handle[(501, 1)], 1): k[handle[(501, 1)]] * 0.006}
+        assert got[case] == pytest.approx({**forces, **enforced}, rel=1e-15)
 
 
 # --------------------------------------------------------------------------------------------

@@ -18,12 +18,13 @@ import json
 import re
 import time
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 
+from blackbox.commands import enforced
 from blackbox.errors import StudyError
 from solver_adapters.bdf import deck_from_cards
 from solver_adapters.bdf.params import inrel_value
@@ -504,6 +505,15 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
         spc_choice = None
     else:
         selected = []
+        if not cc.sol or cc.sol.upper() in _STATIC_SOLS:
+            # a static subcase with no load set whose constraint set enforces displacements is
+            # loaded by them (blackbox.commands.enforced)
+            def values_of(sid):
+                return enforced.spc_values(c for m in _spc_members(sid, spc_sets) for c in spc_sets.get(m, ()))
+            cc = replace(cc, subcases=tuple(
+                replace(s, enforced_only=True) if (s.load is None and s.temp_load is None and s.spc is not None
+                                                   and s.analysis_static and values_of(s.spc)) else s
+                for s in cc.subcases))
         if cc.sol and cc.sol.upper() not in _STATIC_SOLS:
             # a SOL 200 subcase whose ANALYSIS is STATICS is SOL 101's linear static analysis
             # (of the initial design): its TEMPERATURE selections mean what they mean there
@@ -532,7 +542,8 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
                 continue
             what = ([f"LOAD = {s.load} at {path}:{s.load_line}"] if s.load is not None else []) + \
                 ([f"TEMPERATURE(LOAD) = {s.temp_load} at {path}:{s.temp_load_line}"]
-                 if s.temp_load is not None else [])
+                 if s.temp_load is not None else []) + \
+                ([f"SPC = {s.spc} at {path}:{s.spc_line} (its enforced values)"] if s.enforced_only else [])
             where = " and ".join(what) + (f", subcase {s.id}" if cc.explicit else "")
             selected.append((str(s.id), s.load, s.temp_load, where))
         _temperature_selections(cc, cards, path, notes)
@@ -579,6 +590,12 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
         drop_cards += design_cards
     dropped_ids = {id(c) for c in drop_cards}
     kept = [c for c in cards if id(c) not in dropped_ids]
+    # enforced values on SPC cards (large-spring method, blackbox.commands.enforced): the reader
+    # takes each such card as the constraint alone
+    spc_values = enforced.spc_values(kept)
+    if spc_values:
+        with_values = {id(card) for _, card, _ in spc_values.values()}
+        kept = [enforced.without_values(c) if id(c) in with_values else c for c in kept]
     # cards the reference solver does not model (shells, solids) are kept for an external solver:
     # the study's adapter is then MYSTRAN (study.toml, a note); load cards are gone already, and
     # the cards that cannot be handed on (superelements) stay errors
@@ -599,17 +616,33 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
     if initial is not None and not any(tsid is not None for _, _, tsid, _ in selected):
         notes.append(f"TEMPERATURE(INITIAL) = {initial}: no effect, no imported case has a thermal load")
     applied = []
+    spcd: dict[str, dict] = {}
     for label, sid, tsid, where in selected:
         values = loads.resolve(sid, deck, where=where) if sid is not None else {}
+        spcd[label] = loads.enforced(sid) if sid is not None else {}
         if tsid is not None:
             for dof, v in loads.resolve_thermal(tsid, deck, where=where, initial=initial).items():
                 values[dof] = values.get(dof, 0.0) + v
-        if not any(v != 0.0 for v in values.values()):
+        moved = any(d != 0.0 for d, _ in spcd[label].values()) or any(
+            d != 0.0 and (dof not in spcd[label]) for dof, (d, _, _) in spc_values.items())
+        if not any(v != 0.0 for v in values.values()) and not moved:
             what = " and ".join(([f"load set {sid}"] if sid is not None else []) +
                                 ([f"temperature set {tsid}"] if tsid is not None else []))
             notes.append(f"case {label}: {what} sums to zero at every DOF: not imported")
             continue
         applied.append((label, values))
+    mpc_choice = _one_selection(cc, "mpc", "MPC", path) if cc is not None else None
+    plan = enforced.plan(deck, kept, {label: spcd[label] for label, _ in applied}, spc_values,
+                         mpc_choice if mpc_choice is not None else max(mpc_sets, default=0) + 1)
+    if plan is not None:
+        if inrel == -1:
+            raise DeckFormatError("enforced displacements (SPCD, SPC with a value) with inertia relief "
+                                  "(PARAM,INREL,-1) are not imported", file=str(path))
+        for label, values in applied:
+            for dof, f in plan.loads[label].items():
+                values[dof] = values.get(dof, 0.0) + f
+        drop_cards += list(plan.drop)
+        notes.append(plan.note)
     if inrel == -1 and applied:
         applied = _relieved(applied, deck, cards, inrel_cards[-1], notes)
     for label, values in applied:
@@ -689,6 +722,8 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
     if cc is not None and cc.autospc is not None and cc.autospc[0] == "NO":
         model_lines += ["$ AUTOSPC = NO of the case control:", "PARAM,AUTOSPC,NO"]
     _model_body(lines, str(path), start, bulk, kept_lines, dropped, model_lines)
+    if plan is not None:
+        model_lines += plan.lines
     model_lines.append("ENDDATA")
 
     name = re.sub(r"[^A-Za-z0-9_.-]+", "_", path.stem) or "imported"
