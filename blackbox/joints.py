@@ -335,20 +335,20 @@ class SimpleJoint(JointModel):
             held.append((p, i, j))
         object.__setattr__(self, "constrained_springs", tuple(sorted(set(held))))
 
-    @property
+    @cached_property
     def spring_pairs(self) -> tuple[tuple[int, int], ...]:
         """The flexible branch pairs ``(i, j)``, ``i < j``, 1-based, lexicographic order."""
         rigid = set(self.rigid_pairs)
         return tuple(p for p in itertools.combinations(range(1, self.n_branches + 1), 2)
                      if p not in rigid)
 
-    @property
+    @cached_property
     def springs(self) -> tuple[tuple[str, int, int], ...]:
         """``(plane, i, j)`` of every parameter, in parameter order (constrained springs left out)."""
         held = set(self.constrained_springs)
         return tuple((p, i, j) for (i, j) in self.spring_pairs for p in PLANES if (p, i, j) not in held)
 
-    @property
+    @cached_property
     def param_names(self) -> tuple[str, ...]:
         """``kx12, ky12, kz12, kx13, ...``: pairs ``i < j`` in lexicographic order, then planes."""
         return tuple(f"k{p}{i}{j}" for (p, i, j) in self.springs)
@@ -476,7 +476,7 @@ class ComplexJoint(JointModel):
         """``3n - 3``, the order of ``K_C``."""
         return 3 * self.n_branches - 3
 
-    @property
+    @cached_property
     def param_names(self) -> tuple[str, ...]:
         return complex_param_names(self.n_branches)
 

@@ -439,7 +439,14 @@ OUTPUT_ONLY = ("its effect acts on the readings alone: MYSTRAN runs for it the d
 LEFT_OUT = {"shell_thin": "its diagnosis piles complex-joint refits over five rounds (many minutes per adapter); "
                          "its study is shell_thick's frame with a thinner wall, which is compared",
             **{k: OUTPUT_ONLY for k in ("sensor_gain", "sensor_offset", "sign_flip", "channel_swap",
-                                        "misplaced_sensor")}}
+                                        "misplaced_sensor")},
+            **{k: "its effect scales a day's loads: load_scale compares the load kind through MYSTRAN (on the "
+                  "cube), and the car deck's own decks run in the other car folders"
+               for k in ("load_scale_day", "load_scale_group")},
+            "joint_translation": "joint_translation_axes runs the same car deck with the same joint's translation "
+                                 "springs, per axis (a superset of this folder's edited decks)",
+            "member_stiffness": "member_bending runs the car deck's member edits (its section variant besides the "
+                                "whole-member factor this folder adds)"}
 """Folders not compared here, with the reason; ``python benchmarks/diagnose_mystran.py`` compares
 every folder (docs/mystran.md). A data defect's folder differs from the others of its deck in its
 readings only, so through MYSTRAN it runs the same kinds of deck (the shared cache reads most of

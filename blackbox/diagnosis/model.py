@@ -170,11 +170,33 @@ class ObsMap:
             m &= np.isin(self.case, idx)
         return m
 
-    def pick(self, U: np.ndarray) -> np.ndarray:
-        f = U[self.row, self.case]
+    @functools.cached_property
+    def _has_ref(self) -> np.ndarray | None:
+        """The rows read against a reference DOF (None: no row is)."""
         has = self.ref >= 0
-        if has.any():
-            f = f - np.where(has, U[np.maximum(self.ref, 0), self.case], 0.0)
+        return has if has.any() else None
+
+    @functools.cached_property
+    def _flats(self) -> dict:
+        return {}
+
+    def _flat(self, n_cases: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """Flat indices into a C-ordered ``U`` of ``n_cases`` columns: the rows, their references."""
+        got = self._flats.get(n_cases)
+        if got is None:
+            flat = self.row * n_cases + self.case
+            ref = None if self._has_ref is None else np.maximum(self.ref, 0) * n_cases + self.case
+            got = self._flats[n_cases] = (flat, ref)
+        return got
+
+    def pick(self, U: np.ndarray) -> np.ndarray:
+        """``U`` (observed DOFs x cases) at the rows, less the reference DOF's where a row has one
+        (the same values as ``U[row, case]``, read through flat indices: this runs per residual)."""
+        flat, ref = self._flat(U.shape[1])
+        u = U if U.flags.c_contiguous else np.ascontiguousarray(U)
+        f = u.take(flat)
+        if ref is not None:
+            f = f - np.where(self._has_ref, u.take(ref), 0.0)
         return f
 
 
