@@ -188,8 +188,9 @@ class CaseControl:
 
 def _is(word: str, name: str) -> bool:
     """``word`` names the command ``name``: an abbreviation of at least four letters (or the
-    whole name), or the name with a plural ``S`` (``SPCFORCES``)."""
-    return name.startswith(word) or word == name + "S"
+    whole name), or the name with a plural ``S`` (``SPCFORCES``; ``ES`` after an S: COSMIC
+    NASTRAN's ``STRESSES``)."""
+    return name.startswith(word) or word == name + "S" or (name.endswith("S") and word == name + "ES")
 
 
 def _uncomment(raw: str) -> str:

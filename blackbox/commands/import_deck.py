@@ -365,6 +365,12 @@ def _inertia_relief(cards) -> tuple[int, list]:
 
 
 _STATIC_SOLS = ("1", "101", "SESTATIC", "SESTATICS", "STATICS")
+
+
+def _sol_key(sol: str) -> str:
+    """The solution a SOL statement names, upper-cased: COSMIC NASTRAN's ``SOL n,m`` (rigid
+    format n, its subset m) names rigid format n (1: static analysis, as MSC's SOL 1)."""
+    return sol.upper().split(",")[0].strip()
 _SOL_NAMES = {"3": "normal modes", "103": "normal modes", "SEMODES": "normal modes", "MODES": "normal modes",
               "5": "buckling", "105": "buckling", "SEBUCKL": "buckling", "106": "nonlinear statics",
               "NLSTATIC": "nonlinear statics", "107": "complex modes", "108": "direct frequency response",
@@ -386,7 +392,7 @@ def _no_static_load(cc: CaseControl | None, path: Path) -> str:
     if cc is None:
         return "no static load case to import: the deck has no case control and no load cards"
     own = (f"the deck's solution is {_sol_text(cc.sol)}, not linear statics, and " if cc.sol
-           and cc.sol.upper() not in _STATIC_SOLS else "")
+           and _sol_key(cc.sol) not in _STATIC_SOLS else "")
     what = "; ".join(f"subcase {s.id}: {', '.join(s.others) or 'no selection'}"
                      for s in cc.subcases[:8]) + (" ..." if len(cc.subcases) > 8 else "")
     return (f"no static load case to import: {own}no subcase selects a static load set with "
@@ -505,7 +511,7 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
         spc_choice = None
     else:
         selected = []
-        if not cc.sol or cc.sol.upper() in _STATIC_SOLS:
+        if not cc.sol or _sol_key(cc.sol) in _STATIC_SOLS:
             # a static subcase with no load set whose constraint set enforces displacements is
             # loaded by them (blackbox.commands.enforced)
             def values_of(sid):
@@ -514,10 +520,10 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
                 replace(s, enforced_only=True) if (s.load is None and s.temp_load is None and s.spc is not None
                                                    and s.analysis_static and values_of(s.spc)) else s
                 for s in cc.subcases))
-        if cc.sol and cc.sol.upper() not in _STATIC_SOLS:
+        if cc.sol and _sol_key(cc.sol) not in _STATIC_SOLS:
             # a SOL 200 subcase whose ANALYSIS is STATICS is SOL 101's linear static analysis
             # (of the initial design): its TEMPERATURE selections mean what they mean there
-            design = cc.sol.upper() in _DESIGN_SOLS
+            design = _sol_key(cc.sol) in _DESIGN_SOLS
             for s in cc.subcases:
                 line = s.temp_load_line or s.temp_mat_line or s.temp_init_line
                 if line and not (design and s.analysis_static):
@@ -534,7 +540,7 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
             if not s.static:
                 notes.append(f"subcase {s.id} selects no load set (no LOAD = or TEMPERATURE(LOAD) =): not imported")
                 continue
-            if (cc.sol and cc.sol.upper() not in _STATIC_SOLS and s.temp_load is None
+            if (cc.sol and _sol_key(cc.sol) not in _STATIC_SOLS and s.temp_load is None
                     and s.load not in loads.set_ids):
                 # a modal or dynamic solution does not read a LOAD = naming no set: nothing to import
                 notes.append(f"subcase {s.id}: LOAD = {s.load} at {path}:{s.load_line} names no load set, "
@@ -585,7 +591,7 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
     # the design model: SOL 200 analyses the initial design (the reader applies the relations);
     # in a deck of another solution NASTRAN does not read it, so it is not carried over
     design_cards = [c for c in cards if c.name in _DESIGN_CARDS]
-    design_dropped = bool(design_cards) and cc is not None and cc.sol.upper() not in _DESIGN_SOLS
+    design_dropped = bool(design_cards) and cc is not None and _sol_key(cc.sol) not in _DESIGN_SOLS
     if design_dropped:
         drop_cards += design_cards
     dropped_ids = {id(c) for c in drop_cards}
@@ -662,7 +668,7 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
     if cc is not None:
         ex = [w if w != "SOL" else f"SOL {cc.sol}" for w in dict.fromkeys(cc.executive)]
         notes.append(f"skipped the executive control ({', '.join(ex)})")
-        if cc.sol and cc.sol.upper() not in _STATIC_SOLS:
+        if cc.sol and _sol_key(cc.sol) not in _STATIC_SOLS:
             taken = ", ".join(f"{label} (" + " and ".join(
                 ([f"LOAD = {sid}"] if sid is not None else []) +
                 ([f"TEMPERATURE(LOAD) = {tsid}"] if tsid is not None else [])) + ")"

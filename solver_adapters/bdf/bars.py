@@ -22,12 +22,26 @@ displacement system (G) or in the offset system (O); converted to basic by
 ``_Reader.resolve_bars``."""
 
 
-def _offt(c) -> None:
-    """OFFT (field 9): one of :data:`OFFT` (blank: BAROR's, else GGG)."""
-    if c.text(9) not in ("", *OFFT):
+def _offt(c, x=None, g0=None) -> str:
+    """OFFT (field 9): one of :data:`OFFT` (blank: BAROR's, else GGG), returned as written.
+
+    COSMIC NASTRAN's CBAR and BAROR have the flag F there instead (NASTRAN-95 User's Manual,
+    CBAR): 1, the orientation given as the vector X1 X2 X3; 2, as the grid G0. Both are in GA's
+    displacement system, and the offsets in each end's, as OFFT GGG: taken as GGG, the flag
+    checked against the fields it describes."""
+    t = c.text(9)
+    if t in ("1", "2"):
+        if (t == "1" and g0 is not None) or (t == "2" and x is not None):
+            raise c.error(9, f"flag F = {t} (COSMIC NASTRAN) says the orientation is given "
+                             f"{'as a vector X1 X2 X3' if t == '1' else 'as a grid G0'}; fields 6-8 give "
+                             f"{'a grid' if t == '1' else 'a vector'}")
+        return "GGG"
+    if t not in ("", *OFFT):
         raise c.error(9, f"offset option OFFT must be one of {', '.join(OFFT)} (orientation vector "
                          f"in GA's displacement system G or basic B, then each end's offset in its "
-                         f"grid's displacement system G or in the offset system O)")
+                         f"grid's displacement system G or in the offset system O; COSMIC NASTRAN's "
+                         f"flag F, 1 or 2, as GGG)")
+    return t
 
 
 def _cbar(r, c) -> None:
@@ -41,13 +55,13 @@ def _cbar(r, c) -> None:
     pid = _int(c, 3, eid)
     ga, gb = _int(c, 4), _int(c, 5)
     x, g0 = _orientation(c)
-    _offt(c)
+    offt = _offt(c, x, g0)
     pa, pb = _pin(c, 10), _pin(c, 11)
     wa = tuple(_real(c, i, 0.0) for i in (12, 13, 14))
     wb = tuple(_real(c, i, 0.0) for i in (15, 16, 17))
     r.claim("element", eid, c, 2)
-    if c.text(9):
-        r.cbar_offt[eid] = c.text(9)
+    if offt:
+        r.cbar_offt[eid] = offt
     r.deck.cbars[eid] = CBar(eid, pid, ga, gb, x, g0, c.src, pa, pb,
                              wa if any(wa) else None, wb if any(wb) else None)
     if not c.text(3):
@@ -153,8 +167,7 @@ def _baror(r, c) -> None:
     for i in (2, 4, 5):
         _blank(c, i, f"BAROR field {i}")
     _int(c, 3, 0)
-    _orientation(c)
-    _offt(c)
+    _offt(c, *_orientation(c))
     if r.baror is not None:
         raise c.error(1, f"only one BAROR is allowed (the first is at {r.baror.src})")
     r.baror = c

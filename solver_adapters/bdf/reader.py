@@ -237,6 +237,8 @@ class _Reader:
         z = x cross v). A blank OFFT of a CBAR is BAROR's, else GGG."""
         deck, frames = self.deck, self.frames
         offt_default = self.baror.text(9) if self.baror is not None else ""
+        if offt_default in ("1", "2"):                # COSMIC's flag F (bars._offt): GGG
+            offt_default = "GGG"
         in_offset = {eid for eid, o in self.cbar_offt.items() if "O" in o[1:]}
         if "O" in offt_default[1:]:
             in_offset |= {e for e, b in deck.cbars.items() if b.card == "CBAR" and e not in self.cbar_offt}
