@@ -50,6 +50,9 @@ FIXTURES = Path(__file__).resolve().parents[1] / "fixtures" / "undeclared"
 FOLDERS = sorted(p.name for p in FIXTURES.iterdir() if (p / "planted.json").exists())
 CUBE_FOLDERS = {"support_flexibility", "load_scale", "support_axes"}   # about 1 s each; the car ones 3-10 s
 
+# one xdist worker for the modules that share conftest.fixture_diagnosis's cache
+pytestmark = pytest.mark.xdist_group("fixture_diagnosis")
+
 
 def _planted(folder: str) -> list[dict]:
     return json.loads((FIXTURES / folder / "planted.json").read_text())["effects"]

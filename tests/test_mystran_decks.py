@@ -34,7 +34,9 @@ ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(__file__).parent / "data"
 RTOL_F06 = 1e-6
 
-pytestmark = pytest.mark.usefixtures("runs_under_tmp_path")
+pytestmark = [pytest.mark.usefixtures("runs_under_tmp_path"),
+              # one xdist worker for the modules that share conftest.fixture_diagnosis's cache
+              pytest.mark.xdist_group("fixture_diagnosis")]
 
 
 # --------------------------------------------------------------------------------------------
