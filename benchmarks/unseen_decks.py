@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import argparse
 import random
+import re
 import subprocess
 import sys
 import tempfile
@@ -344,8 +345,12 @@ def row(path: Path, use_mystran: bool = True) -> tuple[str, str, str, float | No
     # skips a DMIG with a warning only (docs/mystran.md): the original deck is then another
     # structure, and the mystran adapter refuses the study
     relieved = any(n.startswith("inertia relief") for n in result.notes)
+    # and MYSTRAN 18 reads RFORCE's A in radians per unit time (NASTRAN: revolutions; measured on
+    # SB-BAR-RFORCE-OFFSET.DAT, docs/import.md) and reads SPCD without applying it: a deck with
+    # either is compared as a study
+    dialect = re.search(r"^[ \t]*(RFORCE|SPCD)[ \t,*]", path.read_text(errors="replace"), re.M | re.I)
     if cc is not None and cc.sol.upper() in ("1", "101", "SESTATIC", "SESTATICS", "STATICS") and not relieved \
-            and not getattr(result.deck, "dmigs", None):
+            and not getattr(result.deck, "dmigs", None) and not dialect:
         tables = _mystran(path)
         if tables:
             value, source = agreement(cases, report, u, tables, size), "deck"

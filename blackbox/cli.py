@@ -242,7 +242,7 @@ def cmd_import(args) -> int:
     from blackbox.commands import import_deck
 
     out = check_out(args.out, "import")
-    res = import_deck.run(args.deck, joints=args.joint, include_dirs=args.include_dir)
+    res = import_deck.run(args.deck, joints=args.joint, include_dirs=args.include_dir, spc=args.spc)
     write_output(out, "import", res.write)
     for note in res.notes:
         print(f"  {note}")
@@ -447,6 +447,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--include-dir", action="append", default=[], type=Path, metavar="DIR",
                    help="a folder outside the deck's own folder tree that its INCLUDEs may read "
                         "(repeatable; also include_dirs in the user configuration)")
+    s.add_argument("--spc", type=int, metavar="N",
+                   help="when the subcases select different constraint sets (SPC = ...): import the subcases of "
+                        "set N (default: those of the first subcase's set; a study has one set of supports)")
     s.set_defaults(func=cmd_import)
 
     s = sub.add_parser("measurements", help="rig readings (channels, repeats, zero scans) become measurements.csv")

@@ -1,8 +1,8 @@
-"""The load cards that act on elements rather than grids: PLOAD1 (bars and beams) and GRAV
-(the lumped mass), read from the cards of an input file for ``blackbox import``. Their nodal
+"""The load cards that act on elements rather than grids: PLOAD1 (bars and beams), GRAV and
+RFORCE (the lumped mass), read from the cards of an input file for ``blackbox import``. Their nodal
 loads come from the reference solver's elements (:mod:`solver_adapters.reference.loads`, which
 says how NASTRAN applies each); a GRAV reads the masses from MAT1 RHO, the NSM of PBAR, PBARL,
-PBEAM, PBEAML, PROD and CONROD, the CONM2 cards and PARAM,WTMASS. Errors name the card, its
+PBEAM, PBEAML, PROD and CONROD, the CONM2 cards and PARAM,WTMASS; so does an RFORCE. Errors name the card, its
 file, line and field.
 """
 
@@ -18,7 +18,7 @@ from solver_adapters.protocol import DeckFormatError
 from solver_adapters.reference.loads import (SCALES, TYPES, LoadError, Masses, Pload1,
                                              gravity_loads, pload1_loads)
 
-__all__ = ["BarLoad", "Gravity", "read_pload1", "read_grav", "MassReader"]
+__all__ = ["BarLoad", "Gravity", "Rotation", "read_pload1", "read_grav", "read_rforce", "MassReader"]
 
 _OTHER_MASS = ("CMASS3", "CMASS4", "NSM", "NSM1", "NSMADD", "NSML", "NSML1")
 
@@ -135,6 +135,69 @@ def read_grav(c) -> Gravity:
     if not any(n):
         raise c.error(5, "the direction N1, N2, N3 is zero")
     return Gravity(sid, cid, (a * n[0], a * n[1], a * n[2]), c)
+
+
+@dataclass(frozen=True)
+class Rotation:
+    """One RFORCE card: SID G CID A R1 R2 R3 METHOD / RACC MB IDRF (MSC QRG RFORCE): the
+    centrifugal load of a steady rotation at A revolutions per unit time about the axis through
+    grid G (0: the basic origin) along (R1, R2, R3), rectangular components in system CID (of a
+    cylindrical or spherical one, along the rectangular axes it is defined by): the angular
+    velocity w = 2 pi A (R1, R2, R3), not normalised (Autodesk Nastran QRG RFORCE remark 1), and
+    each grid's mass loaded by -w x (w x (x - x_G)), its centripetal acceleration reversed:
+    outwards, m |w|^2 times its distance from the axis."""
+    sid: int
+    grid: int
+    cid: int
+    a: float
+    vector: tuple[float, float, float]
+    raw: object
+
+    def loads(self, deck, masses: "MassReader", sel: str = "") -> dict[tuple[int, int], float]:
+        c = self.raw
+        r = np.array(self.vector, float)
+        if self.cid:
+            system = (getattr(deck, "coords", None) or {}).get(self.cid)
+            if system is None:
+                raise c.error(4, f"coordinate system CID {self.cid} not found (no CORD1R/C/S or "
+                                 f"CORD2R/C/S with that ID){sel}")
+            # "rectangular components" (MSC QRG RFORCE): a cylindrical or spherical CID's
+            # components along the rectangular axes it is defined by
+            r = np.asarray(system.axes).T @ r
+        if self.grid and self.grid not in deck.grids:
+            raise c.error(3, f"grid {self.grid} does not exist (no GRID){sel}")
+        x0 = np.array(deck.grids[self.grid].xyz, float) if self.grid else np.zeros(3)
+        w = 2.0 * np.pi * self.a * r
+        ww = float(w @ w)
+
+        def field(grid: int) -> np.ndarray:
+            d = np.array(deck.grids[grid].xyz, float) - x0
+            return ww * d - w * float(w @ d)           # -w x (w x d)
+
+        return gravity_loads(deck, masses.masses(c, deck, sel, "RFORCE"), field)
+
+
+def read_rforce(c) -> Rotation:
+    """RFORCE SID G CID A R1 R2 R3 METHOD / RACC MB IDRF. METHOD 1 (blank; NASTRAN's default:
+    the mass matrix times each grid's acceleration) only; an angular acceleration RACC, an
+    element set IDRF are refused (located); MB (superelements) has no effect."""
+    _max_fields(c, 12)
+    sid = _int(c, 2)
+    g = _int(c, 3, minimum=0, default=0)
+    cid = _int(c, 4, minimum=0, default=0)
+    a = _real(c, 5, 0.0)
+    r = (_real(c, 6, 0.0), _real(c, 7, 0.0), _real(c, 8, 0.0))
+    if not any(r):
+        raise c.error(6, "the rotation vector R1, R2, R3 is zero")
+    if _int(c, 9, default=1) != 1:
+        raise c.error(9, "METHOD 2 (the elements' own mass distribution) is not imported: only METHOD 1 "
+                         "(blank), the lumped mass times each grid's acceleration")
+    if _real(c, 10, 0.0) != 0.0:
+        raise c.error(10, "an angular acceleration RACC is not imported (a steady rotation only)")
+    _int(c, 11, minimum=-1, default=0)
+    if c.text(12):
+        raise c.error(12, "IDRF (a rotation of part of the model) is not imported")
+    return Rotation(sid, g, cid, a, r, c)
 
 
 class MassReader:

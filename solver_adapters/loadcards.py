@@ -1,4 +1,5 @@
-"""NASTRAN static load cards: FORCE, MOMENT, FORCE1, MOMENT1, FORCE2, MOMENT2, SLOAD, PLOAD1, GRAV and LOAD.
+"""NASTRAN static load cards: FORCE, MOMENT, FORCE1, MOMENT1, FORCE2, MOMENT2, SLOAD, PLOAD1, GRAV,
+RFORCE, SPCD and LOAD.
 
 The study's ``model.bdf`` carries no loads (they come from ``loads.csv``), so the bulk-data reader
 (:mod:`solver_adapters.bdf`) rejects these cards. ``blackbox import`` reads them here from the
@@ -9,8 +10,9 @@ subcase selects with ``LOAD = n`` into nodal forces and moments in the basic sys
 * ``FORCE1 SID G F G1 G2``: force F along the unit vector from G1 to G2; ``MOMENT1`` alike;
 * ``FORCE2 SID G F G1 G2 G3 G4``: force F along the unit vector of (G2 - G1) x (G4 - G3);
   ``MOMENT2`` alike;
-* ``PLOAD1 SID EID TYPE SCALE X1 P1 X2 P2``: a load on a bar or beam, and ``GRAV SID CID A N1
-  N2 N3``: the acceleration A N on the lumped mass, both as NASTRAN's equivalent nodal loads
+* ``PLOAD1 SID EID TYPE SCALE X1 P1 X2 P2``: a load on a bar or beam, ``GRAV SID CID A N1
+  N2 N3``: the acceleration A N on the lumped mass, and ``RFORCE SID G CID A R1 R2 R3``: the
+  centrifugal load of a steady rotation on it, as NASTRAN's equivalent nodal loads
   (:mod:`solver_adapters.elementloads`, :mod:`solver_adapters.reference.loads`);
 * ``SLOAD SID S1 F1 S2 F2 S3 F3``: the loads Fi on scalar points Si (their one DOF);
 * ``LOAD SID S S1 L1 S2 L2 ...``: the set S * sum(Si * set Li), the Li being sets of the cards
@@ -25,7 +27,7 @@ Several cards of one set add up. A CID other than 0 gives the vector in that coo
 CORD2R/C/S of the deck; for a cylindrical or spherical system, along its directions at the
 grid). The resolved loads are returned in each grid's displacement system (its CD; the basic
 system for CD 0), the components loads.csv holds.
-Other load cards (PLOAD, PLOAD2, PLOAD4, TEMPP1, RFORCE, ...) are recorded by set: selecting
+Other load cards (PLOAD, PLOAD2, PLOAD4, TEMPP1, RFORCE1, ...) are recorded by set: selecting
 such a set is an error naming the card. A subcase's thermal load (``TEMPERATURE(LOAD) = n``: TEMP,
 TEMPD, TEMPRB) is resolved by :meth:`LoadCards.resolve_thermal` (:mod:`solver_adapters.thermalloads`);
 a LOAD set does not include temperature cards (NASTRAN selects them with TEMPERATURE only).
@@ -39,7 +41,7 @@ import numpy as np
 
 # the field readers every load card shares (located errors for blank, bad or extra fields)
 from solver_adapters.bdf.fields import valid_components
-from solver_adapters.elementloads import MassReader, _int, _max_fields, _real, read_grav, read_pload1
+from solver_adapters.elementloads import MassReader, _int, _max_fields, _real, read_grav, read_pload1, read_rforce
 from solver_adapters.protocol import DeckFormatError
 from solver_adapters.thermalloads import TEMPERATURE_CARDS, ThermalCards, read_thermal_cards
 
@@ -48,11 +50,11 @@ __all__ = ["LOAD_CARDS", "OTHER_LOAD_CARDS", "PointLoad", "EnforcedValue", "Load
            "InputFile", "read_input_file"]
 
 LOAD_CARDS = frozenset({"FORCE", "MOMENT", "FORCE1", "MOMENT1", "FORCE2", "MOMENT2", "LOAD",
-                        "PLOAD1", "GRAV", "SLOAD", "SPCD"})
+                        "PLOAD1", "GRAV", "RFORCE", "SLOAD", "SPCD"})
 """The load cards this module reads (PLOAD1 and GRAV through :mod:`solver_adapters.elementloads`)."""
 
 OTHER_LOAD_CARDS = frozenset({
-    "ACCEL", "ACCEL1", "RFORCE", "RFORCE1", "PLOAD", "PLOAD2", "PLOAD4", "PLOADX1",
+    "ACCEL", "ACCEL1", "RFORCE1", "PLOAD", "PLOAD2", "PLOAD4", "PLOADX1",
     "PLOADB3", "DEFORM", "TEMP", "TEMPD", "TEMPP1", "TEMPRB", "QBDY1", "QVOL",
     "DAREA", "LSEQ", "CLOAD", "PRESAX", "FORCEAX", "MOMAX",
 })
@@ -112,7 +114,7 @@ class LoadCards:
     combinations: dict[int, LoadCombination] = field(default_factory=dict)
     other: dict[int, list[object]] = field(default_factory=dict)   # SID -> cards of other kinds
     bar: dict[int, list] = field(default_factory=dict)              # SID -> PLOAD1 (BarLoad)
-    gravity: dict[int, list] = field(default_factory=dict)          # SID -> GRAV (Gravity)
+    gravity: dict[int, list] = field(default_factory=dict)          # SID -> GRAV, RFORCE
     spcd: dict[int, list[EnforcedValue]] = field(default_factory=dict)  # SID -> SPCD triples
     masses: object = None                                            # elementloads.MassReader
     cards: list = field(default_factory=list)                       # every bulk card (thermal)
@@ -167,13 +169,13 @@ class LoadCards:
                                                      f"NASTRAN does not allow nested LOAD sets")
                 if not self._has(li):
                     raise combo.raw.error(5 + 2 * k, f"load set {li} not found (no FORCE, MOMENT, "
-                                                     f"SLOAD, PLOAD1 or GRAV card with SID {li}){sel}")
+                                                     f"SLOAD, PLOAD1, GRAV, RFORCE or SPCD card with SID {li}){sel}")
                 for dof, v in self._point_set(li, deck, sel).items():
                     total[dof] = total.get(dof, 0.0) + combo.scale * si * v
             return total
         if not self._has(sid):
             raise DeckFormatError(f"load set {sid}{sel} not found: no LOAD, FORCE, MOMENT, SLOAD, "
-                                  f"PLOAD1 or GRAV card has SID {sid}")
+                                  f"PLOAD1, GRAV, RFORCE or SPCD card has SID {sid}")
         return self._point_set(sid, deck, sel)
 
     def resolve_thermal(self, tsid: int, deck, *, where: str = "",
@@ -202,7 +204,7 @@ class LoadCards:
             c = self.other[sid][0]
             kinds = sorted({o.name for o in self.other[sid]})
             raise c.error(1, f"load set {sid}{sel} contains {', '.join(kinds)}: only FORCE, MOMENT, "
-                             f"FORCE1/2, MOMENT1/2, SLOAD, PLOAD1, GRAV and LOAD are imported")
+                             f"FORCE1/2, MOMENT1/2, SLOAD, PLOAD1, GRAV, RFORCE, SPCD and LOAD are imported")
         out: dict[tuple[int, int], float] = {}
         for p in self.point.get(sid, ()):
             if p.grid not in deck.grids:
@@ -415,8 +417,8 @@ def read_load_cards(cards) -> LoadCards:
         elif c.name == "PLOAD1":
             load = read_pload1(c)
             out.bar.setdefault(load.sid, []).append(load)
-        elif c.name == "GRAV":
-            g = read_grav(c)
+        elif c.name in ("GRAV", "RFORCE"):
+            g = read_grav(c) if c.name == "GRAV" else read_rforce(c)
             out.gravity.setdefault(g.sid, []).append(g)
         elif c.name == "SPCD":
             for e in _spcd(c):

@@ -323,9 +323,6 @@ def test_no_spc_selection_drops_every_constraint_set(tmp_path):
 
 
 @pytest.mark.parametrize("case_control, loads, parts", [
-    ("SUBCASE 1\n SPC = 1\n LOAD = 5\nSUBCASE 2\n SPC = 2\n LOAD = 5\n",
-     "FORCE   5       3               1.      1.      0.      0.\n",
-     ("different constraint sets", "subcase 1: 1", "subcase 2: 2")),
     ("SPC = 1\nLOAD = 8\n", "FORCE   5       3               1.      1.      0.      0.\n",
      ("load set 8", "LOAD = 8 at", "not found")),
     ("SPC = 4\nLOAD = 5\n", "FORCE   5       3               1.      1.      0.      0.\n",
@@ -361,6 +358,26 @@ def test_errors_name_the_place(tmp_path, case_control, loads, parts):
         import_deck.run(_deck(tmp_path, case_control, loads))
     for part in parts:
         assert part in str(exc.value), str(exc.value)
+
+
+def test_subcases_of_different_constraint_sets_import_one_set(tmp_path):
+    """A study has one set of supports: the subcases of the first imported subcase's set are
+    imported and the others named in a note with the option that imports them (``--spc``);
+    ``--spc 2`` imports subcase 3 alone, with set 2 kept and set 1 dropped; a set no subcase
+    selects is an error."""
+    cc = "SUBCASE 1\n SPC = 1\n LOAD = 5\nSUBCASE 2\n SPC = 2\n LOAD = 5\nSUBCASE 3\n SPC = 1\n LOAD = 6\n"
+    loads = ("FORCE   5       3               1.      1.      0.      0.\n"
+             "FORCE   6       3               2.      1.      0.      0.\n")
+    p = _deck(tmp_path, cc, loads)
+    first = import_deck.run(p)
+    assert first.cases == ("1", "3")
+    assert {s.sid for s in first.deck.spc1s} == {1}
+    note = next(n for n in first.notes if "different constraint sets" in n)
+    assert "left out subcase(s) 2 (SPC = 2)" in note and "--spc" in note
+    second = import_deck.run(p, spc=2)
+    assert second.cases == ("2",) and {s.sid for s in second.deck.spc1s} == {2}
+    with pytest.raises(DeckFormatError, match="--spc 7: no imported subcase selects SPC = 7"):
+        import_deck.run(p, spc=7)
 
 
 def test_cend_without_begin_bulk(tmp_path):

@@ -301,6 +301,31 @@ def _one_selection(cc: CaseControl, attr: str, name: str, path: Path, what: str 
     return chosen.pop() if chosen else None
 
 
+def _one_constraint_set(selected: list, cc: CaseControl, spc: int | None, path: Path,
+                        notes: list[str]) -> tuple[list, CaseControl]:
+    """The imported subcases of one constraint set (a study has one set of supports): those that
+    select ``spc`` (``--spc``), else those of the first imported subcase's set; the others are
+    left out with a note naming them and the option that imports them. The case control keeps
+    only the subcases that stay (the later selections, MPC and SUPORT1, read those)."""
+    by_id = {str(s.id): s for s in cc.subcases}
+    chosen_sets = list(dict.fromkeys(by_id[label].spc for label, *_ in selected))
+    if spc is None and len(chosen_sets) <= 1:
+        return selected, cc
+    chosen = chosen_sets[0] if spc is None else spc
+    if chosen not in chosen_sets:
+        raise DeckFormatError(f"--spc {spc}: no imported subcase selects SPC = {spc} (they select "
+                              f"{', '.join('none' if c is None else str(c) for c in chosen_sets)})", file=str(path))
+    left = [label for label, *_ in selected if by_id[label].spc != chosen]
+    if left:
+        others = sorted({by_id[label].spc for label in left}, key=lambda c: (c is None, c or 0))
+        notes.append(f"the subcases select different constraint sets and a study has one set of supports: "
+                     f"imported the subcases of SPC = {chosen}; left out subcase(s) {', '.join(left)} (SPC = "
+                     f"{', '.join('none' if c is None else str(c) for c in others)}): import the deck again with "
+                     f"--spc N for another set")
+    keep = [row for row in selected if by_id[row[0]].spc == chosen]
+    return keep, replace(cc, subcases=tuple(s for s in cc.subcases if str(s.id) not in left))
+
+
 def _mpc_selection(cc: CaseControl, sets: dict[int, list], path: Path, notes: list[str]) -> list:
     """The MPC/MPCADD cards to drop from model.bdf: every set the subcases do not select (all of
     them when none selects one: NASTRAN then applies none). The subcases that import a load must
@@ -472,10 +497,12 @@ def _temperature_selections(cc: CaseControl, cards, path: Path, notes: list[str]
 
 
 def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
-        include_dirs: list | tuple = ()) -> ImportResult:
+        include_dirs: list | tuple = (), spc: int | None = None) -> ImportResult:
     """Read the NASTRAN input file ``deck_path`` and make the study's files (not written yet).
     INCLUDEs read regular files inside the input file's folder tree only, or inside one of
-    ``include_dirs`` (``--include-dir``) or the user's configured ``include_dirs``."""
+    ``include_dirs`` (``--include-dir``) or the user's configured ``include_dirs``. ``spc``
+    (``--spc``): the constraint set whose subcases are imported when they select different ones
+    (default: the first imported subcase's)."""
     from solver_adapters.userconfig import configured_include_dirs
     path = Path(deck_path)
     try:
@@ -552,6 +579,7 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
                 ([f"SPC = {s.spc} at {path}:{s.spc_line} (its enforced values)"] if s.enforced_only else [])
             where = " and ".join(what) + (f", subcase {s.id}" if cc.explicit else "")
             selected.append((str(s.id), s.load, s.temp_load, where))
+        selected, cc = _one_constraint_set(selected, cc, spc, path, notes)
         _temperature_selections(cc, cards, path, notes)
         spc_choice = _one_selection(cc, "spc", "SPC", path, what="constraint", one="set of supports")
     if not selected:

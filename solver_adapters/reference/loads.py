@@ -234,40 +234,50 @@ class Masses:
     conm2_inertia: list[tuple[int, np.ndarray]] = None   # (grid, 3x3 about the CG, basic)
 
 
-def gravity_loads(deck, masses: Masses, accel: np.ndarray) -> dict[tuple[int, int], float]:
-    """The nodal loads (basic) of the acceleration ``accel`` (basic) on the lumped mass."""
+def gravity_loads(deck, masses: Masses, accel) -> dict[tuple[int, int], float]:
+    """The nodal loads (basic) of the acceleration field ``accel`` (basic) on the lumped mass:
+    a 3-vector (GRAV: the same at every grid) or a function of the grid ID (RFORCE: the field of a
+    rotation, at each grid). As NASTRAN's load ``M a`` with the lumped mass matrix M and the
+    field's translational acceleration a at each grid (its rotational one zero): a mass off its
+    grid (a CONM2's offset, a bar's offset end) is loaded by its grid's acceleration, its moment
+    about the grid by the offset."""
     out: dict[tuple[int, int], float] = {}
 
     def add(key, v: float) -> None:
         if v != 0.0:
             out[key] = out.get(key, 0.0) + v
 
-    g = np.asarray(accel, float) * masses.wtmass
+    field = accel if callable(accel) else (lambda grid, a=np.asarray(accel, float): a)
+
+    def g(grid: int) -> np.ndarray:
+        return np.asarray(field(grid), float) * masses.wtmass
+
     for b in deck.cbars.values():
         mpl = masses.bar_pid.get(b.pid, 0.0)
         if mpl:
             R, L, wa, wb = bar_frame(deck, b)
-            half = R @ (0.5 * mpl * L * g)
-            for key, v in _to_grids(b, R, wa, wb, np.concatenate([half, np.zeros(3), half, np.zeros(3)])).items():
+            ha, hb = R @ (0.5 * mpl * L * g(b.ga)), R @ (0.5 * mpl * L * g(b.gb))
+            for key, v in _to_grids(b, R, wa, wb, np.concatenate([ha, np.zeros(3), hb, np.zeros(3)])).items():
                 add(key, v)
     for r in deck.rods.values():
         mpl = masses.conrod.get(r.eid, 0.0) if r.pid is None else masses.rod_pid.get(r.pid, 0.0)
         if mpl:
             L = float(np.linalg.norm(np.subtract(deck.grids[r.gb].xyz, deck.grids[r.ga].xyz)))
             for grid in (r.ga, r.gb):
+                gg = g(grid)
                 for c in range(3):
-                    add((grid, c + 1), float(0.5 * mpl * L * g[c]))
+                    add((grid, c + 1), float(0.5 * mpl * L * gg[c]))
     for grid, m, offset in masses.conm2:
-        force = m * g
+        force = m * g(grid)
         moment = np.cross(np.asarray(offset, float), force)
         for c, v in enumerate((*force, *moment), start=1):
             add((grid, c), float(v))
     for grid, matrix in masses.conm1 or ():
-        for c, v in enumerate(matrix[:, :3] @ g, start=1):
+        for c, v in enumerate(matrix[:, :3] @ g(grid), start=1):
             add((grid, c), float(v))
     for grid, comp, m in masses.scalar or ():
         if comp <= 3:                               # a rigid translation turns no grid
             d = deck.displacement_frames([grid])[0][comp - 1]
-            for c, v in enumerate(d * (m * float(d @ g)), start=1):
+            for c, v in enumerate(d * (m * float(d @ g(grid))), start=1):
                 add((grid, c), float(v))
     return out
