@@ -56,7 +56,7 @@ KNOWN_UNMODELLED = frozenset({
     "PBUSH1D", "PBUSH2D", "PELAST", "PLPLANE", "PLSOLID", "PSHLN1", "PSHLN2",
     "PUSER1", "PUSERIN", "PHBDY", "PCONV",
     # materials other than MAT1, and temperature- or stress-dependent material tables
-    "MAT2", "MAT3", "MAT4", "MAT5", "MAT8", "MAT9", "MAT10", "MAT11", "MATT1", "MATT2", "MATT8",
+    "MAT2", "MAT3", "MAT8", "MAT9", "MAT10", "MAT11", "MATT1", "MATT2", "MATT8",
     "MATT9", "MATS1", "TABLEM1", "TABLEM2", "TABLEM3", "TABLEM4", "TABLES1", "TABLEST",
     # rigid elements other than RBE2, RBE3
     "RBAR1", "RBE1", "RROD", "RTRPLT", "RTRPLT1", "RSPLINE", "RJOINT",

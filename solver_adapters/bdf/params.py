@@ -55,6 +55,9 @@ NO_EFFECT = frozenset({
     # mass: no effect on a linear static solution (GRAV reads the masses it uses from the cards)
     "CONM1", "CONM2", "CMASS1", "CMASS2", "CMASS3", "CMASS4", "PMASS",
     "NSM", "NSM1", "NSMADD", "NSML", "NSML1",
+    # heat-transfer materials (conductivity, specific heat): read by thermal solutions only; a
+    # structural element's MID names a MAT1 (which a MAT4/MAT5 of the same ID accompanies)
+    "MAT4", "MAT5",
     # dampers: a viscous force is proportional to a velocity, zero in a static solution
     "CDAMP1", "CDAMP2", "CDAMP3", "CDAMP4", "CDAMP5", "CVISC", "PDAMP", "PDAMP5", "PDAMPT", "PVISC",
     # eigenvalue extraction, dynamic and nonlinear solution controls
