@@ -80,6 +80,8 @@ _NOT_STATIC = {  # selections of other solutions: no effect on the static soluti
     "GENG": "GENGAF", "AESYMXY": "AESYMXY", "AESYMXZ": "AESYMXZ", "AEUX": "AEUXREF",
     "CSSC": "CSSCHD", "MODT": "MODTRAK", "MPFA": "MPFACTOR",
     "AECO": "AECONFIG", "BC": "BC",
+    # COSMIC NASTRAN: the differential-stiffness coefficient set (rigid formats 4 and 13 only)
+    "DSCO": "DSCOEFFICIENT",
 }
 _DESIGN = {  # design optimisation (SOL 200): read by their first four letters, as NASTRAN does
     "DESO": "DESOBJ", "DESS": "DESSUB", "DESG": "DESGLB", "DSAP": "DSAPRT", "DRSP": "DRSPAN",

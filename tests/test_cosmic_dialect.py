@@ -3,7 +3,8 @@ F in field 9, ``SOL n,m`` (rigid format n, subset m), ``STRESSES`` (docs/import.
 
 References: the NASTRAN-95 User's Manual's CBAR (F = 1: X1 X2 X3 a vector; F = 2: X1 the grid
 G0; both in GA's displacement system, offsets in each end's: OFFT GGG) and its rigid formats
-(1: static analysis). Results are compared with the same deck written with MSC's fields, which
+(1: static analysis; DSCOEFFICIENT selects rigid formats 4 and 13's differential stiffness
+coefficients). Results are compared with the same deck written with MSC's fields, which
 must give the same numbers bit for bit (the same cards after the flag is read).
 """
 
@@ -59,7 +60,8 @@ def test_cbar_flag_f_that_contradicts_its_fields_is_a_located_error(bars, says):
 def test_sol_1_0_is_static_and_stresses_is_an_output_request(tmp_path):
     """``SOL 1,0`` (rigid format 1, static analysis) reads its TEMPERATURE selection as SOL 101
     does (a deck of another solution is refused there); ``STRESSES`` is the STRESS request."""
-    deck = ("ID COSMIC,TEST\nAPP DISP\nSOL 1,0\nCEND\nSTRESSES = ALL\nTEMPERATURE(LOAD) = 5\nLOAD = 10\n"
+    deck = ("ID COSMIC,TEST\nAPP DISP\nSOL 1,0\nCEND\nSTRESSES = ALL\nDSCOEFFICIENT = DEFAULT\n"
+            "TEMPERATURE(LOAD) = 5\nLOAD = 10\n"
             "SPC = 1\nBEGIN BULK\n" + FRAME.format(bars=COSMIC).replace("PBAR", "TEMPD,5,120.\nPBAR")
             .replace("MAT1,1,2.1E11,,.3", "MAT1,1,2.1E11,,.3,,1.2E-5,20.")
             + "SPC1,1,123456,1\nFORCE,10,3,,1000.,0.,0.,1.\nENDDATA\n")
@@ -68,6 +70,7 @@ def test_sol_1_0_is_static_and_stresses_is_an_output_request(tmp_path):
     res = import_deck.run(p)
     assert res.cases == ("1",)
     assert any("STRESS" in n for n in res.notes)
+    assert any("selections of other solutions (DSCOEFFICIENT)" in n for n in res.notes)
     with pytest.raises(DeckFormatError, match="not linear statics"):
         q = tmp_path / "modes.inp"
         q.write_text(deck.replace("SOL 1,0", "SOL 3,0"))
