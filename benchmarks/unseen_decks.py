@@ -3,6 +3,7 @@ and how the solution agrees with MYSTRAN's (issue 20's last target).
 
     python benchmarks/unseen_decks.py --collect FOLDER --mirror OWNER/NAME=GITDIR ...
     python benchmarks/unseen_decks.py FOLDER [--half tuning|held-out] [--no-mystran]
+    python benchmarks/unseen_decks.py FOLDER2 --second --collect --mirror OWNER/NAME=GITDIR ...
     python benchmarks/unseen_decks.py FOLDER2 --second [--no-mystran]
 
 The decks (``DECKS`` below) are every whole input file (a CEND and a BEGIN BULK) of four public
@@ -25,9 +26,9 @@ any change for it: every whole input file with a line element and no shell or so
 of ten further public repositories (NASA's COSMIC NASTRAN-95 and -93 demonstration decks, a
 MATLAB NASTRAN clone's verification decks, FEMAP exports, an FE library's and a structural
 dynamics toolbox's test decks, ...), at most 40 per repository in sorted path order, less exact
-copies of the first corpus and of each other (line endings and trailing blanks aside). Its
-decks are copied to ``FOLDER2/OWNER+NAME/PATH`` (with their INCLUDEd files) by whoever collects
-them; the list names the commit of each.
+copies of the first corpus and of each other (line endings and trailing blanks aside). The list
+names the commit of each; ``--second --collect`` copies them to ``FOLDER2/OWNER+NAME/PATH``
+with the files their INCLUDEs name.
 
 For each deck, one row: the half, whether ``blackbox import`` accepts it (else the first line of
 its message), the subcases imported, and the largest difference of the reference solver's
@@ -51,6 +52,7 @@ solved share of them, and the disagreements above 1e-6.
 from __future__ import annotations
 
 import argparse
+import posixpath
 import random
 import re
 import subprocess
@@ -255,6 +257,35 @@ def collect(folder: Path, mirrors: dict[str, str]) -> None:
             out.write_bytes(data)
 
 
+_INCLUDE_LINE = re.compile(rb"^[ \t]*INCLUDE[ \t]+'([^']+)'", re.I | re.M)
+
+
+def collect_second(folder: Path, mirrors: dict[str, str]) -> None:
+    """The second corpus (``decks_second.csv``) out of git mirrors, each deck at its commit, with
+    the files its INCLUDE lines name (relative to the including file's folder, recursively)."""
+    import csv
+    with open(Path(__file__).with_name("decks_second.csv"), newline="") as f:
+        rows = list(csv.DictReader(f))
+    for r in rows:
+        todo, seen = [r["path"]], set()
+        while todo:
+            p = todo.pop()
+            if p in seen:
+                continue
+            seen.add(p)
+            got = subprocess.run(["git", "--git-dir", mirrors[r["repo"]], "show", f"{r['commit']}:{p}"],
+                                 capture_output=True)
+            if got.returncode:
+                continue                        # an INCLUDE outside the repository: the row says so
+            out = folder / r["repo"].replace("/", "+") / p
+            out.parent.mkdir(parents=True, exist_ok=True)
+            out.write_bytes(got.stdout)
+            base = posixpath.dirname(p)
+            for m in _INCLUDE_LINE.finditer(got.stdout):
+                name = m.group(1).decode("utf-8", "replace").strip().replace("\\", "/")
+                todo.append(posixpath.normpath(posixpath.join(base, name)))
+
+
 def _study_mystran(result):
     """The mystran adapter on the imported study: {case: {grid: [6 values]}}, None when it does
     not run, or the text "lost" when MYSTRAN's AUTOSPC took a load (its grid-level singularity
@@ -375,7 +406,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--second", action="store_true", help="the second corpus (decks_second.csv)")
     a = ap.parse_args(argv)
     if a.collect:
-        collect(a.folder, dict(m.split("=", 1) for m in a.mirror))
+        (collect_second if a.second else collect)(a.folder, dict(m.split("=", 1) for m in a.mirror))
         return 0
     halves = split()
     decks = DECKS
