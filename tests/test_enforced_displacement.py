@@ -166,3 +166,59 @@ def test_a_subcase_with_only_an_enforced_value_is_imported(tmp_path):
     text = DECK.replace(f"FORCE,22,3,,{P / 2.0},0.,1.,0.", "FORCE,22,3,,0.,0.,1.,0.")
     res = import_deck.run(_write(tmp_path, text))
     assert res.cases == ("1", "2")
+
+
+def _portal_study(tmp_path):
+    """tests/data/decks/portal_joint.bdf with two more subcases, one loaded by an SPCD settling
+    the right column's base (grid 3, z), one by an SPCD pushing the left base (grid 1, x) beside
+    a force; imported with its joint J2 (grids 2, 21) and measured from a simulation of the
+    reference solver (k = 2e6 N m/rad, 2 % noise, seed 3)."""
+    import shutil
+    from blackbox.cli import main as cli
+    decks = Path(__file__).parent / "data" / "decks"
+    for name in ("portal_joint.bdf", "portal_props.inc"):
+        shutil.copy(decks / name, tmp_path / name)
+    text = (tmp_path / "portal_joint.bdf").read_text()
+    text = text.replace("SUBCASE 104\n  SUBTITLE = NO LOAD: NOT IMPORTED\n",
+                        "SUBCASE 105\n  LOAD = 60\nSUBCASE 106\n  LOAD = 70\nSUBCASE 107\n  LOAD = 50\n")
+    text = text.replace("ENDDATA", "SPCD,60,3,3,0.002\nSPCD,70,1,1,0.001\nFORCE,70,5,0,300.,0.,1.,0.\nENDDATA")
+    (tmp_path / "portal_enf.bdf").write_text(text)
+    (tmp_path / "truth.toml").write_text(
+        'seed = 3\n[[joints]]\nname = "J2"\nmodel = "simple"\nvalue = 2.0e6\n[noise]\nrelative = 0.02\n'
+        'floor = 0.02\n[measure]\njoint = true\naway_grids = [3, 4, 5]\n'
+        'cases = ["101", "102", "103", "105", "106", "107"]\n')
+    assert cli(["import", str(tmp_path / "portal_enf.bdf"), "--out", str(tmp_path / "st"), "--joint", "J2:2,21"]) == 0
+    assert cli(["simulate", str(tmp_path / "st"), "--truth", str(tmp_path / "truth.toml"),
+                "--out", str(tmp_path / "sim")]) == 0
+    return cli, tmp_path / "sim"
+
+
+def test_an_imported_study_with_enforced_values_identifies_and_diagnoses(tmp_path):
+    """End to end on the handles, MPCs and springs the import writes: identify finds the
+    simulated joint (k = 2e6 inside each 95 % interval; the two well-determined springs within
+    5 % of it), and diagnose, whose edited decks carry the MPCs and handle grids, adds nothing
+    ("adequate"): the data hold no effect."""
+    import json
+    cli, sim = _portal_study(tmp_path)
+    assert cli(["identify", str(sim), "--out", str(tmp_path / "oi")]) == 0
+    params = json.loads((tmp_path / "oi" / "result.json").read_text())["parameters"]
+    for p in params:
+        assert p["ci_low"] <= 2.0e6 <= p["ci_high"], p
+    assert sum(abs(p["value"] / 2.0e6 - 1) < 0.05 for p in params) >= 2
+    cli(["diagnose", str(sim), "--out", str(tmp_path / "od")])
+    diag = json.loads((tmp_path / "od" / "diagnosis.json").read_text())
+    assert diag["verdict"] == "adequate" and not diag["added"]
+
+
+@needs_mystran
+def test_the_same_study_identifies_alike_through_mystran(tmp_path):
+    """The mystran adapter runs the imported model (handle grids, MPCs, grounded CELAS2 of
+    1e17): its identification equals the reference solver's to 1e-4 of each value (MYSTRAN's 7
+    printed digits carried through the fit)."""
+    import json
+    cli, sim = _portal_study(tmp_path)
+    got = {}
+    for adapter in ("reference", "mystran"):
+        assert cli(["identify", str(sim), "--out", str(tmp_path / adapter), "--adapter", adapter]) == 0
+        got[adapter] = [p["value"] for p in json.loads((tmp_path / adapter / "result.json").read_text())["parameters"]]
+    np.testing.assert_allclose(got["mystran"], got["reference"], rtol=1e-4)
