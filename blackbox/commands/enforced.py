@@ -20,10 +20,14 @@ An enforced DOF held in no case by its enforced value (an SPCD of another subcas
 zero by its spring there, as by its constraint.
 
 What changes in the study: the constraint cards (SPC, SPC1) that hold an enforced DOF are
-replaced by SPC1 cards of the same set holding the rest of their DOFs; a ``CELAS2`` to ground of
-stiffness K is added on each enforced DOF (element IDs above the deck's largest); each case gets
-the force (moment) K D there, in the grid's displacement system, as SPC components are. Both
-are written at the end of ``model.bdf`` under a comment saying so.
+replaced by SPC1 cards of the same set holding the rest of their DOFs; each enforced DOF is tied
+by an ``MPC`` (in an MPC set of its own: a study applies every set) to a handle grid of its own
+(IDs above the deck's grids; all its components but the DOF's held by its PS), and the handle
+by a ``CELAS2`` to ground of stiffness K (element IDs above the deck's); each case gets the force
+(moment) K D at the handle. The DOF itself carries no spring, so the grid-point singularity
+check (AUTOSPC: per grid, 1e-8 of its largest stiffness) never weighs K against the grid's
+other components: a spring on the DOF held a free tip in a measured case. All of it is written
+at the end of ``model.bdf`` under a comment saying so.
 """
 
 from __future__ import annotations
@@ -139,8 +143,8 @@ def plan(deck, kept_cards, per_case: dict[str, dict], from_spc: dict, mpc_sid: i
     those of the SPC cards (:func:`spc_values`), applied in every case; ``per_case`` a case's
     SPCD values (:meth:`solver_adapters.loadcards.LoadCards.enforced`), which override them.
     ``kept_cards``: the cards the study keeps (the constraint cards among them); ``mpc_sid`` the
-    set of the MPCs that tie the DOFs to their handles (the selected one, if any: every MPC set
-    of a study applies). None when the deck enforces nothing."""
+    set of the MPCs that tie the DOFs to their handles, one the deck does not use. None when the
+    deck enforces nothing."""
     cases = {label: {dof: v for dof, (v, _) in spcd.items()} for label, spcd in per_case.items()}
     where = {dof: (card, f) for dof, (_, card, f) in from_spc.items()}
     for spcd in per_case.values():

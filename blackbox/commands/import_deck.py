@@ -665,9 +665,9 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
             notes.append(f"case {label}: {what} sums to zero at every DOF: not imported")
             continue
         applied.append((label, values))
-    mpc_choice = _one_selection(cc, "mpc", "MPC", path) if cc is not None else None
+    # the handles' MPCs in a set of their own (a study applies every MPC set of model.bdf)
     plan = enforced.plan(deck, kept, {label: spcd[label] for label, _ in applied}, spc_values,
-                         mpc_choice if mpc_choice is not None else max(mpc_sets, default=0) + 1)
+                         max(mpc_sets, default=0) + 1)
     if plan is not None:
         if inrel == -1:
             raise DeckFormatError("enforced displacements (SPCD, SPC with a value) with inertia relief "
