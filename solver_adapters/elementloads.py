@@ -1,9 +1,9 @@
 """The load cards that act on elements rather than grids: PLOAD1 (bars and beams), GRAV and
-RFORCE (the lumped mass), read from the cards of an input file for ``blackbox import``. Their nodal
-loads come from the reference solver's elements (:mod:`solver_adapters.reference.loads`, which
-says how NASTRAN applies each); a GRAV reads the masses from MAT1 RHO, the NSM of PBAR, PBARL,
-PBEAM, PBEAML, PROD and CONROD, the CONM2 cards and PARAM,WTMASS; so does an RFORCE. Errors name the card, its
-file, line and field.
+RFORCE (the lumped mass), read from the cards of an input file for ``blackbox import``. Their
+nodal loads come from the reference solver's elements (:mod:`solver_adapters.reference.loads`,
+which says how NASTRAN applies each); a GRAV or RFORCE reads the masses from MAT1 RHO, the NSM
+of PBAR, PBARL, PBEAM, PBEAML, PROD and CONROD, the CONM2 cards and PARAM,WTMASS. Errors name
+the card, its file, line and field.
 """
 
 from __future__ import annotations

@@ -51,7 +51,7 @@ __all__ = ["LOAD_CARDS", "OTHER_LOAD_CARDS", "PointLoad", "EnforcedValue", "Load
 
 LOAD_CARDS = frozenset({"FORCE", "MOMENT", "FORCE1", "MOMENT1", "FORCE2", "MOMENT2", "LOAD",
                         "PLOAD1", "GRAV", "RFORCE", "SLOAD", "SPCD"})
-"""The load cards this module reads (PLOAD1 and GRAV through :mod:`solver_adapters.elementloads`)."""
+"""The load cards this module reads (PLOAD1, GRAV and RFORCE through :mod:`solver_adapters.elementloads`)."""
 
 OTHER_LOAD_CARDS = frozenset({
     "ACCEL", "ACCEL1", "RFORCE1", "PLOAD", "PLOAD2", "PLOAD4", "PLOADX1",

@@ -396,6 +396,8 @@ def _sol_key(sol: str) -> str:
     """The solution a SOL statement names, upper-cased: COSMIC NASTRAN's ``SOL n,m`` (rigid
     format n, its subset m) names rigid format n (1: static analysis, as MSC's SOL 1)."""
     return sol.upper().split(",")[0].strip()
+
+
 _SOL_NAMES = {"3": "normal modes", "103": "normal modes", "SEMODES": "normal modes", "MODES": "normal modes",
               "5": "buckling", "105": "buckling", "SEBUCKL": "buckling", "106": "nonlinear statics",
               "NLSTATIC": "nonlinear statics", "107": "complex modes", "108": "direct frequency response",
