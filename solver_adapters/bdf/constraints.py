@@ -26,7 +26,8 @@ def _spc1(r, c) -> None:
 
 def _spc(r, c) -> None:
     """SPC: SID G1 C1 D1 G2 C2 D2. Only a zero enforced value (D blank or 0.0) is supported: it
-    is the SPC1 constraint of the same set; a non-zero D is an enforced displacement (error)."""
+    is the SPC1 constraint of the same set; a non-zero D is an enforced displacement (error here;
+    ``blackbox import`` reads it before the model, blackbox.commands.enforced)."""
     _max_fields(c, 8)
     sid = _int(c, 2)
     for base in (3, 6):
@@ -35,7 +36,9 @@ def _spc(r, c) -> None:
         g = _int(c, base)
         comps = _point_components(c, base + 1)
         if _real(c, base + 2, 0.0) != 0.0:
-            raise c.error(base + 2, "enforced displacement not supported: D must be 0.0 or blank")
+            raise c.error(base + 2, "enforced displacement not supported in a study's model: D must be 0.0 or "
+                                    "blank (its loads are forces in loads.csv; `blackbox import` of the whole "
+                                    "input file turns enforced values into loads on large springs)")
         r.spc1_pending.append((sid, comps, [g], c.src, c, base + 1))
 
 
