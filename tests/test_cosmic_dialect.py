@@ -75,3 +75,37 @@ def test_sol_1_0_is_static_and_stresses_is_an_output_request(tmp_path):
         q = tmp_path / "modes.inp"
         q.write_text(deck.replace("SOL 1,0", "SOL 3,0"))
         import_deck.run(q)
+
+
+ROD_FRAME = """GRID,1,,0.,0.,0.,,123456
+GRID,2,,1.,0.,0.,,2345
+GRID,3,,2.,0.,0.,,2345
+GRID,4,,2.,1.,0.,,345
+PROD,5,1,1.E-3,1.E-6
+PTUBE,6,1,.05,.005
+MAT1,1,2.1E11,,.3
+SPC1,1,123456,4
+"""
+
+
+@pytest.mark.parametrize("cosmic, msc", [
+    ("CROD,60,5,1,2,61,5,2,3\nCTUBE,70,6,3,4\n", "CROD,60,5,1,2\nCROD,61,5,2,3\nCTUBE,70,6,3,4\n"),
+    ("CROD,60,5,1,2\nCTUBE,70,6,3,4,71,,2,3\n", "CROD,60,5,1,2\nCTUBE,70,6,3,4\nCTUBE,71,71,2,3\nPTUBE,71,1,.05,.005\n"),
+])
+def test_two_rods_on_one_card_are_two_rods(cosmic, msc):
+    """COSMIC's CROD/CTUBE carry a second element in fields 6-9 (a blank PID is the EID, as for
+    the first): the same model, and the same displacements bit for bit, as two cards."""
+    extra = "PTUBE,71,1,.05,.005\n" if "71" in cosmic else ""
+    a = read_deck_text(ROD_FRAME + extra + cosmic)
+    b = read_deck_text(ROD_FRAME + msc)
+    assert sorted(a.rods) == sorted(b.rods)
+    loads = LoadMatrix.from_dense([(2, 1), (3, 1), (3, 2)], np.eye(3) * 1e3, ["x2", "x3", "y3"])
+    dofs = [(g, c) for g in (2, 3) for c in (1, 2)]
+    np.testing.assert_array_equal(ReferenceAdapter(a).solve(loads, dofs).values,
+                                  ReferenceAdapter(b).solve(loads, dofs).values)
+
+
+def test_a_second_rod_left_half_written_is_a_located_error():
+    with pytest.raises(DeckFormatError) as e:
+        read_deck_text(ROD_FRAME + "CROD,60,5,1,2,61,5,2\n")
+    assert "card CROD" in str(e.value) and "field 9" in str(e.value) and "second CROD" in str(e.value)

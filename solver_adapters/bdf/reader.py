@@ -14,6 +14,7 @@ deck and the same errors.
 from __future__ import annotations
 
 import gc
+import itertools
 from dataclasses import replace
 
 import numpy as np
@@ -472,8 +473,11 @@ def _read_table(table, keep_unmodelled, validate, cards):
             r.add(TableCard(table, c, names[c].decode()))
             for k, (coll, n) in enumerate(zip(_MERGED, sizes)):
                 col = getattr(d, coll)
-                if len(col) > n:
+                if len(col) == n + 1:
                     added[coll].append((c, next(reversed(col))))
+                elif len(col) > n:              # a card of two elements (COSMIC's CROD, CTUBE)
+                    new = list(itertools.islice(reversed(col), len(col) - n))[::-1]
+                    added[coll] += [(c, key) for key in new]
 
     if one_by_one:
         parse(np.concatenate(one_by_one))

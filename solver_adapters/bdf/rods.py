@@ -11,14 +11,29 @@ from solver_adapters.bdf.numbers import int_column
 from solver_adapters.deck import Prod, Rod
 
 
+def _pair_of_rods(r, c, card: str) -> None:
+    """CROD or CTUBE: EID PID (default EID) G1 G2, and, as COSMIC NASTRAN allows (NASTRAN-95
+    User's Manual, CROD and CTUBE: two elements per entry), a second element EID PID G1 G2 in
+    fields 6-9 (all four, or none, as the first's)."""
+    _max_fields(c, 9)
+    for base in (2, 6):
+        if base == 6 and not any(c.text(i) for i in range(6, 10)):
+            break
+        if base == 6:
+            for i in (6, 8, 9):
+                if not c.text(i):
+                    raise c.error(i, f"fields 6-9 hold a second {card} (EID PID G1 G2, COSMIC NASTRAN's two "
+                                     f"elements per entry), and field {i} is blank")
+        eid = _int(c, base)
+        pid = _int(c, base + 1, eid)
+        ga, gb = _int(c, base + 2), _int(c, base + 3)
+        r.claim("element", eid, c, base)
+        r.deck.rods[eid] = Rod(eid, ga, gb, pid=pid, card=card, src=c.src)
+
+
 def _crod(r, c) -> None:
-    """CROD: EID PID (default EID) G1 G2."""
-    _max_fields(c, 5)
-    eid = _int(c, 2)
-    pid = _int(c, 3, eid)
-    ga, gb = _int(c, 4), _int(c, 5)
-    r.claim("element", eid, c, 2)
-    r.deck.rods[eid] = Rod(eid, ga, gb, pid=pid, card="CROD", src=c.src)
+    """CROD: EID PID (default EID) G1 G2 [EID PID G1 G2] (:func:`_pair_of_rods`)."""
+    _pair_of_rods(r, c, "CROD")
 
 
 def bulk_crod(r, table, cards: np.ndarray) -> np.ndarray:
@@ -61,13 +76,9 @@ def _conrod(r, c) -> None:
 
 
 def _ctube(r, c) -> None:
-    """CTUBE: EID PID (default EID) G1 G2: a rod whose section is a PTUBE's."""
-    _max_fields(c, 5)
-    eid = _int(c, 2)
-    pid = _int(c, 3, eid)
-    ga, gb = _int(c, 4), _int(c, 5)
-    r.claim("element", eid, c, 2)
-    r.deck.rods[eid] = Rod(eid, ga, gb, pid=pid, card="CTUBE", src=c.src)
+    """CTUBE: EID PID (default EID) G1 G2 [EID PID G1 G2]: a rod whose section is a PTUBE's
+    (:func:`_pair_of_rods`)."""
+    _pair_of_rods(r, c, "CTUBE")
 
 
 def tube_section(od: float, t: float) -> tuple[float, float]:
