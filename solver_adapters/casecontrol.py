@@ -87,6 +87,9 @@ _DESIGN = {  # design optimisation (SOL 200): read by their first four letters, 
     "DESO": "DESOBJ", "DESS": "DESSUB", "DESG": "DESGLB", "DSAP": "DSAPRT", "DRSP": "DRSPAN",
     "DESV": "DESVAR", "DESM": "DESMOD",
 }
+_STATIC_SOLUTIONS = ("1", "101", "SESTATIC", "SESTATICS", "STATICS")
+"""SOL values of a linear static solution (COSMIC's ``SOL 1,0`` by its rigid format 1)."""
+
 STATIC_ANALYSES = ("STATICS", "STATIC", "NLSTATICS", "NLSTATIC", "NLSTAT")
 """ANALYSIS values of a static subcase (MSC QRG ANALYSIS: STATICS in SOL 200; NLSTATIC in
 SOL 400); a subcase of any other (MODES, BUCK, DFREQ, SAERO, FLUTTER ...) is not imported."""
@@ -265,6 +268,10 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
     current = defaults
     plot_packet = in_subcom = False
     autospc: tuple[str, int] | None = None
+    # the first command the import cannot take (a superelement selection, a command that changes
+    # the static solution, an unknown one): raised once the whole case control is read, unless
+    # the deck has no static load case at all, which is then what the message says first
+    refused: list[DeckFormatError] = []
     for line, stmt in _statements(lines, cend + 1, begin):
         if plot_packet:
             skip("plot commands", stmt.split(None, 1)[0].upper())
@@ -332,9 +339,10 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
                 skip("output controls", f"OUTPUT{options.upper()}")
         elif key in ("SEAL", "SUPE", "SEKR", "SEMG", "SEEX", "SELG", "SELR", "SEDR", "SEFI"):
             if value.strip().upper() not in ("ALL", "0", ""):
-                raise DeckFormatError("superelement selections other than ALL are not supported "
-                                      "(the import reads the residual structure only)", file=file,
-                                      line=line, card=word, value=stmt)
+                refused.append(DeckFormatError("superelement selections other than ALL are not supported "
+                                               "(the import reads the residual structure only)", file=file,
+                                               line=line, card=word, value=stmt))
+                continue
             skip("superelement controls", f"{word} = {value.strip().upper()}")
         elif word == "PARAM":
             skip("case-control parameters", re.split(r"[,\s]+", value.strip(", "))[0].upper() or "PARAM")
@@ -357,10 +365,10 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
             skip("design optimisation", name if _is(word, name) else f"{name} (written {word})")
             current.setdefault("OTHERS", ({}, line))[0][name] = value.strip()
         elif _lookup(_UNSUPPORTED, word) is not None:
-            raise DeckFormatError(f"the case-control command {_lookup(_UNSUPPORTED, word)} changes "
-                                  f"the static solution and cannot be imported; remove it from the "
-                                  f"deck (or model its effect with supported cards) and import again",
-                                  file=file, line=line, card=word, value=stmt)
+            refused.append(DeckFormatError(f"the case-control command {_lookup(_UNSUPPORTED, word)} changes "
+                                           f"the static solution and cannot be imported; remove it from the "
+                                           f"deck (or model its effect with supported cards) and import again",
+                                           file=file, line=line, card=word, value=stmt))
         else:
             for kind, table in (("output requests", _OUTPUT_REQUESTS),
                                 ("output controls", _OUTPUT_CONTROLS),
@@ -374,10 +382,10 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
             else:
                 close = difflib.get_close_matches(word, known_commands(), n=3, cutoff=0.6)
                 hint = f"; did you mean {' or '.join(close)}?" if close else ""
-                raise DeckFormatError("unknown case-control command (not read by blackbox import; "
-                                      "docs/import.md lists the commands it skips as having no "
-                                      f"effect on a linear static solution){hint}",
-                                      file=file, line=line, card=word, value=stmt)
+                refused.append(DeckFormatError("unknown case-control command (not read by blackbox import; "
+                                               "docs/import.md lists the commands it skips as having no "
+                                               f"effect on a linear static solution){hint}",
+                                               file=file, line=line, card=word, value=stmt))
 
     def make(sid: int, line: int, own: dict) -> Subcase:
         merged = {**defaults, **own}
@@ -399,5 +407,14 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
         cases = tuple(make(sid, line, own) for sid, line, own in subcases)
     else:
         cases = (make(1, 0, {}),)
+    if refused:
+        first = refused[0]
+        static_sol = not sol or sol.split(",")[0].strip() in _STATIC_SOLUTIONS
+        if not static_sol and not any(c.load is not None or c.temp_load is not None for c in cases):
+            # nothing of this deck could be a study: that comes first, the command besides
+            raise DeckFormatError(f"no static load case to import: the deck's solution is SOL {sol}, not "
+                                  f"linear statics, and no subcase selects a load set (LOAD =); besides, "
+                                  f"{first}", file=file, line=first.line)
+        raise first
     return CaseControl(file, cases, bool(subcases), sol, tuple(executive),
                        {k: tuple(v) for k, v in skipped.items()}, begin + 1, autospc)

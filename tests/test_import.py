@@ -380,6 +380,24 @@ def test_subcases_of_different_constraint_sets_import_one_set(tmp_path):
         import_deck.run(p, spc=7)
 
 
+@pytest.mark.parametrize("sol, loads, line, first", [
+    ("103", "", 4, "no static load case to import"),       # a modal deck: nothing to import at all
+    ("101", "LOAD = 5\n", 5, "superelement selections other than ALL"),
+])
+def test_a_refused_command_or_no_static_load_case_first(tmp_path, sol, loads, line, first):
+    """A command the import refuses (here SUPER = 1) is what the message says, at its line, unless
+    the deck has no static load case at all (a SOL 103 deck selecting no LOAD): that is said
+    first, the refused command besides."""
+    p = tmp_path / "deck.bdf"
+    p.write_text(f"SOL {sol}\nCEND\nSPC = 1\n{loads}SUPER = 1\nBEGIN BULK\n" + BULK +
+                 "FORCE   5       3               10.     0.      0.      1.\nENDDATA\n")
+    with pytest.raises(DeckFormatError) as e:
+        import_deck.run(p)
+    where, _, said = str(e.value).partition(": ")
+    assert f"deck.bdf:{line}" in where and said.startswith(first), str(e.value)
+    assert "superelement selections other than ALL" in said and "SUPER = 1" in str(e.value)
+
+
 def test_cend_without_begin_bulk(tmp_path):
     p = tmp_path / "d.bdf"
     p.write_text("SOL 101\nCEND\nLOAD = 1\n")
