@@ -22,7 +22,7 @@ from blackbox.commands import import_deck
 from solver_adapters.protocol import DeckFormatError
 
 from conftest import needs_mystran
-from test_deck_tail import RTOL, _agree, _mystran, _solve
+from test_deck_tail import _agree, _mystran, _solve
 
 pytestmark = pytest.mark.usefixtures("runs_under_tmp_path")
 
