@@ -20,14 +20,18 @@ from solver_adapters.reference import ReferenceAdapter
 
 pytestmark = pytest.mark.usefixtures("runs_under_tmp_path")
 
-FRAME = """GRID,1,,0.,0.,0.,,123456
-GRID,2,,1.,0.,0.
+FRAME = """CORD2R,5,,0.,0.,0.,0.3,0.4,1.,+C5
++C5,1.,0.2,0.
+GRID,1,,0.,0.,0.,5,123456
+GRID,2,,1.,0.,0.,5
 GRID,3,,1.,1.,0.
 GRID,9,,0.,0.,5.
 MAT1,1,2.1E11,,.3
 PBAR,7,1,1.E-3,2.E-6,3.E-6,4.E-6
 {bars}
 """
+"""Grids 1 and 2 in a turned displacement system (CD 5), so that an orientation vector and
+offsets read in GA's system (G) differ from the same numbers read in basic (B)."""
 MSC = "CBAR,1,7,1,2,0.,1.,1.,GGG,+A\n+A,,,0.,0.,0.,0.,0.,.1\nCBAR,2,7,2,3,9,,,GGG"
 COSMIC = "CBAR,1,7,1,2,0.,1.,1.,1,+A\n+A,,,0.,0.,0.,0.,0.,.1\nCBAR,2,7,2,3,9,,,2"
 
@@ -43,6 +47,8 @@ def test_cbar_flag_f_is_offt_ggg():
     """F = 1 (a vector, with an offset at end B) and F = 2 (a grid G0) give the MSC deck's
     solution exactly; BAROR's F alike."""
     np.testing.assert_array_equal(_tip(FRAME.format(bars=COSMIC)), _tip(FRAME.format(bars=MSC)))
+    basic = _tip(FRAME.format(bars=MSC.replace("GGG", "BGG", 1)))
+    assert np.abs(basic - _tip(FRAME.format(bars=MSC))).max() > 1e-3 * np.abs(basic).max()   # G is not B
     baror = "BAROR,,7,,,0.,1.,1.,1\nCBAR,1,,1,2\nCBAR,2,,2,3,0.,1.,1."
     plain = "CBAR,1,7,1,2,0.,1.,1.\nCBAR,2,7,2,3,0.,1.,1."
     np.testing.assert_array_equal(_tip(FRAME.format(bars=baror)), _tip(FRAME.format(bars=plain)))
