@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 
 from solver_adapters.protocol import DeckFormatError
 
-__all__ = ["Subcase", "CaseControl", "read_case_control", "bulk_start"]
+__all__ = ["Subcase", "CaseControl", "read_case_control", "bulk_start", "STATIC_SOLUTIONS", "solution_key"]
 
 _BEGIN_BULK = re.compile(r"BEGIN\s+BULK\b.*", re.IGNORECASE)
 _COMMAND = re.compile(r"\s*([A-Za-z][A-Za-z0-9]*)\s*(\([^)]*\))?\s*(=)?\s*(.*?)\s*$", re.DOTALL)
@@ -87,8 +87,14 @@ _DESIGN = {  # design optimisation (SOL 200): read by their first four letters, 
     "DESO": "DESOBJ", "DESS": "DESSUB", "DESG": "DESGLB", "DSAP": "DSAPRT", "DRSP": "DRSPAN",
     "DESV": "DESVAR", "DESM": "DESMOD",
 }
-_STATIC_SOLUTIONS = ("1", "101", "SESTATIC", "SESTATICS", "STATICS")
-"""SOL values of a linear static solution (COSMIC's ``SOL 1,0`` by its rigid format 1)."""
+STATIC_SOLUTIONS = ("1", "101", "SESTATIC", "SESTATICS", "STATICS")
+"""SOL values of a linear static solution, as :func:`solution_key` gives them."""
+
+
+def solution_key(sol: str) -> str:
+    """The solution a SOL statement names, upper-cased: COSMIC NASTRAN's ``SOL n,m`` (rigid
+    format n, its subset m) names rigid format n (1: static analysis, as MSC's SOL 1)."""
+    return sol.upper().split(",")[0].strip()
 
 STATIC_ANALYSES = ("STATICS", "STATIC", "NLSTATICS", "NLSTATIC", "NLSTAT")
 """ANALYSIS values of a static subcase (MSC QRG ANALYSIS: STATICS in SOL 200; NLSTATIC in
@@ -409,7 +415,7 @@ def read_case_control(text: str, file: str) -> CaseControl | None:
         cases = (make(1, 0, {}),)
     if refused:
         first = refused[0]
-        static_sol = not sol or sol.split(",")[0].strip() in _STATIC_SOLUTIONS
+        static_sol = not sol or solution_key(sol) in STATIC_SOLUTIONS
         if not static_sol and not any(c.load is not None or c.temp_load is not None for c in cases):
             # nothing of this deck could be a study: that comes first, the command besides
             raise DeckFormatError(f"no static load case to import: the deck's solution is SOL {sol}, not "

@@ -102,6 +102,16 @@ def read_pload1(c) -> BarLoad:
     return BarLoad(sid, Pload1(eid, kind, scale, x1, p1, None if x2 == x1 else x2, p2), c)
 
 
+def coord_system(deck, card, field: int, cid: int, sel: str = ""):
+    """The coordinate system ``cid`` of ``deck`` that field ``field`` of ``card`` names; a located
+    error when the deck has none (``sel``: what selected the load, for the message)."""
+    system = (getattr(deck, "coords", None) or {}).get(cid)
+    if system is None:
+        raise card.error(field, f"coordinate system CID {cid} not found (no CORD1R/C/S or "
+                                f"CORD2R/C/S with that ID){sel}")
+    return system
+
+
 @dataclass(frozen=True)
 class Gravity:
     """One GRAV card: SID CID A N1 N2 N3 (MB: no effect here)."""
@@ -114,10 +124,7 @@ class Gravity:
         c = self.raw
         accel = np.array(self.vector, float)
         if self.cid:
-            system = (getattr(deck, "coords", None) or {}).get(self.cid)
-            if system is None:
-                raise c.error(3, f"coordinate system CID {self.cid} not found (no CORD1R/C/S or "
-                                 f"CORD2R/C/S with that ID){sel}")
+            system = coord_system(deck, c, 3, self.cid, sel)
             if system.kind != "R":
                 raise c.error(3, f"CID {self.cid} is a {system.card}: a GRAV direction is given in a "
                                  f"rectangular system only{sel}")
@@ -157,10 +164,7 @@ class Rotation:
         c = self.raw
         r = np.array(self.vector, float)
         if self.cid:
-            system = (getattr(deck, "coords", None) or {}).get(self.cid)
-            if system is None:
-                raise c.error(4, f"coordinate system CID {self.cid} not found (no CORD1R/C/S or "
-                                 f"CORD2R/C/S with that ID){sel}")
+            system = coord_system(deck, c, 4, self.cid, sel)
             # "rectangular components" (MSC QRG RFORCE): a cylindrical or spherical CID's
             # components along the rectangular axes it is defined by
             r = np.asarray(system.axes).T @ r

@@ -41,7 +41,8 @@ import numpy as np
 
 # the field readers every load card shares (located errors for blank, bad or extra fields)
 from solver_adapters.bdf.fields import valid_components
-from solver_adapters.elementloads import MassReader, _int, _max_fields, _real, read_grav, read_pload1, read_rforce
+from solver_adapters.elementloads import (MassReader, _int, _max_fields, _real, coord_system, read_grav, read_pload1,
+                                         read_rforce)
 from solver_adapters.protocol import DeckFormatError
 from solver_adapters.thermalloads import TEMPERATURE_CARDS, ThermalCards, read_thermal_cards
 
@@ -264,10 +265,7 @@ def _basic_vector(p: PointLoad, deck) -> np.ndarray:
         v = np.array(p.vector, dtype=float)
         if p.cid == 0:
             return v
-        system = (getattr(deck, "coords", None) or {}).get(p.cid)
-        if system is None:
-            raise c.error(4, f"coordinate system CID {p.cid} not found (no CORD1R/C/S or "
-                             f"CORD2R/C/S with that ID)")
+        system = coord_system(deck, c, 4, p.cid)
         if p.grid not in deck.grids:
             raise c.error(3, f"grid {p.grid} does not exist (no GRID)")
         try:

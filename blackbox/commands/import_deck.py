@@ -29,7 +29,8 @@ from blackbox.errors import StudyError
 from solver_adapters.bdf import deck_from_cards
 from solver_adapters.bdf.params import inrel_value
 from solver_adapters.bdf.tokens import BEGIN_BULK as _BEGIN_BULK, _INCLUDE, _split, _strip_comment, is_include
-from solver_adapters.casecontrol import CaseControl, bulk_start
+from solver_adapters.casecontrol import STATIC_SOLUTIONS as _STATIC_SOLS, CaseControl, bulk_start
+from solver_adapters.casecontrol import solution_key as _sol_key
 from solver_adapters.deck import Deck
 from solver_adapters.loadcards import LOAD_CARDS, OTHER_LOAD_CARDS, read_input_file
 from solver_adapters.protocol import DeckFormatError
@@ -387,15 +388,6 @@ def _inertia_relief(cards) -> tuple[int, list]:
                                   "set of DOFs (six for a free 3-D structure): the displacements "
                                   "are then relative to them")
     return value, params
-
-
-_STATIC_SOLS = ("1", "101", "SESTATIC", "SESTATICS", "STATICS")
-
-
-def _sol_key(sol: str) -> str:
-    """The solution a SOL statement names, upper-cased: COSMIC NASTRAN's ``SOL n,m`` (rigid
-    format n, its subset m) names rigid format n (1: static analysis, as MSC's SOL 1)."""
-    return sol.upper().split(",")[0].strip()
 
 
 _SOL_NAMES = {"3": "normal modes", "103": "normal modes", "SEMODES": "normal modes", "MODES": "normal modes",
