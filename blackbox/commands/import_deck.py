@@ -209,6 +209,20 @@ def _is_enddata(body: str) -> bool:
         return False
 
 
+def _one_fate_per_line(shown: str, numbers: list[int], dropped: set[int], kept: set[int]) -> None:
+    """A COSMIC free-field line that generates several cards (``=(N)``) is copied or left out
+    whole: an error when the import keeps some of its cards and leaves out others (a load set
+    and the next constraint set of one replication)."""
+    seen: set[int] = set()
+    several = {n for n in numbers if n in seen or seen.add(n)}
+    both = sorted(dropped & kept & several)
+    if both:
+        raise DeckFormatError("this free-field line generates cards of which the import keeps some "
+                              "(the model, the selected sets) and leaves out others (load cards, "
+                              "sets not selected); write those cards on lines of their own",
+                              file=shown, line=both[0])
+
+
 def _model_body(lines: list[str], shown: str, start: int, bulk, kept: dict, dropped: dict,
                 out: list[str]) -> bool:
     """Append the bulk data of one file to ``out``; True once ENDDATA is met. The input file
@@ -220,8 +234,13 @@ def _model_body(lines: list[str], shown: str, start: int, bulk, kept: dict, drop
     own = start is not None
     drop = dropped.get(shown, set())
     keep = kept.get(shown, set())
+    numbers = None
+    if shown in bulk.expanded:
+        # COSMIC free-field input: the card images the reader made of it, each numbered by the
+        # line it came from (MYSTRAN and diagnose's edited decks read no replication)
+        lines, numbers = bulk.expanded[shown]
     for k in range(start or 0, len(lines)):
-        raw, n = lines[k], k + 1
+        raw, n = lines[k], (numbers[k] if numbers else k + 1)
         if n in drop:
             continue
         head = raw.lstrip()[:1]
@@ -749,6 +768,9 @@ def run(deck_path: str | Path, *, joints: list[str] | tuple[str, ...] = (),
     kept_lines = bulk.lines_of([c for c in kept if c.file != str(path)]) if len(files) > 1 else {}
     if cc is not None and cc.autospc is not None and cc.autospc[0] == "NO":
         model_lines += ["$ AUTOSPC = NO of the case control:", "PARAM,AUTOSPC,NO"]
+    for shown, (_, numbers) in bulk.expanded.items():
+        _one_fate_per_line(shown, numbers, dropped.get(shown, set()),
+                           bulk.lines_of([c for c in kept if c.file == shown]).get(shown, set()))
     _model_body(lines, str(path), start, bulk, kept_lines, dropped, model_lines)
     if plan is not None:
         model_lines += plan.lines

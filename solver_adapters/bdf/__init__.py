@@ -32,7 +32,7 @@ line's (for large field: 2-5, 6-9, ...). The line number is the physical line ho
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field as dataclass_field
 from pathlib import Path
 
 import numpy as np
@@ -124,11 +124,13 @@ def read_deck_text(text: str, name: str = "<string>", base_dir: Path | None = No
 class BulkInput:
     """Every bulk-data card of an input file as read (not interpreted), the files read (the
     input file first), the text of each included file as read (by the name in ``files``) and
-    which INCLUDE line read which file (``(file, line) -> name``)."""
+    which INCLUDE line read which file (``(file, line) -> name``); ``expanded``: the lines read,
+    each with its line number, of a file with COSMIC free-field lines (:mod:`.freefield`)."""
     cards: list
     files: list[str]
     texts: dict[str, str]
     included: dict[tuple[str, int], str]
+    expanded: dict[str, tuple[list[str], list[int]]] = dataclass_field(default_factory=dict)
 
     def lines_of(self, cards) -> dict[str, set[int]]:
         """File -> the physical lines ``cards`` were read from."""
@@ -167,7 +169,7 @@ def read_bulk(path: str | Path, text: str | None = None, include_dirs=None) -> B
         inc = _includes(policy, p.resolve())
         inc.files.append(str(p))
         cards = list(group_cards(LineReader(inc).lines(text, str(p), p.parent)))
-    return BulkInput(cards, inc.files, inc.texts, inc.included)
+    return BulkInput(cards, inc.files, inc.texts, inc.included, inc.expanded)
 
 
 def bulk_cards(path: str | Path, text: str | None = None, include_dirs=None):

@@ -103,6 +103,11 @@ class _Builder:
             bodies, joined = raw, text
         low = joined.lower()
         start = bulk_start(bodies, file) if "cend" in low and not included else 0
+        bodies, numbers = self.inc.expand(bodies, start, file)
+        if numbers is not None:
+            joined = "\n".join(bodies)
+            low = joined.lower()
+        number = (lambda k: numbers[k]) if numbers is not None else (lambda k: k + 1)
         n = len(bodies)
         skip: set[int] = set()
         includes: list[int] = []
@@ -140,7 +145,7 @@ class _Builder:
             if not lines[i].strip():
                 blank[i] = True
                 continue
-            line = _split(lines[i], file, int(rows[i]) + 1)          # raises the reference error
+            line = _split(lines[i], file, number(int(rows[i])))      # raises the reference error
             if line.first.rstrip("*") == "ENDDATA":
                 end = i
                 break
@@ -158,7 +163,7 @@ class _Builder:
                    if not CARD_NAME.fullmatch(n.decode("utf-8", "replace"))]
             if bad:
                 i = int(np.flatnonzero(np.isin(first[:end], bad) & ~blank[:end])[0])
-                raise not_bulk_data(file, int(rows[i]) + 1)
+                raise not_bulk_data(file, number(int(rows[i])))
         # the include lines cut the file into chunks (a card never continues across them)
         cuts = np.searchsorted(rows, [k for k in includes])
         lo = 0
@@ -168,13 +173,14 @@ class _Builder:
             keep = keep[~blank[lo:stop]]
             if keep.size:
                 whole = keep.size == len(lines)
-                self.chunks.append(_Chunk(fidx, rows[keep] + 1, lines if whole else [lines[i] for i in keep.tolist()],
+                lno = rows[keep] + 1 if numbers is None else np.asarray(numbers, np.int64)[rows[keep]]
+                self.chunks.append(_Chunk(fidx, lno, lines if whole else [lines[i] for i in keep.tolist()],
                                           *((first, cont, data, nd) if whole else
                                             (first[keep], cont[keep], data[keep], nd[keep]))))
             if inc is None or cut > end:                 # no INCLUDE before ENDDATA is left
                 self.ended = end < len(lines)
                 return
-            self.include(bodies[inc].strip(), file, inc + 1, base_dir)
+            self.include(bodies[inc].strip(), file, number(inc), base_dir)
             if self.ended:
                 return
             lo = cut

@@ -26,6 +26,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from solver_adapters.bdf import freefield
 from solver_adapters.protocol import DeckFormatError
 
 
@@ -215,6 +216,18 @@ class Includes:
     stack: list[Path] = field(default_factory=list)
     texts: dict[str, str] = field(default_factory=dict)            # shown name -> text read
     included: dict[tuple[str, int], str] = field(default_factory=dict)  # (file, INCLUDE line) -> shown
+    # shown name -> (lines, their line numbers) of a file with COSMIC free-field lines, expanded
+    expanded: dict[str, tuple[list[str], list[int]]] = field(default_factory=dict)
+
+    def expand(self, bodies: list[str], start: int, file: str) -> tuple[list[str], list[int] | None]:
+        """A file's comment-free lines with COSMIC free-field lines expanded (:mod:`.freefield`)
+        and the line number of each; the lines as they are and None when it has none."""
+        got = freefield.expand(bodies, start, file, _split, is_include,
+                               lambda s: BEGIN_BULK.fullmatch(s) is not None)
+        if got is None:
+            return bodies, None
+        self.expanded[file] = got
+        return got
 
     def open(self, stripped: str, file: str, lineno: int, base_dir: Path) -> tuple[str, str, Path]:
         """``(text, shown name, resolved path)`` of the file an INCLUDE line names, read; a
@@ -264,8 +277,9 @@ class LineReader:
         raw_lines = text.removeprefix("\ufeff").splitlines()
         uncommented = [_strip_comment(r) for r in raw_lines]
         start = 0 if included else bulk_start(uncommented, file)
-        for k in range(start, len(raw_lines)):
-            body, lineno = uncommented[k], k + 1
+        uncommented, numbers = self.inc.expand(uncommented, start, file)
+        for k in range(start, len(uncommented)):
+            body, lineno = uncommented[k], (numbers[k] if numbers else k + 1)
             stripped = body.strip()
             if not stripped or BEGIN_BULK.fullmatch(stripped):
                 continue

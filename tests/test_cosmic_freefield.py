@@ -1,0 +1,245 @@
+"""COSMIC NASTRAN's free-field input (solver_adapters.bdf.freefield): blanks as separators,
+``=``, ``==``, ``*(i)``, ``%(E)``, ``/``, ``=(N)``, ``n)X``, ``)+X``, ``)`` in field 1, and
+continuation lines away from their parents.
+
+References: the NASTRAN-95 User's Manual, section 2.4.1.2 (rules 1-26) and its examples 1-7 in
+2.4.1.2.1, whose generated card images are the expected values below; a frame written in free
+field must be the same structure as its fixed-field twin, read field by field, so their
+solutions are compared bit for bit; MYSTRAN, which reads no free-field replication, solving the
+study ``blackbox import`` made of it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from blackbox.commands import import_deck
+from conftest import needs_mystran
+from solver_adapters.bdf import read_deck_text
+from solver_adapters.bdf.freefield import expand, needed
+from solver_adapters.bdf.numbers import typed
+from solver_adapters.bdf.tokens import _split, _strip_comment
+from solver_adapters.protocol import DeckFormatError
+from test_deck_tail import _solve
+
+pytestmark = pytest.mark.usefixtures("runs_under_tmp_path")
+
+
+def _images(*lines: str) -> list[list]:
+    """The card images (fields 1-10, typed) the lines expand to."""
+    out, _ = expand([_strip_comment(x) for x in lines], 0, "t.dat", _split)
+    images = []
+    for body in out:
+        line = _split(body, "t.dat", 1)
+        fields = [line.first, *line.data, line.cont]
+        while fields and fields[-1] == "":
+            fields.pop()
+        images.append([typed(f) for f in fields])
+    return images
+
+
+def _cards(table: str) -> list[list]:
+    """The manual's table of generated cards: one card per line, fields separated by '|'."""
+    return [[typed(f) for f in row.split("|")] for row in table.strip().splitlines()]
+
+
+@pytest.mark.parametrize("lines, table", [
+    # example 1: "=", "*(i)", "==", then "=(3)" repeating the line's increments
+    (("GRID, 2, 3, 1.0 2.0,, 4,316", "=, *(1), =, *(.2), == $", "=(3)"),
+     """GRID|2|3|1.0|2.0||4|316
+        GRID|3|3|1.2|2.0||4|316
+        GRID|4|3|1.4|2.0||4|316
+        GRID|5|3|1.6|2.0||4|316
+        GRID|6|3|1.8|2.0||4|316"""),
+    # example 2: the same cards by "%(E)", an increment that ends at E
+    (("grid,2,3,1.0,2.0,,4,316", "=(4),*(1),=,%(1.8),=="),
+     """GRID|2|3|1.0|2.0||4|316
+        GRID|3|3|1.2|2.0||4|316
+        GRID|4|3|1.4|2.0||4|316
+        GRID|5|3|1.6|2.0||4|316
+        GRID|6|3|1.8|2.0||4|316"""),
+    # example 3: a field index "7)"
+    (("Grid, 2 3 1.0 2.0, 7) 4, 316",), "GRID|2|3|1.0|2.0||4|316"),
+    # example 4: "10)+abc", and ")" in field 1 continuing the card before
+    (("Tabled3,62, 126.9, 30.0 10)+abc", "),  1.23e+4,  5.67+8, 1234567. endt"),
+     """TABLED3|62|126.9|30.0||||||+ABC
+        +ABC|1.23E+4|5.67+8|1234567.|ENDT"""),
+    # example 5: ")+aBc" for field 10
+    (("taBLed3, 62 126.9 30.0 )+aBc",), "TABLED3|62|126.9|30.0||||||+ABC"),
+    # example 7: continuation IDs +A-X counted up, continuations placed after their parents
+    (("PBAR, 3, 4, 5.0 , 6.0, )+ABC-1", "= , *(1), =, *(2.)  ==", "=(2)",
+      "+ABC-1, 7.7  8.8  9  )+DEF-22", "=(3),=="),
+     """PBAR|3|4|5.0|6.0|||||+ABC-1
+        +ABC-1|7.7|8.8|9||||||+DEF-22
+        PBAR|4|4|7.0|6.0|||||+ABC-2
+        +ABC-2|7.7|8.8|9||||||+DEF-23
+        PBAR|5|4|9.0|6.0|||||+ABC-3
+        +ABC-3|7.7|8.8|9||||||+DEF-24
+        PBAR|6|4|11.0|6.0|||||+ABC-4
+        +ABC-4|7.7|8.8|9||||||+DEF-25"""),
+    # rule 25: "/" is the field before's operation ("///" three times)
+    (("CTRAPRG, 1,1,3,4,2,.0,12", "=(2), *(1) *(2),///, =="),
+     """CTRAPRG|1|1|3|4|2|.0|12
+        CTRAPRG|2|3|5|6|4|.0|12
+        CTRAPRG|3|5|7|8|6|.0|12"""),
+])
+def test_the_manuals_examples_expand_to_its_card_images(lines, table):
+    assert _images(*lines) == _cards(table)
+
+
+FREE = """ID    FRAME,FREEFLD
+APP   DISP
+SOL   1,0
+CEND
+TITLE = OCTAGONAL FRAME, PULLED APART ACROSS EACH DIAMETER (FREE-FIELD INPUT)
+SPC = 1
+LOAD = 1
+DISP = ALL
+BEGIN BULK
+GRDSET,8)345
+GRID,  1  0   0.     75.     0.
+GRID,  2  0  53.033  53.033  ==
+GRID,  3  0  75.      0.     ==
+GRID,  4  0  53.033 -53.033  ==
+GRID,  5  0   0.    -75.     ==
+GRID,  6  0 -53.033 -53.033  ==
+GRID,  7  0 -75.      0.     ==
+GRID,  8  0 -53.033  53.033  ==
+SPC,1,1,126
+CBAR,  1  1   1   2   0.  0.  1.
+=(2),*(1),=, *(1),/,==
+CBAR,  4  2   4   5   0.  0.  1.
+=(3),*(1),=, *(1),/,==
+CBAR,  8  2   8   1   0.  0.  1.
+PBAR, 1  1   1.  .83333  .83333  1.6 )+P-1
+=(1),*(1),=,*(.5),==
++P-1, ,,,,,,, )+Q-1
+=(1),==
++Q-1, .8333 .8333
+=(1), *(.05)  /
+MAT1,  1  1.E7,, 0.3
+FORCE1, 1  1   26516.5  5   1
+=(3),  =,*(1),       = *(1),/
+FORCE1, 1  5   26516.5  1   5
+=(3),  =,*(1),       = *(1),/
+ENDDATA
+"""
+
+FIXED = """SOL 101
+CEND
+SPC = 1
+LOAD = 1
+DISP = ALL
+BEGIN BULK
+GRDSET                                                  345
+GRID    1       0       0.      75.     0.
+GRID    2       0       53.033  53.033  0.
+GRID    3       0       75.     0.      0.
+GRID    4       0       53.033  -53.033 0.
+GRID    5       0       0.      -75.    0.
+GRID    6       0       -53.033 -53.033 0.
+GRID    7       0       -75.    0.      0.
+GRID    8       0       -53.033 53.033  0.
+SPC     1       1       126
+CBAR    1       1       1       2       0.      0.      1.
+CBAR    2       1       2       3       0.      0.      1.
+CBAR    3       1       3       4       0.      0.      1.
+CBAR    4       2       4       5       0.      0.      1.
+CBAR    5       2       5       6       0.      0.      1.
+CBAR    6       2       6       7       0.      0.      1.
+CBAR    7       2       7       8       0.      0.      1.
+CBAR    8       2       8       1       0.      0.      1.
+PBAR    1       1       1.      .83333  .83333  1.6
++
++       .8333   .8333
+PBAR    2       1       1.5     .83333  .83333  1.6
++
++       .8833   .8833
+MAT1    1       1.E7            0.3
+FORCE1  1       1       26516.5 5       1
+FORCE1  1       2       26516.5 6       2
+FORCE1  1       3       26516.5 7       3
+FORCE1  1       4       26516.5 8       4
+FORCE1  1       5       26516.5 1       5
+FORCE1  1       6       26516.5 2       6
+FORCE1  1       7       26516.5 3       7
+FORCE1  1       8       26516.5 4       8
+ENDDATA
+"""
+
+
+def _import(tmp_path, name: str, text: str):
+    path = tmp_path / name
+    path.write_text(text)
+    return import_deck.run(path)
+
+
+def test_a_free_field_frame_is_its_fixed_field_twin(tmp_path):
+    """Read field by field, the free-field deck's cards are the twin's: the same loads (FORCE1
+    generated by "=(3)") and the same solution to the last bit; model.bdf holds the expanded
+    card images, which read without this module."""
+    free, fixed = _import(tmp_path, "free.dat", FREE), _import(tmp_path, "fixed.dat", FIXED)
+    assert free.loads_csv == fixed.loads_csv
+    cf, rf, uf = _solve(free)
+    cx, rx, ux = _solve(fixed)
+    assert (cf, rf) == (cx, rx)
+    np.testing.assert_array_equal(uf, ux)
+    assert np.abs(uf).max() > 1e-3                          # the frame does deform
+    body = free.model_bdf.split("BEGIN BULK")[-1]
+    assert "=(" not in body and "==" not in body
+    assert not needed([_strip_comment(x) for x in free.model_bdf.splitlines()], 0)
+    deck = read_deck_text(free.model_bdf)
+    assert deck.pbars[2].k1 == pytest.approx(0.8833, rel=0, abs=0)    # .8333 + .05, printed exactly
+    assert deck.grids[6].ps == "345" and deck.grids[6].xyz == (-53.033, -53.033, 0.0)
+
+
+@needs_mystran
+def test_the_imported_free_field_frame_agrees_with_mystran(tmp_path):
+    """MYSTRAN runs model.bdf (the expanded card images) through the mystran adapter; it prints
+    7 significant digits, so 1e-6 of the largest displacement."""
+    from blackbox.adapters import make_adapter_for
+    from blackbox.study import load_study
+    result = _import(tmp_path, "free.dat", FREE)
+    (tmp_path / "study").mkdir()
+    result.write(tmp_path / "study")
+    study = load_study(tmp_path / "study")
+    cases, report, ours = _solve(result)
+    out = make_adapter_for(study, "mystran", cache=False).solve(study.loads, report)
+    got = out.values[:, [list(out.cases).index(c) for c in cases]]
+    assert np.abs(got - ours).max() <= 1e-6 * np.abs(ours).max()
+
+
+@pytest.mark.parametrize("lines, line, says", [
+    (("=(3),*(1)",), 1, "duplicate the card before, and there is none"),
+    (("GRID,1,,0.,0.,0.", "GRID,2,,,0.,0.", "=(2),*(1),,*(1.)"), 3, "not a number"),
+    (("GRID,1,,0.,0.,0.", "=(1),*(1),,*(x)"), 2, "is not a number"),
+    (("GRID,1,,0.,0.,0.", "=(1),*(1),,x"), 2, "not a real"),
+])
+def test_notation_and_field_errors_name_the_line_written(lines, line, says):
+    """An error of the notation, or of a field of a generated card, is located at the line the
+    user wrote (``=(N)`` makes N cards of one line)."""
+    with pytest.raises(DeckFormatError) as err:
+        read_deck_text("\n".join(lines) + "\n", name="t.dat")
+    assert err.value.line == line and says in str(err.value)
+
+
+def test_a_line_whose_cards_the_import_would_split_is_an_error(tmp_path):
+    """"=(2)" makes SPC1 sets 2 and 3 of one line; SPC = 2 keeps one and drops the other, which
+    cannot be done to one line of the deck as written: a located error, never a lost set."""
+    text = FIXED.replace("SPC = 1", "SPC = 2").replace(
+        "SPC     1       1       126", "SPC1,1,126,1\n=(2),*(1),=,*(1)")
+    path = tmp_path / "split.dat"
+    path.write_text(text)
+    with pytest.raises(DeckFormatError) as err:
+        import_deck.run(path)
+    assert err.value.line == text.splitlines().index("=(2),*(1),=,*(1)") + 1
+    assert "write those cards on lines of their own" in str(err.value)
+
+
+@pytest.mark.parametrize("line", ["GRID,1,,0.,0.,0.", "GRID*,1,,0.,0.,+", "DEQATN,10,F(A,B) = A + B",
+                                  "CBAR    1       1       1       2       0.      0.      1."])
+def test_other_lines_are_left_as_they_are(line):
+    """MSC free field, large field, a DEQATN's equation and fixed field are no COSMIC free
+    field: a deck of them is not expanded at all."""
+    assert not needed([line], 0)
