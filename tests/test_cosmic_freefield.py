@@ -11,6 +11,8 @@ study ``blackbox import`` made of it.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -243,3 +245,49 @@ def test_other_lines_are_left_as_they_are(line):
     """MSC free field, large field, a DEQATN's equation and fixed field are no COSMIC free
     field: a deck of them is not expanded at all."""
     assert not needed([line], 0)
+
+
+T01231A = Path(__file__).parent / "data" / "decks" / "t01231a.inp"
+"""NASA's NASTRAN-95 demonstration deck T01-23-1A: a plane truss of CBARs in COSMIC free field
+(``GRDSET,8)246``, ``=`` cards, PBAR continuations four cards below their parents), settled by
+four SPCDs of -1.0 beside one FORCE."""
+
+
+def _spc_twin(model_bdf: str) -> str:
+    """MYSTRAN's input for T01-23-1A: the import's expanded cards before its enforced-displacement
+    section, the four settlements as SPC values (MYSTRAN 18 reads SPCD without applying it),
+    and the FORCE."""
+    body = model_bdf.split("$ ---- blackbox import: enforced")[0].split("\n")
+    body = [b for b in body if b and not b.startswith("$")]
+    return ("SOL 101\nCEND\nSPC = 1\nLOAD = 10\nDISP = ALL\nBEGIN BULK\n" + "\n".join(body)
+            + "\nSPC,1,1,3,-1.0,2,3,-1.0\nSPC,1,4,3,-1.0,6,3,-1.0\n"
+            "FORCE,10,1,,110.0,0.0,0.0,-1.0\nENDDATA\n")
+
+
+@needs_mystran
+def test_nasas_free_field_truss_agrees_with_mystran(tmp_path):
+    """T01-23-1A imports (its SPCDs by large springs of 1e15) and its solution agrees with
+    MYSTRAN holding the settlements by SPC values, and with MYSTRAN solving the study itself
+    through the mystran adapter, which picks MYSTRAN's band solver for the large springs (its
+    default SuperLU was 1.1e-4 off there); 1e-6 of the largest translation (7 printed digits)."""
+    from blackbox.adapters import make_adapter_for
+    from blackbox.study import load_study
+    from solver_adapters.nastran import banded_solver
+    from test_deck_tail import _mystran
+    result = import_deck.run(T01231A)
+    assert result.cases == ("1",) and any("4 more by SPCD" in n for n in result.notes)
+    assert banded_solver(read_deck_text(result.model_bdf)) and not banded_solver(result.deck)
+    cases, report, ours = _solve(result)
+    index = {d: i for i, d in enumerate(report)}
+    table = _mystran(tmp_path / "twin", _spc_twin(result.model_bdf))[1]
+    grids = sorted(g for g in table if (g, 1) in index)
+    assert len(grids) == 11
+    ref = np.array([[table[g][c - 1] for c in (1, 2, 3)] for g in grids])
+    got = np.array([[ours[index[(g, c)], 0] for c in (1, 2, 3)] for g in grids])
+    scale = np.abs(ref).max()
+    assert np.abs(got - ref).max() <= 1e-6 * scale
+    (tmp_path / "study").mkdir()
+    result.write(tmp_path / "study")
+    study = load_study(tmp_path / "study")
+    out = make_adapter_for(study, "mystran", cache=False).solve(study.loads, report)
+    assert np.abs(out.values[:, 0] - ours[:, 0]).max() <= 1e-6 * scale
