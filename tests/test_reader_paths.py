@@ -65,7 +65,7 @@ FIXTURES = sorted((ROOT / "fixtures").glob("*/model.bdf"))
 @pytest.mark.parametrize("path", DECKS + FIXTURES, ids=lambda p: f"{p.parent.name}/{p.name}")
 @pytest.mark.parametrize("keep", [False, True])
 def test_every_data_deck_reads_the_same_on_both_paths(path, keep):
-    if path.suffix not in (".bdf", ".dat", ".nas", ".inc"):
+    if path.suffix not in (".bdf", ".dat", ".nas", ".inc", ".inp"):
         pytest.skip("not a deck")
     assert_same(path.read_text(errors="replace"), path.parent, keep=keep)
 
@@ -182,3 +182,28 @@ def test_includes_read_the_same_on_both_paths(tmp_path):
     fast, slow = both(main, tmp_path)
     assert not isinstance(slow, Exception) and ordered(fast) == ordered(slow)
     assert set(fast.cbars) == set() and set(fast.grids) == {1, 2, 3, 4}
+
+
+EARLY = """GRID           1       0      0.      0.      0.
+GRID           2       0      .2      0.      0.
+CBAR           1       1       1       2      0.      1.      0.
+PBARL         1       1 MSCBML0     BAR                                {m}
++            .1      .05      0.
+MAT1           1    7.+4              .3   2700.      0.      0.        {m}
++          2.7+3
+"""
+
+
+def test_a_continuation_marker_one_column_early_is_the_marker(tmp_path):
+    """TACS's PBARL decks (FEMAP-style) put the lone "+" in column 72, field 9, which no card
+    has as a value: both paths read it as field 10's marker, giving the deck with the marker in
+    column 73; a "+" in field 9 beside a marker in field 10 stays the field's error."""
+    early, proper = EARLY.format(m="+"), EARLY.format(m=" +")
+    assert early.splitlines()[3][71] == "+" and proper.splitlines()[3][72] == "+"
+    fast, slow = both(early, tmp_path)
+    assert not isinstance(slow, Exception), slow
+    assert ordered(fast) == ordered(slow)
+    assert ordered(slow) == ordered(both(proper, tmp_path)[1])
+    assert slow.mat1s[1].g == pytest.approx(7e4 / 2.6)
+    fast, slow = both(EARLY.format(m="+A"), tmp_path)
+    assert isinstance(slow, Exception) and isinstance(fast, Exception)

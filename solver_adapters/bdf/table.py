@@ -79,6 +79,10 @@ def _split_plain(lines: list[str]):
     else:
         data = strings.strip(F[:, 1:9])
     cont = _upper(strings.strip(F[:, 9]))
+    early = (data[:, 7] == b"+") & (cont == b"") & ~large     # tokens.MISPLACED_MARKER
+    if early.any():
+        cont = cont.copy()
+        data[early, 7], cont[early] = b"", b"+"
     nd = np.where(large, 4, 8).astype(np.int8)
     blank = (first == b"") & (cont == b"") & (data == b"").all(axis=1)
     return first, cont, data, nd, blank

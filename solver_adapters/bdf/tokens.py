@@ -157,7 +157,17 @@ def _split(raw: str, file: str, lineno: int) -> _Line:
     large = first.endswith("*") or first.startswith("*")
     width = 16 if large else 8
     data = [line[8 + width * k: 8 + width * (k + 1)].strip() for k in range(64 // width)]
-    return _Line(file, lineno, first, data, line[72:80].strip().upper())
+    cont = line[72:80].strip().upper()
+    if not large and data[7] == "+" and not cont:
+        data[7], cont = "", "+"          # a continuation marker one column early (MISPLACED_MARKER)
+    return _Line(file, lineno, first, data, cont)
+
+
+MISPLACED_MARKER = True
+"""A lone ``+`` in field 9 of a small-field line whose field 10 is blank is its continuation
+marker written one column early (column 72, not 73; seen in public decks: TACS's
+``beam_model_pbarl_rect.bdf``, where MYSTRAN 18 reads it so): a ``+`` alone is no value of any
+field, so it is read as the marker and field 9 as blank."""
 
 
 BOUNDARY = object()  # between files: a card never continues across an INCLUDE
