@@ -851,6 +851,17 @@ def test_pbeaml_angle_is_an_error():
     assert info.value.field == 5
 
 
+def test_pbeam_with_an_empty_section_is_said_so():
+    """FEMAP exports of bcm-problems (Upright_PB-6.nas) carry PBEAMs whose A, I1, I2, I12 and J
+    are all 0.0 beside the default shear factors: the error says the section is empty, at A,
+    rather than that a shear factor needs an area."""
+    text = ("MAT1,1,2.1+11,,.3\nGRID,1,,0.,0.,0.\nGRID,2,,1.,0.,0.\nCBEAM,1,1,1,2,0.,1.,0.\n"
+            "PBEAM,1,1,0.,0.,0.,0.,0.,0.\n")
+    with pytest.raises(DeckFormatError, match="the section is empty") as info:
+        read_deck_text(text)
+    assert (info.value.card, info.value.field) == ("PBEAM", 4)
+
+
 # --------------------------------------------------------------------------------------------
 # CBEAM / PBEAM / PBEAML: prismatic beams
 # --------------------------------------------------------------------------------------------

@@ -110,6 +110,10 @@ def _pbeam(r, c) -> None:
         if value < 0.0:
             raise c.error(i, "shear stiffness factor must be >= 0 (0.0: rigid in shear)")
         if value and end_a[0] == 0.0:
+            if not any(end_a):
+                raise c.error(4, "the section is empty: A, I1, I2, I12 and J are all 0.0 (a "
+                                 "pre-processor's placeholder?): no stiffness to model; give "
+                                 "the property its section")
             raise c.error(i, "shear stiffness factor needs a non-zero area A (0.0: rigid in shear)")
         k.append(value or None)
     for i, what in ((kf + 2, "shear relief S1"), (kf + 3, "shear relief S2")):
