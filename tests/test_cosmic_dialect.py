@@ -115,3 +115,13 @@ def test_a_second_rod_left_half_written_is_a_located_error():
     with pytest.raises(DeckFormatError) as e:
         read_deck_text(ROD_FRAME + "CROD,60,5,1,2,61,5,2\n")
     assert "card CROD" in str(e.value) and "field 9" in str(e.value) and "second CROD" in str(e.value)
+
+
+def test_pressure_stiffness_elements_have_no_static_effect():
+    """CPSE2/CPSE3/CPSE4 and PPSE are differential stiffness only ("no structural stiffness and
+    no structural mass", User's Manual, CPSEi remark 2): accepted with no effect, the solution
+    that of the frame without them, bit for bit."""
+    bars = MSC + "\nCPSE2,17,2,1,2\nCPSE3,18,2,1,2,3\nPPSE,2,500."
+    deck = read_deck_text(FRAME.format(bars=bars))
+    assert set(deck.no_effect) == {"CPSE2", "CPSE3", "PPSE"}
+    np.testing.assert_array_equal(_tip(FRAME.format(bars=bars)), _tip(FRAME.format(bars=MSC)))

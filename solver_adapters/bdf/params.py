@@ -72,6 +72,9 @@ NO_EFFECT = frozenset({
     # static condensation sets: the reduction of a linear static solution to them is exact;
     # resequencing (SEQGP): the order of the unknowns in the solver's matrices, not the solution
     "ASET", "ASET1", "OMIT", "OMIT1", "SEQGP",
+    # COSMIC's pressure stiffness elements and their property: differential stiffness only, "no
+    # structural stiffness and no structural mass" (NASTRAN-95 User's Manual, CPSEi remark 2)
+    "CPSE2", "CPSE3", "CPSE4", "PPSE",
     # output only: plot elements, monitor points, bar output stations (CBARAO: where a CBAR's
     # forces and stresses are printed)
     "PLOTEL", "MONPNT1", "MONPNT3", "CBARAO",
