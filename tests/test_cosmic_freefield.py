@@ -240,6 +240,7 @@ def test_a_line_whose_cards_the_import_would_split_is_an_error(tmp_path):
 
 
 @pytest.mark.parametrize("line", ["GRID,1,,0.,0.,0.", "GRID*,1,,0.,0.,+", "DEQATN,10,F(A,B) = A + B",
+                                  "DEQATN  7       A(X,Y)=X", "                (RL**2,1.)/ABS(S)",
                                   "CBAR    1       1       1       2       0.      0.      1."])
 def test_other_lines_are_left_as_they_are(line):
     """MSC free field, large field, a DEQATN's equation and fixed field are no COSMIC free

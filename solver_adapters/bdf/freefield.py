@@ -70,7 +70,8 @@ def _is_cosmic(body: str) -> bool:
     if "," not in s:
         return False
     head = s.split(",", 1)[0].strip().upper()
-    if head == "DEQATN" or (not body.expandtabs(8)[:8].strip() and s[0] not in ",+*"):
+    columns = body.expandtabs(8)[:8].strip().upper()
+    if head == "DEQATN" or columns == "DEQATN" or (not columns and s[0] not in ",+*"):
         return False                            # a DEQATN's equation: text with commas
     if _SPECIAL.search(s):
         return True
