@@ -5,6 +5,7 @@ and how the solution agrees with MYSTRAN's (issue 20's last target).
     python benchmarks/unseen_decks.py FOLDER [--half tuning|held-out] [--no-mystran]
     python benchmarks/unseen_decks.py FOLDER2 --second --collect --mirror OWNER/NAME=GITDIR ...
     python benchmarks/unseen_decks.py FOLDER2 --second [--no-mystran]
+    python benchmarks/unseen_decks.py FOLDER3 --third [--collect --mirror ...]
 
 The decks (``DECKS`` below) are every whole input file (a CEND and a BEGIN BULK) of four public
 repositories, at the commits of ``COMMITS``, that has a line element (CBAR, CBEAM, CROD, CONROD,
@@ -29,6 +30,11 @@ dynamics toolbox's test decks, ...), at most 40 per repository in sorted path or
 copies of the first corpus and of each other (line endings and trailing blanks aside). The list
 names the commit of each; ``--second --collect`` copies them to ``FOLDER2/OWNER+NAME/PATH``
 with the files their INCLUDEs name.
+
+A third corpus, ``--third`` (``decks_third.csv``), was collected on 2026-11-27 by the same rule
+from nine more public repositories, found and fetched for it (course decks, an OpenMDAO NASTRAN
+wrapper's tests, DMAP examples, a MYSTRAN pre-processor's exports, ...; every other repository
+searched had no such deck), and run once before any change for it.
 
 For each deck, one row: the half, whether ``blackbox import`` accepts it (else the first line of
 its message), the subcases imported, and the largest difference of the reference solver's
@@ -261,11 +267,12 @@ def collect(folder: Path, mirrors: dict[str, str]) -> None:
 _INCLUDE_LINE = re.compile(rb"^[ \t]*INCLUDE[ \t]+'([^']+)'", re.I | re.M)
 
 
-def collect_second(folder: Path, mirrors: dict[str, str]) -> None:
-    """The second corpus (``decks_second.csv``) out of git mirrors, each deck at its commit, with
-    the files its INCLUDE lines name (relative to the including file's folder, recursively)."""
+def collect_second(folder: Path, mirrors: dict[str, str], corpus: str = "second") -> None:
+    """A listed corpus (``decks_second.csv``, ``decks_third.csv``) out of git mirrors, each deck
+    at its commit, with the files its INCLUDE lines name (relative to the including file's
+    folder, recursively)."""
     import csv
-    with open(Path(__file__).with_name("decks_second.csv"), newline="") as f:
+    with open(Path(__file__).with_name(f"decks_{corpus}.csv"), newline="") as f:
         rows = list(csv.DictReader(f))
     for r in rows:
         todo, seen = [r["path"]], set()
@@ -405,17 +412,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-mystran", action="store_true")
     ap.add_argument("--only", help="decks whose path contains this text")
     ap.add_argument("--second", action="store_true", help="the second corpus (decks_second.csv)")
+    ap.add_argument("--third", action="store_true", help="the third corpus (decks_third.csv)")
     a = ap.parse_args(argv)
+    listed = "third" if a.third else "second" if a.second else None
+    mirrors = dict(m.split("=", 1) for m in a.mirror)
     if a.collect:
-        (collect_second if a.second else collect)(a.folder, dict(m.split("=", 1) for m in a.mirror))
+        collect_second(a.folder, mirrors, listed) if listed else collect(a.folder, mirrors)
         return 0
     halves = split()
     decks = DECKS
-    if a.second:
+    if listed:
         import csv
-        with open(Path(__file__).with_name("decks_second.csv"), newline="") as f:
+        with open(Path(__file__).with_name(f"decks_{listed}.csv"), newline="") as f:
             decks = [(r["repo"], r["path"], ()) for r in csv.DictReader(f)]
-        halves = {(r, p): "second" for r, p, _ in decks}
+        halves = {(r, p): listed for r, p, _ in decks}
     print("| deck | source | half | accepted | subcases | agreement |\n|---|---|---|---|---|---|")
     tally: dict[str, list[int]] = {}
     bad = []
