@@ -85,6 +85,14 @@ def _cards(table: str) -> list[list]:
      """CTRAPRG|1|1|3|4|2|.0|12
         CTRAPRG|2|3|5|6|4|.0|12
         CTRAPRG|3|5|7|8|6|.0|12"""),
+    # MSC replication in free field, a blank field incremented as 0 (pyNastran's dbxdra7.bdf,
+    # whose grids before these carry CD = 1)
+    (("GRID,   123,    1,      25.,    -60.4,  0.,", "=,      *(1),   =,      =,      *(14.8),=,      *(1)",
+      "=,      *(1),   =,      =,      *(14.8),=,      ==", "=(1)"),
+     """GRID|123|1|25.|-60.4|0.
+        GRID|124|1|25.|-45.6|0.|1
+        GRID|125|1|25.|-30.8|0.|1
+        GRID|126|1|25.|-16.0|0.|1"""),
 ])
 def test_the_manuals_examples_expand_to_its_card_images(lines, table):
     assert _images(*lines) == _cards(table)
@@ -214,7 +222,7 @@ def test_the_imported_free_field_frame_agrees_with_mystran(tmp_path):
 
 @pytest.mark.parametrize("lines, line, says", [
     (("=(3),*(1)",), 1, "duplicate the card before, and there is none"),
-    (("GRID,1,,0.,0.,0.", "GRID,2,,,0.,0.", "=(2),*(1),,*(1.)"), 3, "not a number"),
+    (("GRID,1,,0.,0.,0.", "GRID,2,,A,0.,0.", "=(2),*(1),,*(1.)"), 3, "not a number"),
     (("GRID,1,,0.,0.,0.", "=(1),*(1),,*(x)"), 2, "is not a number"),
     (("GRID,1,,0.,0.,0.", "=(1),*(1),,x"), 2, "not a real"),
 ])

@@ -5,7 +5,7 @@ A COSMIC free-field line (one with a comma, or starting with ``=`` or ``)``) sep
 by commas, blanks, or both, and may use:
 
 * ``=`` (the field of the card before), ``==`` (every trailing field of the card before),
-  ``*(i)`` (the card before's field plus ``i``), ``%(E)`` (an increment ending at ``E`` on the
+  ``*(i)`` (the card before's field plus ``i``, a blank field counting as 0), ``%(E)`` (an increment ending at ``E`` on the
   last card generated), ``/`` (the operation of the field before);
 * ``=(N)`` in field 1: ``N`` cards generated from the card before, each from the one before it,
   with the line's operations (a bare ``=(N)``: those of the line before); ``=`` in field 1: one
@@ -215,7 +215,7 @@ class _Expander:
         before = self.prev[i - 1]
         if op.kind == "same":
             return before
-        value = _number(before)
+        value = 0 if before == "" else _number(before)    # a blank field counts as 0
         if value is None:
             raise self.fail(lineno, f"'*(i)' increments field {i} of the card before, which holds "
                                     f"{before!r}, not a number", before)
