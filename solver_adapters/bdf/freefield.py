@@ -5,8 +5,9 @@ A COSMIC free-field line (one with a comma, or starting with ``=`` or ``)``) sep
 by commas, blanks, or both, and may use:
 
 * ``=`` (the field of the card before), ``==`` (every trailing field of the card before),
-  ``*(i)`` (the card before's field plus ``i``, a blank field counting as 0), ``%(E)`` (an increment ending at ``E`` on the
-  last card generated), ``/`` (the operation of the field before);
+  ``*(i)`` (the card before's field plus ``i``, a blank field counting as 0), ``%(E)`` (an
+  increment ending at ``E`` on the last card generated), ``/`` (the operation of the field
+  before);
 * ``=(N)`` in field 1: ``N`` cards generated from the card before, each from the one before it,
   with the line's operations (a bare ``=(N)``: those of the line before); ``=`` in field 1: one
   such card; a continuation ID of the form ``+A-X`` in field 1 or 10 goes up by 1 from card to
