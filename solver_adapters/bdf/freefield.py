@@ -79,8 +79,11 @@ def _is_cosmic(body: str) -> bool:
     return any(len(piece.split()) > 1 for piece in s.replace("\t", " ").split(","))
 
 
-def needed(bodies: list[str], start: int) -> bool:
-    """Whether any bulk line (from ``start`` on) is COSMIC free field (see :func:`_is_cosmic`)."""
+def needed(bodies: list[str], start: int, text: str | None = None) -> bool:
+    """Whether any bulk line (from ``start`` on) is COSMIC free field (see :func:`_is_cosmic`).
+    ``text``: the file's text, if at hand (without ``=``, ``)`` or ``,`` it has none)."""
+    if text is not None and "=" not in text and ")" not in text and "," not in text:
+        return False
     return any(("=" in b or ")" in b or "," in b) and _is_cosmic(b) for b in bodies[start:])
 
 
@@ -317,14 +320,14 @@ def _reorder(lines: list[str], nums: list[int], firsts: list[str], conts: list[s
 
 
 def expand(bodies: list[str], start: int, file: str, split, include=None,
-           begin_bulk=None) -> tuple[list[str], list[int]] | None:
+           begin_bulk=None, text: str | None = None) -> tuple[list[str], list[int]] | None:
     """The comment-free lines of a file with its COSMIC free-field lines (from ``start``, the
     first bulk line) expanded, and each line's number in the file (1-based); None when the file
     has none. ``split``: the readers' line splitter (``tokens._split``), which gives the fields of
     the other lines (the card before a replication may be one of them); ``include`` and
     ``begin_bulk``: whether a stripped line is an INCLUDE or a BEGIN BULK line (the tokenizer's
-    tests), kept as they are (no card continues across an INCLUDE)."""
-    if not needed(bodies, start):
+    tests), kept as they are (no card continues across an INCLUDE); ``text``: see :func:`needed`."""
+    if not needed(bodies, start, text):
         return None
     is_include = include or (lambda s: False)
     is_begin = begin_bulk or (lambda s: False)

@@ -107,7 +107,7 @@ class _Builder:
             bodies, joined = raw, text
         low = joined.lower()
         start = bulk_start(bodies, file) if "cend" in low and not included else 0
-        bodies, numbers = self.inc.expand(bodies, start, file)
+        bodies, numbers = self.inc.expand(bodies, start, file, joined)
         if numbers is not None:
             joined = "\n".join(bodies)
             low = joined.lower()

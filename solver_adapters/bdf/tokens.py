@@ -229,11 +229,13 @@ class Includes:
     # shown name -> (lines, their line numbers) of a file with COSMIC free-field lines, expanded
     expanded: dict[str, tuple[list[str], list[int]]] = field(default_factory=dict)
 
-    def expand(self, bodies: list[str], start: int, file: str) -> tuple[list[str], list[int] | None]:
+    def expand(self, bodies: list[str], start: int, file: str,
+               text: str | None = None) -> tuple[list[str], list[int] | None]:
         """A file's comment-free lines with COSMIC free-field lines expanded (:mod:`.freefield`)
-        and the line number of each; the lines as they are and None when it has none."""
+        and the line number of each; the lines as they are and None when it has none. ``text``:
+        the file's text, if at hand (a quick test before the lines are looked at)."""
         got = freefield.expand(bodies, start, file, _split, is_include,
-                               lambda s: BEGIN_BULK.fullmatch(s) is not None)
+                               lambda s: BEGIN_BULK.fullmatch(s) is not None, text)
         if got is None:
             return bodies, None
         self.expanded[file] = got
@@ -287,7 +289,7 @@ class LineReader:
         raw_lines = text.removeprefix("\ufeff").splitlines()
         uncommented = [_strip_comment(r) for r in raw_lines]
         start = 0 if included else bulk_start(uncommented, file)
-        uncommented, numbers = self.inc.expand(uncommented, start, file)
+        uncommented, numbers = self.inc.expand(uncommented, start, file, text)
         for k in range(start, len(uncommented)):
             body, lineno = uncommented[k], (numbers[k] if numbers else k + 1)
             stripped = body.strip()
