@@ -375,12 +375,27 @@ def write_dmig(m: Dmig, scalar: set[int], fmt: str = "small") -> str:
     return "".join(out)
 
 
+def write_genel(m: Dmig, scalar: set[int], fmt: str = "small") -> str:
+    """A GENEL as the stiffness form over all its components (its UI and UD lists and S folded
+    into one K, no UD): ``GENEL EID (blank) UI CI ...`` then ``K`` and the lower triangle by
+    columns, each keyword in field 2 of a line of its own (a scalar point's component as 0)."""
+    dofs = list(dict.fromkeys(row for row, _, _ in m.terms))
+    value = {(row, col): a for row, col, a in m.terms}
+    fields: list[Field] = [int(m.name[5:]), None]
+    for g, c in dofs:
+        fields += [g, 0 if g in scalar else c]
+    fields += [None] * ((-len(fields)) % 8)          # "K" in field 2 of a line of its own
+    lower = [float(value.get((dofs[i], dofs[j]), 0.0)) for j in range(len(dofs)) for i in range(j, len(dofs))]
+    fields += ["K", *lower]
+    return format_card("GENEL", fields, fmt)
+
+
 def write_deck(deck: Deck, fmt: str = "small") -> str:
     """A complete bulk data section (``BEGIN BULK`` ... ``ENDDATA``) of everything the parsed
     deck holds, cards sorted by ID, so that reading it back gives the same model: grids (in
     basic, CD kept), coordinate systems (as CORD2R/C/S in basic), CBAR/CBEAM as CBAR with
     PBAR/PBARL/PBEAM/PBEAML as the PBAR they are, rods, MAT1, SPC1, SPCADD, RBE2, RBE3, CBUSH,
-    PBUSH, PELAS, CELAS1/2, CGAP, PGAP, DMIG (and PARAM,CK2), PARAM,AUTOSPC,NO and PARAM,EPZERO when they
+    PBUSH, PELAS, CELAS1/2, CGAP, PGAP, DMIG (and PARAM,CK2), GENEL, PARAM,AUTOSPC,NO and PARAM,EPZERO when they
     differ from NASTRAN's defaults (designed properties with their values at the initial design),
     and the cards the reader keeps without modelling them (``Deck.unmodelled``: shells,
     solids, for an external solver) field by field. Cards accepted with no effect on a static
@@ -420,7 +435,8 @@ def write_deck(deck: Deck, fmt: str = "small") -> str:
     dmigs = getattr(deck, "dmigs", {})
     if dmigs and getattr(deck, "ck2", 1.0) != 1.0:
         out.append(format_card("PARAM", ["CK2", float(deck.ck2)], fmt))
-    out += [write_dmig(dmigs[k], deck.scalar_points(), fmt) for k in sorted(dmigs)]
+    out += [(write_genel if dmigs[k].card == "GENEL" else write_dmig)(dmigs[k], deck.scalar_points(), fmt)
+            for k in sorted(dmigs)]
     out += [write_unmodelled(u, fmt) for u in getattr(deck, "unmodelled", ())]
     out.append("ENDDATA\n")
     return "".join(out)

@@ -361,11 +361,19 @@ class Dmig:
     """DMIG: a matrix of direct input at grid points, added to the stiffness (K2GG): ``terms``
     ``((row grid, component), (column grid, component), value)`` in the grids' displacement
     systems; ``ifo`` 6 (symmetric: each off-diagonal term stands for its mirror too) or 1
-    (square, symmetric as read)."""
+    (square, symmetric as read). A GENEL is held as the square matrix of its element stiffness
+    over its UI and UD components (``card`` "GENEL", ``name`` GENEL<EID>), which PARAM,CK2 does
+    not scale."""
     name: str
     ifo: int
     terms: tuple[tuple[tuple[int, int], tuple[int, int], float], ...]
     src: str = ""
+    card: str = "DMIG"          # "GENEL": a general element's stiffness (``name`` GENEL<EID>)
+
+    @property
+    def label(self) -> str:
+        """What messages call it: ``DMIG NAME`` or ``GENEL EID``."""
+        return f"GENEL {self.name[5:]}" if self.card == "GENEL" else f"DMIG {self.name}"
 
 
 @dataclass(frozen=True)

@@ -132,7 +132,7 @@ def unsupported_features(m) -> list[tuple[str, str, str]]:
     for e in sorted(getattr(m, "gaps", {}).values(), key=lambda e: e.eid):
         out.append((f"CGAP {e.eid}", e.src, "gap elements (FRAMESOLVE has beams and scalar springs only)"))
     for d in getattr(m, "dmigs", {}).values():
-        out.append((f"DMIG {d.name}", d.src, "a direct stiffness matrix (FRAMESOLVE has scalar springs only)"))
+        out.append((d.label, d.src, "a direct stiffness matrix (FRAMESOLVE has scalar springs only)"))
     return out
 
 

@@ -197,7 +197,7 @@ def needs_passthrough(model) -> bool:
     unmodelled cards that :func:`read_model` let pass, or any card the reader models that this
     writer does not know (the scan then names it: :func:`passthrough_cards`)."""
     from solver_adapters import bdf
-    if set(bdf.SUPPORTED) - WRITTEN - RAW_MODELLED - DESIGN_MODEL - {"DMIG"}:
+    if set(bdf.SUPPORTED) - WRITTEN - RAW_MODELLED - DESIGN_MODEL - {"DMIG", "GENEL"}:
         return True
     if getattr(model, "no_effect", None) or any(getattr(model, f, None)
                                                 for f in ("rbe3s", "bushes", "pbushes", "mpcs", "mpcadds")):
@@ -262,6 +262,9 @@ def check_writable(model) -> None:
         _cannot_run(e.src, "CGAP", f"CGAP {e.eid}: MYSTRAN 18 has no gap element (CGAP/PGAP); the reference "
                                    f"adapter models its linear stiffness")
     for m in getattr(model, "dmigs", {}).values():
+        if m.card == "GENEL":
+            _cannot_run(m.src, "GENEL", f"{m.label} (a general element, its stiffness given as a matrix): "
+                                        f"MYSTRAN 18 has no GENEL; the reference adapter models it")
         _cannot_run(m.src, "DMIG", f"DMIG {m.name} (a stiffness added by K2GG): MYSTRAN 18 does not read DMIG "
                                    f"(it skips the card with a warning, so it would solve the structure "
                                    f"without it); the reference adapter models it")

@@ -160,8 +160,8 @@ class Translation:
                 self.refuse(f"SPOINT {g}", m.grids[g].src, "a scalar point (one DOF, no position): "
                                                          "an OpenSees node is a point in space")
         for dm in getattr(m, "dmigs", {}).values():
-            self.refuse(f"DMIG {dm.name}", dm.src, "a direct stiffness matrix (K2GG): the OpenSees "
-                                                   "deck has no general matrix element")
+            self.refuse(dm.label, dm.src, "a direct stiffness matrix (K2GG, or a GENEL's): the "
+                                          "OpenSees deck has no general matrix element")
         for g in self.grids:
             d.add("node", g, *map(_num, self.xyz[g]))
         self._supports()

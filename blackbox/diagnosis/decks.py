@@ -63,25 +63,32 @@ def unsplittable_grids(deck: Deck) -> dict[int, list[str]]:
     solid, kept for an external solver), with those cards. The undeclared-joint cut splits a
     grid into one grid per bar; such an element is no bar and would stay on the first bar's grid
     only, rigidly joined to that bar and flexibly to the others: a connection the structure does
-    not have. So these grids are not undeclared-joint candidates (:func:`unmodelled_notes`)."""
-    if not deck.unmodelled:
+    not have. So these grids are not undeclared-joint candidates (:func:`unmodelled_notes`). The
+    same holds for a grid that a stiffness matrix couples (a DMIG, a GENEL)."""
+    held: dict[int, list[str]] = {g: list(cards) for g, cards in deck.unmodelled_grids().items()} \
+        if deck.unmodelled else {}
+    for m in getattr(deck, "dmigs", {}).values():
+        for g in dict.fromkeys(g for (g, _), _, _ in m.terms):
+            held.setdefault(g, []).append(m.label)
+    if not held:
         return {}
     at = members_at(deck)
     # grids no cut touches anyway (constrained, in an RBE2, on a spring) are left out
     sprung = {g for s in deck.springs.values() for g in (s.g1, s.g2) if g}
     other = set(constrained_grids(deck)) | rbe2_grids(deck) | sprung
-    return {g: cards for g, cards in sorted(deck.unmodelled_grids().items())
+    return {g: cards for g, cards in sorted(held.items())
             if len(at.get(g, ())) >= 2 and g not in other}
 
 
 def unmodelled_notes(deck: Deck) -> list[str]:
     """What the diagnosis leaves aside on a deck with cards the reader does not model (shells,
-    solids, solved by an external adapter), one sentence each, for ``diagnosis.json`` ``notes``."""
-    if not deck.unmodelled:
-        return []
-    kinds = ", ".join(f"{n} x{k}" for n, (k, _) in deck.unmodelled_counts().items())
-    notes = [f"the deck holds cards the diagnosis does not edit ({kinds}): they stay in every edited "
-             f"deck as they are; member_stiffness candidates are the CBAR and rod members only"]
+    solids, solved by an external adapter) or one with stiffness matrices at grids where bars meet
+    (DMIG, GENEL), one sentence each, for ``diagnosis.json`` ``notes``."""
+    notes = []
+    if deck.unmodelled:
+        kinds = ", ".join(f"{n} x{k}" for n, (k, _) in deck.unmodelled_counts().items())
+        notes.append(f"the deck holds cards the diagnosis does not edit ({kinds}): they stay in every "
+                     f"edited deck as they are; member_stiffness candidates are the CBAR and rod members only")
     skipped = unsplittable_grids(deck)
     if skipped:
         cards = sorted({c.split()[0] for cs in skipped.values() for c in cs})
@@ -113,6 +120,7 @@ def cards_at(deck: Deck, grid: int) -> list[str]:
             if grid == r.refgrid or any(grid in gs for _, _, gs in r.groups)]
     out += [f"CBUSH {b.eid}" for b in deck.bushes.values() if grid in (b.ga, b.gb)]
     out += [f"{s.card} {s.eid}" for s in deck.springs.values() if grid in (s.g1, s.g2)]
+    out += [m.label for m in getattr(deck, "dmigs", {}).values() if any(g == grid for (g, _), _, _ in m.terms)]
     sets = sorted({s.sid for s in deck.spc1s if grid in s.grids})
     out += [f"SPC set {sid}" + "".join(f" (in SPCADD {a.sid})" for a in deck.spcadds.values() if sid in a.sets)
             for sid in sets]

@@ -1,4 +1,5 @@
-"""DMIG: direct matrix input at grid points, a stiffness added in the g-set (NASTRAN's K2GG).
+"""DMIG: direct matrix input at grid points, a stiffness added in the g-set (NASTRAN's K2GG);
+GENEL, the general element (its stiffness given as a matrix, :func:`_genel`).
 
 MSC QRG DMIG: a header ``DMIG NAME 0 IFO TIN TOUT POLAR NCOL`` and column entries ``DMIG NAME
 GJ CJ (blank) G1 C1 A1 B1 / G2 C2 A2 B2 ...``: the terms A of column (GJ, CJ), rows (Gi, Ci),
@@ -15,6 +16,8 @@ that does not exist.
 """
 
 from __future__ import annotations
+
+import numpy as np
 
 from solver_adapters.bdf.fields import _int, _real
 from solver_adapters.deck import Dmig
@@ -56,9 +59,142 @@ def _dmig(r, c) -> None:
     r.dmig_columns.setdefault(name, []).append((c, gj, cj, terms))
 
 
+_GENEL_WORDS = ("UD", "K", "Z", "S")
+
+
+def _genel(r, c) -> None:
+    """GENEL EID (blank) UI1 CI1 UI2 CI2 ... ["UD" (blank) UD1 CD1 ...] "K"|"Z" KZ11 KZ21 ...
+    ["S" S11 S12 ...] (NASTRAN-95 User's Manual 2.4; MSC QRG GENEL): each keyword in field 2 of
+    a line; KZ the lower triangle of the stiffness K or flexibility Z over the UI list, by
+    columns; S the m x n matrix over UI and UD by rows. The element stiffness over (UI, UD) is
+    ``[[K, -K S], [-S^T K, S^T K S]]`` (``K = Z^-1``); without UD, K alone (the UI components
+    against ground); with UD and no S, S is the rigid-body motion of the UI points when the UD
+    components move (:func:`_rigid_s`). Resolved in :func:`finish` (the grids may come later)."""
+    eid = _int(c, 2)
+    if c.text(3):
+        raise c.error(3, "GENEL field 3 must be blank")
+    n = len(c.fields)
+
+    def keyword(i: int) -> bool:         # a keyword stands in field 2 of a continuation line
+        return i >= 10 and (i - 2) % 8 == 0 and c.text(i) in _GENEL_WORDS
+
+    def pairs(i: int, what: str) -> tuple[list, int]:
+        out = []
+        while i <= n and not keyword(i):
+            if c.text(i) or c.text(i + 1):
+                out.append((_int(c, i), _int(c, i + 1, 0, minimum=0), i))
+            i += 2
+        if not out:
+            raise c.error(i, f"GENEL {eid}: the {what} list is empty")
+        return out, i
+
+    ui, i = pairs(4, "UI")
+    ud: list = []
+    if i <= n and c.text(i) == "UD":
+        if c.text(i + 1):
+            raise c.error(i + 1, "the field after UD must be blank")
+        ud, i = pairs(i + 2, "UD")
+    if i > n or c.text(i) not in ("K", "Z"):
+        raise c.error(min(i, n), f"GENEL {eid} needs its matrix: K (stiffness) or Z (flexibility) in "
+                                 f"field 2 of a continuation line after the UI{'/UD' if ud else ''} list")
+    form, start = c.text(i), i
+
+    def values(i: int) -> tuple[list, int]:
+        out = []
+        while i <= n and not keyword(i):
+            if c.text(i):
+                out.append((_real(c, i), i))
+            i += 1
+        return out, i
+
+    kz, i = values(i + 1)
+    m = len(ui)
+    if len(kz) != m * (m + 1) // 2:
+        raise c.error(start, f"GENEL {eid}: {form} needs the lower triangle of an {m} x {m} matrix "
+                             f"({m * (m + 1) // 2} values by columns), got {len(kz)}")
+    s_values = None
+    if i <= n and c.text(i) == "S":
+        if not ud:
+            raise c.error(i, f"GENEL {eid}: S without a UD list")
+        s_values, j = values(i + 1)
+        if len(s_values) != m * len(ud):
+            raise c.error(i, f"GENEL {eid}: S needs {m} x {len(ud)} values (by rows), got {len(s_values)}")
+        i = j
+    if i <= n:
+        raise c.error(i, f"GENEL {eid}: {c.text(i)} out of place (the order is UI, UD, K or Z, S)")
+    r.claim("element", eid, c, 2)
+    r.genels.append((c, eid, ui, ud, form, [v for v, _ in kz], None if s_values is None else [v for v, _ in s_values]))
+
+
+def _rigid_s(r, c, eid: int, ui: list, ud: list) -> np.ndarray:
+    """S of a GENEL given without one: column j the UI components' motion when UD component j
+    moves the element as a rigid body (a translation, or a rotation about the UD grid), which
+    needs every UD component on one grid and every point a grid in the basic system (the
+    manual's rule: six UD components of one point; fewer move it in their own directions only)."""
+    grids = r.deck.grids
+    owners = {g for g, _ in ud}
+    if len(owners) != 1:
+        raise c.error(4, f"GENEL {eid}: S omitted, and the UD components are on {len(owners)} points: "
+                         f"give S (S is computed only for the components of one grid)")
+    gd = grids[next(iter(owners))]
+    for g in {g for g, _ in ui} | owners:
+        if grids[g].scalar or grids[g].cd:
+            raise c.error(4, f"GENEL {eid}: S omitted, and point {g} is "
+                             f"{'a scalar point' if grids[g].scalar else f'in displacement system {grids[g].cd}'}: "
+                             f"give S (it is computed for grids in the basic system only)")
+    S = np.zeros((len(ui), len(ud)))
+    eye = np.eye(3)
+    for j, (_, cd) in enumerate(ud):
+        for i, (g, ci) in enumerate(ui):
+            if cd <= 3:                           # a unit translation: translations only
+                S[i, j] = eye[cd - 1][ci - 1] if ci <= 3 else 0.0
+            else:                                 # a unit rotation about the UD grid
+                axis = eye[cd - 4]
+                if ci <= 3:
+                    S[i, j] = np.cross(axis, np.subtract(grids[g].xyz, gd.xyz))[ci - 1]
+                else:
+                    S[i, j] = axis[ci - 4]
+    return S
+
+
+def _finish_genels(r, dof) -> None:
+    for c, eid, ui, ud, form, kz, s_values in r.genels:
+        ui_d = [dof(c, g, comp, i) for g, comp, i in ui]
+        ud_d = [dof(c, g, comp, i) for g, comp, i in ud]
+        both = ui_d + ud_d
+        if len(set(both)) != len(both):
+            raise c.error(4, f"GENEL {eid} names a component twice in its UI and UD lists")
+        m = len(ui)
+        M = np.zeros((m, m))
+        M[np.triu_indices(m)[::-1]] = kz          # the lower triangle, by columns
+        M = np.tril(M) + np.tril(M, -1).T
+        if form == "Z":
+            try:
+                K = np.linalg.inv(M)
+            except np.linalg.LinAlgError:
+                raise c.error(4, f"GENEL {eid}: its flexibility Z is singular") from None
+            K = (K + K.T) / 2.0
+        else:
+            K = M
+        if ud:
+            S = (np.array(s_values, float).reshape(m, len(ud)) if s_values is not None
+                 else _rigid_s(r, c, eid, [(g, comp) for g, comp, _ in ui], [(g, comp) for g, comp, _ in ud]))
+            KS = K @ S
+            E = np.block([[K, -KS], [-KS.T, S.T @ KS]])
+            E = (E + E.T) / 2.0
+        else:
+            E = K
+        terms = tuple((both[a], both[b], float(E[a, b])) for a in range(len(both)) for b in range(len(both))
+                      if E[a, b] != 0.0)
+        name = f"GENEL{eid}"
+        if name in r.deck.dmigs:
+            raise c.error(2, f"GENEL {eid}: a DMIG is named {name} too ({r.deck.dmigs[name].src})")
+        r.deck.dmigs[name] = Dmig(name, 1, terms, c.src, card="GENEL")
+
+
 def finish(r) -> None:
     """The matrices into ``Deck.dmigs``: headers and columns matched, points and components
-    checked, the symmetry rules applied."""
+    checked, the symmetry rules applied; the GENEL elements' stiffness matrices."""
     for name, cols in r.dmig_columns.items():
         if name not in r.dmig_headers:
             c = cols[0][0]
@@ -101,6 +237,7 @@ def finish(r) -> None:
                                      f"{value.get((col, row), 0.0):g}; a stiffness the study adds "
                                      f"must be symmetric")
         r.deck.dmigs[name] = Dmig(name, ifo, tuple(terms), h.src)
+    _finish_genels(r, dof)
 
 
-PARSERS = {"DMIG": _dmig}
+PARSERS = {"DMIG": _dmig, "GENEL": _genel}

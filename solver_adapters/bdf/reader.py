@@ -50,6 +50,7 @@ class _Reader:
         self.design = design.DesignState.empty()   # SOL 200's design model, applied in finish()
         self.dmig_headers: dict[str, object] = {}  # DMIG name -> its header card
         self.dmig_columns: dict[str, list] = {}    # DMIG name -> (card, GJ, CJ, terms) per column
+        self.genels: list[tuple] = []              # GENEL cards as parsed, resolved in finish()
         self.spc1_pending: list[tuple[int, str, list[int | tuple[int, int]], str, object, int]] = []
         self.spoints: dict[int, object] = {}      # SPOINT ID -> its Grid (scalar), in finish()
         # (card, field, point, component) of every spring end and MPC term (component 0: blank

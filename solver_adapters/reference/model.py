@@ -336,17 +336,19 @@ def assemble(deck: Deck, extra_springs: tuple[ScalarSpring, ...] = (),
 
 def dmig_stiffness(deck: Deck, grid_ids: np.ndarray) -> sp.csr_matrix:
     """The DMIG matrices (K2GG) in the g-set, times PARAM,CK2: a symmetric matrix's (IFO 6)
-    off-diagonal term stands for its mirror too (MSC QRG DMIG)."""
+    off-diagonal term stands for its mirror too (MSC QRG DMIG); and the GENEL elements'
+    stiffness matrices, which CK2 does not scale."""
     rows, cols, vals = [], [], []
     for m in deck.dmigs.values():
+        scale = 1.0 if m.card == "GENEL" else deck.ck2
         for (gi, ci), (gj, cj), a in m.terms:
             rows.append((gi, ci))
             cols.append((gj, cj))
-            vals.append(a)
+            vals.append(scale * a)
             if m.ifo == 6 and (gi, ci) != (gj, cj):
                 rows.append((gj, cj))
                 cols.append((gi, ci))
-                vals.append(a)
+                vals.append(scale * a)
     n_g = 6 * len(grid_ids)
     if not vals:
         return sp.csr_matrix((n_g, n_g))
@@ -354,7 +356,7 @@ def dmig_stiffness(deck: Deck, grid_ids: np.ndarray) -> sp.csr_matrix:
     c = np.array(cols, dtype=np.int64)
     i = 6 * _grid_pos(grid_ids, r[:, 0], "DMIG") + r[:, 1] - 1
     j = 6 * _grid_pos(grid_ids, c[:, 0], "DMIG") + c[:, 1] - 1
-    return sp.coo_matrix((deck.ck2 * np.array(vals, float), (i, j)), shape=(n_g, n_g)).tocsr()
+    return sp.coo_matrix((np.array(vals, float), (i, j)), shape=(n_g, n_g)).tocsr()
 
 
 def autospc(K_ff: sp.spmatrix, f_index: np.ndarray, ratio: float) -> tuple[np.ndarray, np.ndarray]:
