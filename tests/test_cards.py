@@ -755,6 +755,44 @@ def angle_by_hand(b, h, t1, t2):
     return a, i1, i2, i12
 
 
+STUBBY = """GRID,1,,0.,0.,0.
+GRID,2,,0.01,0.,0.
+CBAR,1,7,1,2,0.,1.,0.
+PBAR,7,1,1.E-3,2.E-7,3.E-7,4.E-7,,,+P
++P,,,,,,,,,+Q
++Q,{k},{k},{i12}
+MAT1,1,2.1E11,,.3
+SPC1,1,123456,1
+"""
+"""A bar 10 mm long, so stubby that its shear flexibility (with K = 0.5) is 30 times its bending
+flexibility: whether K1/K2 count shows in every digit."""
+
+
+def _stubby_tip(k: str, i12: str) -> np.ndarray:
+    deck = read_deck_text(STUBBY.format(k=k, i12=i12))
+    loads = LoadMatrix.from_dense([(2, 2), (2, 3)], np.array([[1e3], [1e3]]), ["1"])
+    return ReferenceAdapter(deck).solve(loads, [(2, c) for c in range(1, 7)]).values[:, 0]
+
+
+@needs_mystran
+def test_pbar_k1_k2_beside_i12_are_ignored_as_nastran_and_mystran_do(tmp_path):
+    """NASTRAN ignores K1/K2 when I12 is non-zero (QRG PBAR), and MYSTRAN 18 gives the same
+    displacements with and without them then; with I12 = 0 they count. The reader ignores them
+    with a note; MYSTRAN prints 7 digits (test_deck_tail's 1e-6, translations and rotations
+    apart)."""
+    from test_deck_tail import _agree, _mystran
+    head = "SOL 101\nCEND\nSPC = 1\nLOAD = 1\nDISP = ALL\nBEGIN BULK\n"
+    force = "FORCE,1,2,,1000.,0.,1.,1.\nENDDATA\n"
+    for k, i12 in (("0.5", "1.E-7"), ("0.5", "0."), ("", "1.E-7")):
+        ours = _stubby_tip(k, i12)
+        theirs = np.array(_mystran(tmp_path / f"m{k}{i12}", head + STUBBY.format(k=k, i12=i12) + force)[1][2])
+        _agree(ours[None, :], theirs[None, :], f"K = {k or 'blank'}, I12 = {i12}")
+    np.testing.assert_array_equal(_stubby_tip("0.5", "1.E-7"), _stubby_tip("", "1.E-7"))
+    assert _stubby_tip("0.5", "0.")[1] > 10 * _stubby_tip("", "0.")[1]        # the shear counts
+    notes = read_deck_text(STUBBY.format(k="0.5", i12="1.E-7")).notes
+    assert any("K1/K2 ignored beside a non-zero I12" in n for n in notes)
+
+
 def test_pbarl_angle_section_constants():
     """A, I1, I2, I12 of the reader's angle against the hand calculation (exact: 1e-12, both
     exact decompositions of the same polygon), against a numerical integration over the shape
