@@ -79,7 +79,7 @@ def _split_plain(lines: list[str]):
     else:
         data = strings.strip(F[:, 1:9])
     cont = _upper(strings.strip(F[:, 9]))
-    early = (data[:, 7] == b"+") & (cont == b"") & ~large     # tokens.MISPLACED_MARKER
+    early = (data[:, 7] == b"+") & (cont == b"") & ~large     # a marker one column early (tokens._split)
     if early.any():
         cont = cont.copy()
         data[early, 7], cont[early] = b"", b"+"

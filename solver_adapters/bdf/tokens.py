@@ -159,15 +159,11 @@ def _split(raw: str, file: str, lineno: int) -> _Line:
     data = [line[8 + width * k: 8 + width * (k + 1)].strip() for k in range(64 // width)]
     cont = line[72:80].strip().upper()
     if not large and data[7] == "+" and not cont:
-        data[7], cont = "", "+"          # a continuation marker one column early (MISPLACED_MARKER)
+        # a lone + in field 9 with field 10 blank is the continuation marker written one column
+        # early (column 72, not 73: TACS's beam_model_pbarl_rect.bdf, which MYSTRAN 18 reads so);
+        # a + alone is no value of any field (table._split_plain reads it the same way)
+        data[7], cont = "", "+"
     return _Line(file, lineno, first, data, cont)
-
-
-MISPLACED_MARKER = True
-"""A lone ``+`` in field 9 of a small-field line whose field 10 is blank is its continuation
-marker written one column early (column 72, not 73; seen in public decks: TACS's
-``beam_model_pbarl_rect.bdf``, where MYSTRAN 18 reads it so): a ``+`` alone is no value of any
-field, so it is read as the marker and field 9 as blank."""
 
 
 BOUNDARY = object()  # between files: a card never continues across an INCLUDE
