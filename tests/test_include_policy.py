@@ -129,3 +129,28 @@ def test_import_copies_only_what_it_read_as_cards_from_an_included_file(tmp_path
     text = import_deck.run(deck).model_bdf
     assert "PBAR,7,1,1.E-3,2.E-6,3.E-6,4.E-6" in text
     assert "private remark" not in text and "$ note" not in text and "$ my own remark" in text
+
+
+def test_an_include_written_on_windows_is_found(tmp_path):
+    """``INCLUDE 'Props\\PBAR.INC'`` from a deck written on Windows: backslashes as separators
+    and the parts in any letter case find ``props/pbar.inc``; the import then reads the
+    property, as NASTRAN on Windows would."""
+    (tmp_path / "d" / "props").mkdir(parents=True)
+    (tmp_path / "d" / "props" / "pbar.inc").write_text(PBAR)
+    result = import_deck.run(_deck(tmp_path / "d", "Props\\PBAR.INC"))
+    assert "PBAR,7" in result.model_bdf and result.deck.pbars[7].a == 1e-3
+
+
+def test_a_windows_spelling_leaves_the_folder_only_if_allowed(tmp_path):
+    """The same reading of ``..\\elsewhere\\secret.txt`` is still outside the deck's folder,
+    refused as any other; and two files of one name in different letter cases are no match."""
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "elsewhere" / "secret.txt").write_text(SECRET)
+    with pytest.raises(DeckFormatError, match="outside the deck's folder") as info:
+        import_deck.run(_deck(tmp_path / "d", "..\\ELSEWHERE\\secret.txt"))
+    assert "secret-token" not in str(info.value)
+    (tmp_path / "e").mkdir()
+    (tmp_path / "e" / "a.inc").write_text(PBAR)
+    (tmp_path / "e" / "A.inc").write_text(PBAR)
+    with pytest.raises(DeckFormatError, match="cannot read included file"):
+        import_deck.run(_deck(tmp_path / "e", "a.INC"))

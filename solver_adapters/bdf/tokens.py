@@ -213,6 +213,33 @@ class IncludePolicy:
         return any(path == d or d in path.parents for d in (self.root, *self.allowed))
 
 
+def _as_written_on_windows(base_dir: Path, name: str) -> str:
+    """The name of an included file that does not exist as written, read as a deck written on
+    Windows names it (NASTRAN there takes both): backslashes as separators and each part in any
+    letter case, when exactly one existing path then matches; else ``name`` as written (the
+    error then names it)."""
+    if (base_dir / name).exists():
+        return name
+    parts = [p for p in name.replace("\\", "/").split("/")]
+    if not parts or parts[0] == "" or ":" in parts[0]:
+        return name                              # an absolute path: not guessed at
+    here = base_dir
+    for part in parts:
+        if part in ("", "."):
+            continue
+        if part == ".." or (here / part).exists():
+            here = here / part
+            continue
+        try:
+            hits = [p for p in here.iterdir() if p.name.lower() == part.lower()]
+        except OSError:
+            return name
+        if len(hits) != 1:
+            return name
+        here = hits[0]
+    return os.path.relpath(here, base_dir) if here.exists() else name
+
+
 @dataclass
 class Includes:
     """The state of one reading: the files read (as named in messages), the chain of files being
@@ -251,6 +278,7 @@ class Includes:
         def fail(message: str) -> DeckFormatError:
             return DeckFormatError(message, file=file, line=lineno, card="INCLUDE", field=2, value=name)
 
+        name = _as_written_on_windows(base_dir, name)
         path = (base_dir / name).resolve()
         if path in self.stack:
             raise fail(f"INCLUDE loop: {' -> '.join(str(p) for p in self.stack + [path])}")
