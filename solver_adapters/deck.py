@@ -481,7 +481,9 @@ class Deck:
                   "MPC": len(self.mpcs), "MPCADD": len(self.mpcadds),
                   "RBE2": len(self.rbe2s), "RBE3": len(self.rbe3s), "CBUSH": len(self.bushes),
                   "PBUSH": len(self.pbushes), "PELAS": len(self.pelas), "CELAS1/2": len(self.springs),
-                  "CORD1/2": len(self.coords), "DMIG matrices": len(self.dmigs)}
+                  "CORD1/2": len(self.coords),
+                  "DMIG matrices": sum(m.card == "DMIG" for m in self.dmigs.values()),
+                  "GENEL": sum(m.card == "GENEL" for m in self.dmigs.values())}
         text = ", ".join(f"{n} {k}" for k, n in counts.items() if n)
         if self.autospc:
             why = (f"PARAM,AUTOSPC,YES at {self.autospc_src}" if self.autospc_src
