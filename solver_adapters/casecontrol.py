@@ -221,11 +221,21 @@ def bulk_start(lines: list[str]) -> tuple[int | None, int | None]:
     return cend, begin
 
 
+def _card_columns(raw: str) -> str:
+    """A line cut at column 72 when what follows there is only marks (no letter or digit: a
+    frame drawn around the commands, ``|``): NASTRAN reads columns 1-72 of a case-control card
+    (NASTRAN-95 User's Manual 2.3.4, rule 6), and marks can carry no value. Other text beyond
+    column 72 is kept (the line is read as written, and a value there is not silently lost)."""
+    if len(raw) > 72 and raw[72:].strip() and not any(ch.isalnum() for ch in raw[72:]):
+        return raw[:72]
+    return raw
+
+
 def _statements(lines: list[str], start: int, stop: int):
     """``(line number, text)`` of the commands in ``lines[start:stop]``, comma continuations joined."""
     pending, first = "", 0
     for i in range(start, stop):
-        text = _uncomment(lines[i])
+        text = _uncomment(_card_columns(lines[i]))
         if not text.strip() and not pending:
             continue
         if not pending:

@@ -428,6 +428,19 @@ def test_case_control_reader():
     assert read_case_control("GRID    1\n", "b.bdf") is None
 
 
+def test_marks_beyond_column_72_of_the_case_control_are_not_read():
+    """A case control framed by ``|`` in column 73 (a course deck of jlefanic/NASTRAN-Slides):
+    NASTRAN reads columns 1-72 of a case-control card, and marks carry no value; text with a
+    letter or digit beyond column 72 is read as written (here an error, not a lost value)."""
+    framed = ("SOL 101\nCEND\nSUBCASE 1000\n" + "        SPC=1000".ljust(72) + "|\n"
+              + "        LOAD=1000".ljust(72) + "|  \nBEGIN BULK\n")
+    cc = read_case_control(framed, "x.dat")
+    assert [(s.id, s.spc, s.load) for s in cc.subcases] == [(1000, 1000, 1000)]
+    with pytest.raises(DeckFormatError, match="SPC must select a set by its integer ID") as err:
+        read_case_control(framed.replace("|\n", "7\n", 1), "x.dat")
+    assert err.value.line == 4
+
+
 def test_load_combination_rules(tmp_path):
     from solver_adapters.bdf import bulk_cards
     p = tmp_path / "l.bdf"
