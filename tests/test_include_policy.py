@@ -154,3 +154,19 @@ def test_a_windows_spelling_leaves_the_folder_only_if_allowed(tmp_path):
     (tmp_path / "e" / "A.inc").write_text(PBAR)
     with pytest.raises(DeckFormatError, match="cannot read included file"):
         import_deck.run(_deck(tmp_path / "e", "a.INC"))
+
+
+@pytest.mark.parametrize("begin", ["BEGIN SUPER 101", "BEGIN SUPER = 2", "BEGIN BULK SUPER=2", "BEGIN AUXMODEL 1"])
+def test_a_bulk_data_section_of_its_own_is_refused_at_its_line(tmp_path, begin):
+    """A superelement's or an auxiliary model's bulk data (pyyeti's ``outboard.pch``, included in
+    an assembly run, starts with ``BEGIN SUPER 101``) is another structure: read as the main
+    model's cards it would change it without a word. Both reader paths refuse it at its line;
+    a second plain BEGIN BULK is skipped, and a section after ENDDATA is not read."""
+    from solver_adapters.bdf import read_deck_text
+    from test_reader_paths import both
+    text = PBAR + BULK.replace("FORCE,5,2,,1.,0.,0.,-1.\n", "") + f"{begin}\nGRID,3,,1.,1.,0.\n"
+    fast, slow = both(text, tmp_path)
+    for err in (fast, slow):
+        assert isinstance(err, DeckFormatError) and err.line == 7 and "section of its own" in str(err)
+    assert read_deck_text(text.replace(begin, "BEGIN BULK")).grids.keys() == {1, 2, 3}
+    assert read_deck_text(text.replace(begin, "ENDDATA\n" + begin)).grids.keys() == {1, 2}

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from solver_adapters.bdf.numbers import strings
-from solver_adapters.bdf.tokens import (BEGIN_BULK, CARD_NAME, Includes, _Card, _split,
+from solver_adapters.bdf.tokens import (BEGIN_BULK, CARD_NAME, Includes, _Card, _split, section_error,
                                         _strip_comment, bulk_start, card_error, card_from_lines,
                                         is_include, not_bulk_data)
 from solver_adapters.errors import IrregularTable as Irregular   # the table cannot be built
@@ -116,8 +116,14 @@ class _Builder:
         skip: set[int] = set()
         includes: list[int] = []
         if "begin" in low or "include" in low:
+            ended = False
             for k in range(start, n):
                 s = bodies[k].strip()
+                if not ended and s[:7].upper() == "ENDDATA":
+                    ended = True          # the reference reader stops there, and reads no section after
+                error = section_error(s, file, number(k)) if s and not ended else None
+                if error is not None:
+                    raise error
                 if s and BEGIN_BULK.fullmatch(s):
                     skip.add(k)
                 elif s and is_include(s):

@@ -182,6 +182,26 @@ def not_bulk_data(file: str, lineno: int) -> DeckFormatError:
 BEGIN_BULK = re.compile(r"BEGIN\s+BULK\b.*", re.IGNORECASE)
 
 
+_SECTION = re.compile(r"BEGIN\b\s*(.*)", re.IGNORECASE)
+
+
+def section_error(stripped: str, file: str, lineno: int) -> DeckFormatError | None:
+    """The error for a comment-free, stripped bulk-data line that opens a bulk data section
+    other than the main one (``BEGIN SUPER = 2``, ``BEGIN BULK SUPER=2``, ``BEGIN AUXMODEL``):
+    its cards belong to another structure (a superelement, an auxiliary model), and read as the
+    main model's they would change it without a word. ``None`` for any other line (a second
+    ``BEGIN BULK`` is skipped)."""
+    if stripped[:5].upper() != "BEGIN":
+        return None
+    m = _SECTION.fullmatch(stripped)
+    if m is None or " ".join(m.group(1).upper().split()) == "BULK":
+        return None
+    return DeckFormatError(f"{stripped!r} opens a bulk data section of its own (a superelement's, an "
+                           f"auxiliary model's): the import reads one structure, the main bulk data, "
+                           f"and such a section is not read", file=file, line=lineno, card="BEGIN",
+                           value=stripped)
+
+
 def is_include(stripped: str) -> bool:
     """A comment-free, stripped line that is an INCLUDE statement."""
     return stripped[:7].upper() == "INCLUDE" and (len(stripped) == 7 or not stripped[7].isalnum())
@@ -317,6 +337,9 @@ class LineReader:
         for k in range(start, len(uncommented)):
             body, lineno = uncommented[k], (numbers[k] if numbers else k + 1)
             stripped = body.strip()
+            error = section_error(stripped, file, lineno)
+            if error is not None:
+                raise error
             if not stripped or BEGIN_BULK.fullmatch(stripped):
                 continue
             if is_include(stripped):
