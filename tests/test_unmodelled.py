@@ -431,3 +431,41 @@ def test_solid_passes_through_with_its_continuations(tmp_path, capsys):
     assert main(["solve", str(study), "--out", str(tmp_path / "s"), "--no-cache"]) == 0
     assert main(["solve", str(study), "--adapter", "reference", "--out", str(tmp_path / "r")]) == 2
     assert "CHEXA x1 (first at" in capsys.readouterr().err
+
+
+UNUSED_BASE = """GRID,1,,0.,0.,0.,,123456
+GRID,2,,1.,0.,0.
+GRID,3,,0.,1.,0.,,123456
+GRID,4,,1.,1.,0.,,123456
+CBAR,1,7,1,2,0.,1.,0.
+PBAR,7,1,1.E-3,2.E-6,3.E-6,4.E-6
+MAT1,1,2.1E11,,.3
+"""
+UNUSED_SECTIONS = "PSHELL,7,8,.01,8\nPCOMP,9,,,,,,,,+P\n+P,8,.002,0.,YES\nMAT8,8,1.E11,1.E10,.3,5.E9\n"
+
+
+def test_sections_no_element_uses_have_no_effect():
+    """A pre-processor exports every property of its model: a frame deck with a PSHELL (sharing
+    the PBAR's PID), a PCOMP and their MAT8 but no shell is the frame itself, read with and
+    without an external solver in mind (no effect, a note; never a reason for the mystran
+    adapter); its solution is the frame's without them, bit for bit. With a CQUAD4 using the
+    PSHELL, the PSHELL and its MAT8 are kept (the PCOMP, used by nothing, is not), and the
+    reference solver refuses the shell as before."""
+    from solver_adapters.reference import ReferenceAdapter
+
+    def tip(deck):
+        loads = LoadMatrix.from_dense([(2, 2)], np.array([[1e3]]), ["1"])
+        return ReferenceAdapter(deck).solve(loads, [(2, c) for c in range(1, 7)]).values
+
+    plain = read_deck_text(UNUSED_BASE)
+    for mode in ("error", "keep"):
+        deck = read_deck_text(UNUSED_BASE + UNUSED_SECTIONS, unmodelled=mode)
+        assert not deck.unmodelled and set(deck.no_effect) == {"PSHELL", "PCOMP", "MAT8"}
+        assert any("no element of the deck uses" in n for n in deck.notes)
+        np.testing.assert_array_equal(tip(deck), tip(plain))
+    shell = UNUSED_BASE + UNUSED_SECTIONS + "CQUAD4,9,7,1,2,4,3\n"
+    kept = read_deck_text(shell, unmodelled="keep")
+    assert [u.name for u in kept.unmodelled] == ["PSHELL", "MAT8", "CQUAD4"]
+    assert set(kept.no_effect) == {"PCOMP"}
+    with pytest.raises(DeckFormatError, match="PSHELL x1"):
+        read_deck_text(shell)

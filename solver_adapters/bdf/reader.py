@@ -31,6 +31,16 @@ from solver_adapters.deck import ON_AXIS_RULE, Deck, Spc1, Unmodelled
 from solver_adapters.errors import ReaderFallback as Fallback
 from solver_adapters.protocol import DeckFormatError, ModelError
 
+UNUSED_IF_UNREFERENCED = frozenset({
+    "PSHELL", "PCOMP", "PCOMPG", "PCOMP1", "PSOLID", "PSHEAR", "PWELD", "PFAST", "PLPLANE",
+    "PLSOLID", "PSHLN1", "PSHLN2", "MAT2", "MAT3", "MAT8", "MAT9", "MAT10", "MAT11"})
+"""Properties of shells, solids and connectors, and their materials, which no bar, beam, rod or
+spring can name (their PIDs and MIDs are read by elements the reader does not model): with no
+element of the deck using one, it has no effect on the structure (:meth:`_Reader.unused_sections`)."""
+
+_UNUSED_NOTE = ("a shell or solid property or material that no element of the deck uses: no effect "
+                "on the structure")
+
 _MERGED = ("grids", "cbars", "rods")
 """Deck collections that both the bulk converters and the parsers fill (kept in deck order)."""
 
@@ -150,10 +160,59 @@ class _Reader:
                                  "and no BAROR default)")
             self.deck.cbars[eid] = replace(self.deck.cbars[eid], x=x, g0=g0)
 
+    def unused_sections(self) -> None:
+        """Shell and solid properties and their materials that no element of the deck uses
+        (:data:`UNUSED_IF_UNREFERENCED`: a pre-processor exports every property of its model)
+        have no effect on the structure: counted in ``Deck.no_effect`` with a note, instead of
+        kept for an external solver or refused. Without ``keep_unmodelled`` every unmodelled
+        card is refused anyway unless all of them are such cards (then no element uses them);
+        with it, a property is unused when no other kept card names its PID in field 3 (every
+        integer field of a card of unknown layout counts), and a material when no kept card
+        holds its MID in any integer field."""
+        def accept(name: str, src: str, count: int) -> None:
+            n, first = self.deck.no_effect.get(name, (0, src))
+            self.deck.no_effect[name] = (n + count, first)
+            self.notes.setdefault(_UNUSED_NOTE, []).append(f"{name} at {src}")
+
+        if not self.keep_unmodelled:
+            if self.unsupported and set(self.unsupported) <= UNUSED_IF_UNREFERENCED:
+                for name, (n, card) in self.unsupported.items():
+                    accept(name, card.src, n)
+                self.unsupported.clear()
+            return
+        kept = self.deck.unmodelled
+        if not any(u.name in UNUSED_IF_UNREFERENCED for u in kept):
+            return
+
+        def ints(u) -> set:
+            return {f for f in u.fields if isinstance(f, int)}
+
+        pids: set = set()
+        for u in kept:
+            if u.name in UNUSED_IF_UNREFERENCED:
+                continue
+            if u.grids is None:
+                pids |= ints(u)
+            elif u.grids and len(u.fields) > 1 and isinstance(u.fields[1], int):
+                pids.add(u.fields[1])
+        props = [u for u in kept if u.name in UNUSED_IF_UNREFERENCED and not u.name.startswith("MAT")]
+        unused = {id(u) for u in props if not (u.fields and u.fields[0] in pids)}
+        mids: set = set()
+        for u in kept:
+            if id(u) not in unused and not u.name.startswith("MAT"):
+                mids |= ints(u)
+        unused |= {id(u) for u in kept if u.name in UNUSED_IF_UNREFERENCED and u.name.startswith("MAT")
+                   and not (u.fields and u.fields[0] in mids)}
+        for u in kept:
+            if id(u) in unused:
+                accept(u.name, u.src, 1)
+        self.deck.unmodelled = [u for u in kept if id(u) not in unused]
+
     def check_unsupported(self) -> None:
         """One DeckFormatError naming every unsupported card: count and first location of each.
 
         It points (file, line, field 1) at the first unsupported card of the deck."""
+        self.unused_sections()
         if not self.unsupported:
             return
         raise unsupported_error([(name, n, c.src) for name, (n, c) in self.unsupported.items()],
@@ -286,6 +345,7 @@ class _Reader:
     def finish(self) -> Deck:
         """GRDSET defaults into the GRIDs; SPC1 ``G1 THRU G2`` expanded (as in NASTRAN, grids of
         the range that do not exist are skipped)."""
+        self.unused_sections()
         if self.grdset is not None:
             c = self.grdset
             gid = self.first_blank["SEID"]
