@@ -444,9 +444,8 @@ def banded_solver(model) -> bool:
             if length > 0.0:
                 axial = max(axial, abs(m.e * p.a) / length)
     for r in model.rods.values():
-        p = model.prods.get(r.pid) if r.pid is not None else None
-        mid, area = (p.mid, p.a) if p is not None else (r.mid, r.a)
-        m = model.mat1s.get(mid) if mid is not None else None
+        mid, area, _ = model.rod_section(r)
+        m = model.mat1s.get(mid)
         a, b = model.grids.get(r.ga), model.grids.get(r.gb)
         if m is not None and a is not None and b is not None:
             length = math.dist(a.xyz, b.xyz)

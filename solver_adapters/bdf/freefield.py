@@ -59,6 +59,15 @@ def _items(body: str) -> list[str]:
     return out
 
 
+def equation_image(raw: str) -> bool:
+    """Whether a line with commas is a DEQATN's fixed-field card image, whose commas are equation
+    text: DEQATN in columns 1-8, or columns 1-8 blank before text that does not start with ``,``,
+    ``+`` or ``*`` (its continuation; a free-field line starts with its card name or a comma)."""
+    fixed = raw.expandtabs(8)
+    columns = fixed[:8].strip().upper()
+    return columns == "DEQATN" or (not columns and fixed.strip()[:1] not in ",+*")
+
+
 def _is_cosmic(body: str) -> bool:
     """Whether a comment-free bulk line needs this module: it starts with ``=`` or ``)``, or is
     a comma-separated line (not a DEQATN's) with a replication or field-index item, or with two
@@ -70,9 +79,7 @@ def _is_cosmic(body: str) -> bool:
         return True
     if "," not in s:
         return False
-    head = s.split(",", 1)[0].strip().upper()
-    columns = body.expandtabs(8)[:8].strip().upper()
-    if head == "DEQATN" or columns == "DEQATN" or (not columns and s[0] not in ",+*"):
+    if s.split(",", 1)[0].strip().upper() == "DEQATN" or equation_image(body):
         return False                            # a DEQATN's equation: text with commas
     if _SPECIAL.search(s):
         return True

@@ -117,12 +117,12 @@ def _split(raw: str, file: str, lineno: int) -> _Line:
         if head[0].strip().upper() == "DEQATN" and len(head) == 3:
             # free field: DEQATN,EQID,equation (the equation's own commas kept)
             return _Line(file, lineno, "DEQATN", [head[1].strip(), head[2].strip()] + [""] * 6, "")
-        fixed = raw.expandtabs(8).rstrip()
-        if fixed[:8].strip().upper() == "DEQATN" or (not fixed[:8].strip() and fixed.strip()[:1] not in ",+*"):
+        if freefield.equation_image(raw):
             # a DEQATN's equation (columns 17-72 of its first line, 9-72 of the next) holds
             # commas as text: a fixed-field card image, the equation one field (a blank field 1
             # before text with commas is no free-field line, which starts with its card name
             # or a comma)
+            fixed = raw.expandtabs(8).rstrip()
             if len(fixed) > 80:
                 raise fail("text beyond column 80 of a fixed-field line")
             fixed = fixed.ljust(80)
