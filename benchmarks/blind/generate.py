@@ -911,6 +911,9 @@ def _try_study(rng: np.random.Generator, index: int, kinds: tuple[str, ...], fam
     # offers, though nothing is planted as them
     m_k["bad_channel"] = len(dofs) if len(fit_labels) >= 2 else 0
     m_k["bad_case"] = len(fit_labels) if len(fit_labels) >= 3 else 0
+    # every pair of fitted cases read at the same channels may have been exchanged (case_swap):
+    # every case here is read at the same channels
+    m_k["case_swap"] = len(fit_labels) * (len(fit_labels) - 1) // 2
     m_k = {k: v for k, v in m_k.items() if v}
     # the diagnosis's first-round multiplier of one hypothesis of a kind (search.multipliers): 2 K M_k
     mult = {k: 2 * len(m_k) * m for k, m in m_k.items()}

@@ -189,6 +189,18 @@ class ObsMap:
             got = self._flats[n_cases] = (flat, ref)
         return got
 
+    def source(self, U: np.ndarray, rows: np.ndarray, terms: list, cases: np.ndarray | None = None) -> np.ndarray:
+        """What the rows ``rows`` read from another source (an output mix, :meth:`Effect.mix_rows`):
+        ``sum(w * U[idx, case])`` over ``terms = [(idx, w)]``, less the rows' reference DOFs, in
+        the rows' own cases or in ``cases`` (U's column per row: another case's readings)."""
+        case = self.case[rows] if cases is None else cases
+        src = sum(w * U[idx, case] for idx, w in terms)
+        ref = self.ref[rows]
+        has = ref >= 0
+        if has.any():
+            src = src - np.where(has, U[np.maximum(ref, 0), case], 0.0)
+        return src
+
     def pick(self, U: np.ndarray) -> np.ndarray:
         """``U`` (observed DOFs x cases) at the rows, less the reference DOF's where a row has one
         (the same values as ``U[row, case]``, read through flat indices: this runs per residual)."""
@@ -438,45 +450,35 @@ class AugmentedModel:
         groups = [(order[a:e], dKs[g], As[g], keys[g]) for g, (a, e) in enumerate(zip(starts, ends))]
         return z, groups, (dKs, As, keys, inv)
 
-    def _output_mixes(self, om: ObsMap) -> list[tuple[int, np.ndarray, list]]:
+    def _output_mixes(self, om: ObsMap) -> list[tuple]:
+        """``(parameter index, rows, terms, cases)`` of every output mix (:meth:`Effect.mix_rows`;
+        ``cases`` None: the rows' own)."""
         if not any(type(e).mix_rows is not Effect.mix_rows for e in self._outputs):
             return []
         sl = dict(zip(self.spec.effects, self.spec.effect_slices()))
         o_index = self._o_index
-        return [(sl[e].start + q, rows, terms) for e in self._outputs for q, rows, terms in e.mix_rows(om, o_index)]
+        return [(sl[e].start + m[0], m[1], m[2], m[3] if len(m) > 3 else None)
+                for e in self._outputs for m in e.mix_rows(om, o_index)]
 
     def pick(self, U: np.ndarray, x: np.ndarray, om: ObsMap) -> np.ndarray:
         """``U`` (observed DOFs x cases) at the rows of ``om``, with the output mixes applied
-        (a channel that reads, in part ``x_q``, another DOF's motion: two channels swapped, a
-        sensor on the neighbouring grid): ``f_rows += x_q (source - f_rows)``. Linear in ``U``."""
+        (a channel that reads, in part ``x_q``, another DOF's motion or another case's: two
+        channels swapped, a sensor on the neighbouring grid, two cases' readings exchanged):
+        ``f_rows += x_q (source - f_rows)``. Linear in ``U``."""
         f = om.pick(U)
         mixes = self._output_mixes(om)
         if not mixes:
             return f
         out = f.copy()
-        for i, rows, terms in mixes:
-            case = om.case[rows]
-            src = sum(w * U[idx, case] for idx, w in terms)
-            ref = om.ref[rows]
-            has = ref >= 0
-            if has.any():
-                src = src - np.where(has, U[np.maximum(ref, 0), case], 0.0)
-            out[rows] += x[i] * (src - f[rows])
+        for i, rows, terms, cases in mixes:
+            out[rows] += x[i] * (om.source(U, rows, terms, cases) - f[rows])
         return out
 
     def _mix_columns(self, U: np.ndarray, om: ObsMap) -> list[tuple[int, np.ndarray, np.ndarray]]:
         """``d pick / d x_q`` of every mixing parameter: ``(q, rows, source - own)``."""
         f = om.pick(U)
-        out = []
-        for i, rows, terms in self._output_mixes(om):
-            case = om.case[rows]
-            src = sum(w * U[idx, case] for idx, w in terms)
-            ref = om.ref[rows]
-            has = ref >= 0
-            if has.any():
-                src = src - np.where(has, U[np.maximum(ref, 0), case], 0.0)
-            out.append((i, rows, src - f[rows]))
-        return out
+        return [(i, rows, om.source(U, rows, terms, cases) - f[rows])
+                for i, rows, terms, cases in self._output_mixes(om)]
 
     def _output_factors(self, om: ObsMap) -> list[tuple[int, np.ndarray]]:
         sl = dict(zip(self.spec.effects, self.spec.effect_slices()))

@@ -30,9 +30,10 @@ from blackbox.diagnosis.effects.bad_case import BadCase  # noqa: E402
 from blackbox.diagnosis.effects.rigid_motion import RigidMotion  # noqa: E402
 from blackbox.diagnosis.effects.rigid_end_zone import RigidEndZone  # noqa: E402
 from blackbox.diagnosis.effects.support_fixity import SupportFixity  # noqa: E402
+from blackbox.diagnosis.effects.case_swap import CaseSwap  # noqa: E402
 
 __all__ = ["CandidateContext", "CandidateLimit", "Effect", "Connection", "register", "get", "kinds", "families",
            "UndeclaredJoint", "JointTranslation", "SupportFlexibility", "JointCoupling", "MemberStiffness", "JointGap",
            "JointSoftening", "JointUnloading", "PDelta", "Preload", "LoadScale", "SensorGain", "SensorOffset", "Outlier",
            "SignFlip", "ChannelSwap", "MisplacedSensor", "BadChannel", "BadCase", "RigidMotion", "RigidEndZone",
-           "SupportFixity"]
+           "SupportFixity", "CaseSwap"]

@@ -301,12 +301,14 @@ class Effect:
         a mask or indices, or float weights over every row of ``om`` (``x_q`` times each)."""
         return []
 
-    def mix_rows(self, om: "ObsMap", o_index: dict) -> list[tuple[int, np.ndarray, list]]:
-        """``[(q, rows, terms)]``: the predictions at ``rows`` (indices into ``om``) read, in part
-        ``x_q``, a source instead of their own DOF: ``f += x_q (source - f)``, the source
-        ``sum(w * U[idx, case])`` over ``terms = [(idx, w)]`` (observed-DOF indices per row,
-        ``o_index``, and weights), minus the row's reference DOF when it has one. Applied before
-        the factors and offsets."""
+    def mix_rows(self, om: "ObsMap", o_index: dict) -> list[tuple]:
+        """``[(q, rows, terms)]`` or ``[(q, rows, terms, cases)]``: the predictions at ``rows``
+        (indices into ``om``) read, in part ``x_q``, a source instead of their own DOF:
+        ``f += x_q (source - f)``, the source ``sum(w * U[idx, case])`` over ``terms = [(idx, w)]``
+        (observed-DOF indices per row, ``o_index``, and weights), minus the row's reference DOF
+        when it has one, in the row's own case or in ``cases`` (a column of ``U`` per row: the
+        readings of another case). Applied before the factors and offsets
+        (:meth:`ObsMap.source`)."""
         return []
 
     @property
@@ -513,7 +515,8 @@ class ReadsAnother:
     and a share below 1/2 (mostly the channels' own reading) or above 3/2 (more than the defect
     can explain) is no defect of its kind. Mixed into an :class:`Effect` dataclass that says how
     its share reads (:meth:`share_read`), what a low share is (:attr:`not_low`) and what the whole
-    defect is called (:attr:`summary_noun`)."""
+    defect is called (:attr:`summary_noun`), and where it reads (:meth:`Effect.mix_rows`, one
+    parameter), from which its score columns follow."""
     not_low = ""
     summary_noun = ""
 
@@ -524,6 +527,23 @@ class ReadsAnother:
         whole = x2.copy()
         whole[first:] = 1.0
         return super().refit_starts(x2, step, lo, hi, first) + [whole]
+
+    @classmethod
+    def sparse_columns(cls, model, st, x, om, effects):
+        # the one parameter's column: (source - own reading) on the mixed rows, times the factors
+        o_index = {d: i for i, d in enumerate(model.o_dofs)}
+        mult = model.multiplier(x, om)
+        U = st.U_O
+        own = om.pick(U)
+        out = []
+        for e in effects:
+            rows_all, vals_all = [], []
+            for _, rows, terms, *cases in e.mix_rows(om, o_index):
+                rows_all.append(rows)
+                vals_all.append(mult[rows] * (om.source(U, rows, terms, cases[0] if cases else None) - own[rows]))
+            out.append((np.concatenate(rows_all) if rows_all else np.zeros(0, int),
+                        np.concatenate(vals_all) if vals_all else np.zeros(0)))
+        return out
 
     def rejection(self, x_effect: np.ndarray) -> str | None:
         t = float(np.asarray(x_effect)[0])

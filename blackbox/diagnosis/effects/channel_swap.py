@@ -78,30 +78,6 @@ class ChannelSwap(ReadsAnother, Effect):
                 out.append((0, rows, [(np.full(rows.size, o_index[(other, c)]), 1.0)]))
         return out
 
-    @classmethod
-    def sparse_columns(cls, model, st, x, om, effects):
-        o_index = {d: i for i, d in enumerate(model.o_dofs)}
-        mult = model.multiplier(x, om)
-        U = st.U_O
-        out = []
-        for e in effects:
-            rows_all, vals_all = [], []
-            a, b = (int(w) for w in e.where)
-            for own, other in ((a, b), (b, a)):
-                rows = np.flatnonzero(om.rows_of(own, e.component))
-                if not rows.size or (other, e.component) not in o_index:
-                    continue
-                case = om.case[rows]
-                src = U[o_index[(other, e.component)], case]
-                ref = om.ref[rows]
-                src = src - np.where(ref >= 0, U[np.maximum(ref, 0), case], 0.0)
-                own_f = om.pick(U)[rows]
-                rows_all.append(rows)
-                vals_all.append(mult[rows] * (src - own_f))
-            out.append((np.concatenate(rows_all) if rows_all else np.zeros(0, int),
-                        np.concatenate(vals_all) if vals_all else np.zeros(0)))
-        return out
-
     not_low = "mostly their own grids, not a swap"
     summary_noun = "a swap"
 

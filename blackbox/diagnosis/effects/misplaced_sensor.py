@@ -124,29 +124,6 @@ class MisplacedSensor(ReadsAnother, Effect):
                 out.append((0, rows, self._terms(c, w, o_index, rows.size)))
         return out
 
-    @classmethod
-    def sparse_columns(cls, model, st, x, om, effects):
-        o_index = {d: i for i, d in enumerate(model.o_dofs)}
-        mult = model.multiplier(x, om)
-        U = st.U_O
-        own = om.pick(U)
-        out = []
-        for e in effects:
-            rows_all, vals_all = [], []
-            for c, w in zip(e.components, e.weights):
-                rows = np.flatnonzero(om.rows_of(e.grid, c))
-                if not rows.size:
-                    continue
-                case = om.case[rows]
-                src = sum(wj * U[idx, case] for idx, wj in e._terms(c, w, o_index, rows.size))
-                ref = om.ref[rows]
-                src = src - np.where(ref >= 0, U[np.maximum(ref, 0), case], 0.0)
-                rows_all.append(rows)
-                vals_all.append(mult[rows] * (src - own[rows]))
-            out.append((np.concatenate(rows_all) if rows_all else np.zeros(0, int),
-                        np.concatenate(vals_all) if vals_all else np.zeros(0)))
-        return out
-
     not_low = "mostly their own grid, not misplaced"
     summary_noun = "a misplacement"
 
