@@ -99,6 +99,54 @@ def test_channel_swap(tmp_module):
     _within(a["parameters"][0], 1.0)
 
 
+def test_case_swap(tmp_module):
+    """Every reading of cases L3 and L8 exchanged, values and sigmas (two files saved under each
+    other's names): one effect names both cases, its fraction 1 within 4 std, the data."""
+    study = _copy(tmp_module, "case_swap")
+    rows = _rows(study)
+    by = {(r["case"], r["grid"], r["component"]): r for r in rows}
+    for (case, g, c), r in by.items():
+        if case == "L3":
+            o = by[("L8", g, c)]
+            for k in ("value", "sigma"):
+                r[k], o[k] = o[k], r[k]
+    _write(study, rows)
+    doc = _diagnose(study)
+    a = _only(doc, "case_swap")
+    assert len(doc["added"]) == 1 and a["where"] == ["L3", "L8"] and a["of"] == "data"
+    _within(a["parameters"][0], 1.0)
+
+
+def test_case_swap_model_is_the_exchange(cube_prepared):
+    """At fraction 1 the augmented model predicts each of the two cases' rows as the declared
+    model's response to the other case's load (the columns of ``U`` exchanged), at 1/2 their
+    mean, to rounding; the score column the search batches (``sparse_columns``) is the
+    Jacobian's column (the model is linear in the fraction: both are ``u_B - u_A``)."""
+    from blackbox.diagnosis.effects import CaseSwap
+    pr = cube_prepared
+    swap = next(e for e in pr.candidates if isinstance(e, CaseSwap) and e.where == ("L3", "L8"))
+    assert sum(isinstance(e, CaseSwap) for e in pr.candidates) == 45           # 10 fitted cases, pairs
+    spec, x = dg.ModelSpec(tuple(pr.joints)).add(swap, pr.ident.k)
+    o = list(dict.fromkeys(pr.study.measurements.all_dofs))
+    model = dg.AugmentedModel(pr.base, spec, pr.boundary, pr.K_deck, o)
+    om = dg.ObsMap.of(pr.fit_obs, {d: i for i, d in enumerate(o)})
+    U = model.state(x).U_O
+    a, b = (list(pr.study.loads.cases).index(c) for c in ("L3", "L8"))
+    swapped = U.copy()
+    swapped[:, [a, b]] = U[:, [b, a]]
+    scale = np.max(np.abs(U))
+    for t, want in ((1.0, om.pick(swapped)), (0.5, 0.5 * (om.pick(U) + om.pick(swapped)))):
+        x[-1] = t
+        assert np.max(np.abs(model.predict(x, om) - want)) < 1e-13 * scale
+    x[-1] = 0.0
+    base = dg.AugmentedModel(pr.base, dg.ModelSpec(tuple(pr.joints)), pr.boundary, pr.K_deck, o)
+    (rows, vals), = CaseSwap.sparse_columns(base, base.state(x[:-1]), x[:-1], om, [swap])
+    col = np.zeros(len(om.y))
+    col[rows] = vals
+    J = model.jacobian(x, om)[:, -1]
+    assert np.max(np.abs(col - J)) < 1e-13 * scale and np.count_nonzero(J) == 2 * 30      # 30 channels a case
+
+
 def test_misplaced_sensor(tmp_module):
     """Grid 5's sensor block read at its neighbour 6 (one bar away): the block variant, t ~ 1."""
     study = _copy(tmp_module, "misplaced")
@@ -301,6 +349,7 @@ def test_clean_data_raise_no_data_defect(tmp_module):
     assert doc["verdict"] == "adequate" and not doc["added"]
     kinds = doc["settings"]["candidates_by_effect"]
     assert kinds["outlier"] == 300 and kinds["channel_swap"] > 20 and kinds["joint_gap"] == 1
+    assert kinds["case_swap"] == 45             # every pair of the 10 fitted cases
 
 
 def test_holdout_veto_is_calibrated():

@@ -1,8 +1,9 @@
 """``bad_case``: the readings of one load case follow no model; they are set aside.
 
 A case can go wrong as a whole in ways a load-cell factor does not describe: its file written in
-millimetres where the others are in metres, the readings of two cases exchanged, the load
-applied at another point or not at all. This effect gives every channel read in the case a free
+millimetres where the others are in metres, its readings exchanged with a hold-out case's (two
+fitted cases exchanged are ``case_swap``, one parameter for both), the load applied at another
+point or not at all. This effect gives every channel read in the case a free
 offset (``c_<case>_G_C``), which is what setting the case's readings aside means; its LR
 statistic is the part of the case's misfit the model cannot absorb. Exact, no run. Candidates:
 every fitted case when at least three are fitted (one set aside leaves two).
