@@ -281,6 +281,38 @@ def test_patterns_of_set_aside_readings():
     assert case_pattern(u[::-1] + e, u, s)["pattern"] == "other"
 
 
+def test_two_cases_set_aside_that_read_as_each_other_are_called_exchanged():
+    """Two set-aside cases whose readings are each other's model response (the exchanged
+    readings with the sigma of their new label: 1 where the reading's own noise is 3, the
+    exchange then scatters beyond the noise and both cases are set aside) are named
+    ``exchanged``, judged with the larger sigma of each channel; readings that are neither
+    case's response stay ``other``."""
+    from types import SimpleNamespace
+    from blackbox.diagnosis.effects.bad_case import BadCase
+    rng = np.random.default_rng(4)
+    n = 40
+    chans = tuple((g, 1) for g in range(1, n + 1))
+    u_a, u_b = rng.uniform(20.0, 60.0, n), rng.uniform(-60.0, -20.0, n)
+    s_a, s_b = np.full(n, 1.0), np.full(n, 3.0)
+    y_a, y_b = u_b + rng.normal(0.0, 3.0, n), u_a + rng.normal(0.0, 1.0, n)      # exchanged
+
+    def fit_of(ya, yb):
+        a = BadCase(("L1",), tuple(f"c_L1_{g}_1" for g, _ in chans), case="L1", channels=chans,
+                    readings=tuple(ya), sigmas=tuple(s_a))
+        # the other case lists its channels in another order
+        b = BadCase(("L2",), tuple(f"c_L2_{g}_1" for g, _ in chans[::-1]), case="L2", channels=chans[::-1],
+                    readings=tuple(yb[::-1]), sigmas=tuple(s_b[::-1]))
+        spec = dg.ModelSpec((), (a, b))
+        # the offsets set each case's readings to the model's response (reading - offset = u)
+        return a, b, SimpleNamespace(spec=spec, x=np.concatenate([ya - u_a, (yb - u_b)[::-1]]))
+
+    a, b, fit = fit_of(y_a, y_b)
+    assert a.findings(fit)["pattern"] == b.findings(fit)["pattern"] == "exchanged"
+    assert "cases L1 and L2 exchanged" in a.findings(fit)["pattern_detail"]
+    a, b, fit = fit_of(u_a[::-1] + rng.normal(0.0, 1.0, n), y_b)                # L1 reads neither
+    assert a.findings(fit)["pattern"] == b.findings(fit)["pattern"] == "other"
+
+
 @pytest.fixture(scope="module")
 def cube_prepared(tmp_module):
     (tmp_module / "decks").mkdir()

@@ -13,8 +13,10 @@ explains, and any effect that explains several cases wins as well. Once added it
 of what it subsumes in its case (its outliers, its own load scale: :meth:`subsumes`). The report
 says what the readings look like (:meth:`BadCase.findings`): ``zero`` (noise about zero: no load
 reached the structure), ``scale`` (the model's response times a factor beyond a load cell's
-error: other units, a factor 1000 is millimetres for metres) or ``other`` (neither: a load
-applied elsewhere, or another case's readings).
+error: other units, a factor 1000 is millimetres for metres), ``exchanged`` (another case set
+aside in the same fit reads as this case's response and this case as its: the two cases'
+readings exchanged) or ``other`` (none of these: a load applied elsewhere, or another case's
+readings).
 """
 
 from __future__ import annotations
@@ -90,7 +92,35 @@ class BadCase(SetAsideEffect):
         return other.kind == "load_scale" and tuple(other.where) == (self.case,)
 
     def findings(self, fit) -> dict:
-        return case_pattern(*self.model_readings(fit))
+        y, u, s = self.model_readings(fit)
+        found = case_pattern(y, u, s)
+        if found["pattern"] == "other":
+            found = self._exchanged(fit, y, u, s) or found
+        return found
+
+    def _exchanged(self, fit, y, u, s) -> dict | None:
+        """Another case set aside in ``fit`` whose model response these readings are while its
+        readings are this case's response: the two cases' readings exchanged (the exchange is
+        ``case_swap``; it gives way to two set-aside cases when the exchanged readings scatter
+        beyond their declared sigma, a sigma that stayed with the case's label while its
+        readings moved). Each reading is judged with the larger of the two cases' sigmas at its
+        channel, as either may be its noise."""
+        mine = {ch: i for i, ch in enumerate(self.channels)}
+        for e in fit.spec.effects:
+            if e is self or not isinstance(e, BadCase) or set(e.channels) != set(mine):
+                continue
+            yo, uo, so = e.model_readings(fit)
+            order = np.array([mine[ch] for ch in e.channels])
+            y2, u2, s2 = np.empty_like(yo), np.empty_like(uo), np.empty_like(so)
+            y2[order], u2[order], s2[order] = yo, uo, so
+            sm = np.maximum(s, s2)
+            n = len(y)
+            if _fits(float(np.sum(((y - u2) / sm) ** 2)), n) and _fits(float(np.sum(((y2 - u) / sm) ** 2)), n):
+                return {"pattern": "exchanged",
+                        "pattern_detail": f"the readings are the model's response to case {e.case}'s load, and "
+                                          f"case {e.case}'s readings (set aside too) are this case's: the readings "
+                                          f"of cases {self.case} and {e.case} exchanged"}
+        return None
 
     def label(self) -> str:
         return f"{self.kind} @ case {self.case}"
