@@ -503,6 +503,9 @@ def joint_branches(deck, grids) -> list[Branch]:
         d = np.subtract(deck.grids[other].xyz, deck.grids[g].xyz)
         L = float(np.linalg.norm(d))
         p = deck.pbars[b.pid]
+        if p.taper is not None:
+            raise StudyError(f"branch grid {g}: its bar {b.eid} ({p.card} {p.pid}) is tapered; the stub joint "
+                             f"and the branch averaging need a prismatic branch")
         m = deck.mat1s[p.mid]
         v = np.array(b.x, float) if b.g0 is None else \
             np.subtract(deck.grids[b.g0].xyz, deck.grids[b.ga].xyz)

@@ -205,10 +205,14 @@ def write_pbar(p: PBar, fmt: str = "small") -> str:
 
 
 def write_pbeam(p: PBar, fmt: str = "small") -> str:
-    """A PBar with a neutral axis offset (which PBAR cannot hold) as the prismatic PBEAM it came
-    from: PID MID A I1 I2 I12 J, the K line (blank K of the PBar: 0.0, no shear flexibility)
-    and the M/N line with N1, N2 at both ends."""
+    """A PBar with a neutral axis offset or a taper (which PBAR cannot hold) as the PBEAM it
+    came from: PID MID A I1 I2 I12 J, end B's station (SO = NO, X/XB = 1.0) when tapered, the
+    K line (blank K of the PBar: 0.0, no shear flexibility) and the M/N line with N1, N2 at both
+    ends."""
     fields: list[Field] = [p.pid, p.mid, p.a, p.i1, p.i2, p.i12, p.j, None] + [None] * 8
+    if p.taper is not None:
+        a, i1, i2, j = p.taper
+        fields += ["NO", 1.0, a, i1, i2, p.i12, j, None]
     fields += [p.k1 or 0.0, p.k2 or 0.0] + [None] * 6 + [None] * 4 + [p.n1, p.n2, p.n1, p.n2]
     return format_card("PBEAM", fields, fmt)
 
@@ -410,7 +414,8 @@ def write_deck(deck: Deck, fmt: str = "small") -> str:
     out += [write_grid(deck.grids[i], fmt) for i in sorted(deck.grids)]
     coords = getattr(deck, "coords", None) or {}
     out += [write_coord(coords[i], fmt) for i in sorted(coords)]
-    beams = {pid for pid, p in deck.pbars.items() if getattr(p, "n1", 0.0) or getattr(p, "n2", 0.0)}
+    beams = {pid for pid, p in deck.pbars.items()
+             if getattr(p, "n1", 0.0) or getattr(p, "n2", 0.0) or getattr(p, "taper", None) is not None}
     for i in sorted(deck.cbars):
         b = deck.cbars[i]
         out.append(write_cbar(cbar_in_cd(deck, b), fmt, "CBEAM" if b.pid in beams else "CBAR"))

@@ -163,6 +163,10 @@ class PBar:
     card: str = "PBAR"          # the card it was read from: PBAR, PBARL, PBEAM or PBEAML
     n1: float = 0.0             # PBEAM neutral axis (element y, z) from the shear-centre axis:
     n2: float = 0.0             # the axial force acts on it, bending and shear on the axis
+    taper: tuple[float, float, float, float] | None = None
+    """A tapered PBEAM: end B's A, I1, I2, J (``a``, ``i1``, ``i2``, ``j`` are end A's); the
+    section varies linearly from end A to end B (``reference.frame.tapered_local_stiffness``).
+    ``None``: a prismatic beam."""
 
 
 @dataclass(frozen=True)

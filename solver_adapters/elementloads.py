@@ -256,8 +256,7 @@ class MassReader:
                 n = PBARL_DIMS.get(c.text(5), 0)
                 nsm["bar"][_int(c, 2)] = card_value(deck, c, 10 + n, 0.0)
             elif name == "PBEAM":
-                self._pbeam(c, nsm, refuse)
-                nsm["bar"][_int(c, 2)] = card_value(deck, c, 9, 0.0)
+                self._pbeam(deck, c, nsm, refuse)
             elif name == "PROD":
                 nsm["rod"][_int(c, 2)] = card_value(deck, c, 7, 0.0)
             elif name == "CONROD":
@@ -275,7 +274,8 @@ class MassReader:
                 for base in (2, 4, 6, 8):
                     if c.text(base):
                         pmass[_int(c, base)] = _real(c, base + 1)
-        bar_pid = {pid: rho.get(p.mid, 0.0) * p.a + nsm["bar"].get(pid, 0.0) for pid, p in deck.pbars.items()}
+        bar_pid = {pid: self._bar_mass(p, rho.get(p.mid, 0.0), nsm["bar"].get(pid, 0.0))
+                   for pid, p in deck.pbars.items()}
         rod_pid = {pid: rho.get(p.mid, 0.0) * p.a + nsm["rod"].get(pid, 0.0) for pid, p in deck.prods.items()}
         conrod = {r.eid: rho.get(r.mid, 0.0) * r.a + nsm["conrod"].get(r.eid, 0.0)
                   for r in deck.rods.values() if r.pid is None}
@@ -329,18 +329,35 @@ class MassReader:
         return g, m
 
     @staticmethod
-    def _pbeam(c, nsm: dict, refuse) -> None:
-        """A PBEAM's mass per length: NSM(A) (field 9); every station's NSM must be equal (a
-        tapered mass is refused), and the centre-of-gravity offsets M1, M2 must be zero."""
+    def _bar_mass(p, rho: float, nsm) -> float | tuple[float, float]:
+        """A bar property's mass per length, ``rho A + NSM``; at end A and end B when it varies
+        along the beam (a tapered area, an NSM(B) of its own: linear between them)."""
+        a_b = p.taper[0] if p.taper is not None else p.a
+        nsm_a, nsm_b = nsm if isinstance(nsm, tuple) else (nsm, nsm)
+        if a_b == p.a and nsm_b == nsm_a:
+            return rho * p.a + nsm_a
+        return rho * p.a + nsm_a, rho * a_b + nsm_b
+
+    @staticmethod
+    def _pbeam(deck, c, nsm: dict, refuse) -> None:
+        """A PBEAM's mass per length: NSM(A) (field 9) and end B's (X/XB = 1.0; blank: NSM(A)),
+        linear between them; an intermediate station's NSM must be NSM(A) (a mass varying
+        through intermediate stations is refused), and the centre-of-gravity offsets M1, M2 must
+        be zero."""
         pid = _int(c, 2)
-        nsm["bar"][pid] = value = _real(c, 9, 0.0)
+        value = card_value(deck, c, 9, 0.0)
+        end_b = value
         fields = [c.text(i) for i in range(1, len(c.fields) + 1)]
         g = 3
         while 8 * (g - 1) + 2 <= len(fields) and fields[8 * (g - 1) + 1] in ("YES", "YESA", "NO"):
             f0 = 8 * (g - 1) + 2
-            if _real(c, f0 + 7, value) != value:
-                raise refuse(c, f"has a mass per length NSM varying along the beam (field {f0 + 7})")
+            if _real(c, f0 + 1) == 1.0:
+                end_b = _real(c, f0 + 7, value)
+            elif _real(c, f0 + 7, value) != value:
+                raise refuse(c, f"has a mass per length NSM varying through an intermediate station "
+                                f"(field {f0 + 7})")
             g += 2 if fields[f0 - 1] == "YES" else 1
+        nsm["bar"][pid] = value if end_b == value else (value, end_b)
         kf = 8 * (g - 1) + 2
         if any(_real(c, i, 0.0) for i in range(kf + 8, kf + 12)):
             raise refuse(c, "has centre-of-gravity offsets M1, M2: its mass is not on the beam's axis")

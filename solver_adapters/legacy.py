@@ -121,6 +121,8 @@ def unsupported_features(m) -> list[tuple[str, str, str]]:
             out.append((f"{p.card} {p.pid}", p.src, f"product of inertia I12 = {p.i12:g}"))
         if getattr(p, "n1", 0.0) or getattr(p, "n2", 0.0):
             out.append((f"{p.card} {p.pid}", p.src, "a neutral axis off the shear centre (PBEAM N1/N2)"))
+        if getattr(p, "taper", None) is not None:
+            out.append((f"{p.card} {p.pid}", p.src, "a tapered section (FRAMESOLVE's beams are prismatic)"))
     for r in sorted(m.rods.values(), key=lambda r: r.eid):
         out.append((f"{r.card} {r.eid}", r.src, "rods (FRAMESOLVE has beams only)"))
     for r in sorted(m.rbe3s.values(), key=lambda r: r.eid):

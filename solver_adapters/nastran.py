@@ -273,6 +273,10 @@ def check_writable(model) -> None:
             _cannot_run(p.src, "PBEAM", f"PBEAM {p.pid}: its neutral axis is offset (N1, N2), and MYSTRAN 18 "
                                         f"has no CBEAM (its CBAR, as which the run deck writes a CBEAM, has no "
                                         f"neutral axis offset); the reference adapter models it")
+        if getattr(p, "taper", None) is not None:
+            _cannot_run(p.src, "PBEAM", f"PBEAM {p.pid}: it is tapered (end B's section is not end A's), and "
+                                        f"MYSTRAN 18 has no CBEAM (its CBAR, as which the run deck writes a "
+                                        f"CBEAM, is prismatic); the reference adapter models it")
 
 
 def _cannot_run(src: str, card: str, what: str) -> None:

@@ -222,6 +222,9 @@ class Translation:
         if p.i12:
             self.refuse(f"{p.card} {p.pid}", p.src, f"product of inertia I12 = {p.i12:g} (used by {card}): "
                                                     f"OpenSees's elastic beams have none")
+        if getattr(p, "taper", None) is not None:
+            self.refuse(f"{p.card} {p.pid}", p.src, f"a tapered section (used by {card}): OpenSees's elastic "
+                                                    f"beams are prismatic")
         if getattr(p, "n1", 0.0) or getattr(p, "n2", 0.0):
             self.refuse(f"{p.card} {p.pid}", p.src, f"neutral axis offset N1/N2 = {p.n1:g}/{p.n2:g} (used by "
                                                     f"{card}): OpenSees's elastic beams have their axis on the "

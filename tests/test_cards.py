@@ -953,7 +953,7 @@ def test_pbeam_written_as_pbar_reads_the_same():
 
 
 @pytest.mark.parametrize("edit, field, why", [
-    (("YESA    1.", "YESA    1.      2.-3"), 20, "tapered beam not supported: A"),
+    (("YESA    1.", "NO      .5      2.-3\n        YESA    1.      3.-3"), 20, "varies through an intermediate station"),
     (("                        0.      0.\n", "                        0.      .1\n"), 29, "shear relief S2"),
     (("                                        0.      0.      0.      0.", "                                        0.      0.      0.      .1"), 41, "neutral axis"),
     (("0.      1.      0.      GGG", "0.      1.      0.      .5"), 9, "BIT"),

@@ -40,42 +40,43 @@ def _cbeam(r, c) -> None:
 _SO = ("YES", "YESA", "NO")
 
 
-def _station_value(r, c, i: int, end_a: float, name: str, xxb: float) -> None:
-    """A station's value of a prismatic beam: blank (end A's), equal to end A's, or equal to
-    printing precision (a note); any other value makes a tapered beam (error)."""
+def _station_value(r, c, i: int, end_a: float, name: str) -> float | None:
+    """A station's value where it differs from end A's, else ``None``: blank (end A's), equal
+    to end A's, or equal to printing precision (a note, end A's value kept)."""
     text = c.text(i)
     if not text:
-        return
+        return None
     value = _real(c, i)
     if value == end_a:
-        return
+        return None
     if same_printed(c.text(_A_FIELD[name]), end_a, text, value):
         r.note(c, f"ends that differ only in printed digits ({name} {c.text(_A_FIELD[name])} "
                   f"and {text}) taken as prismatic, with end A's values")
-        return
-    raise c.error(i, f"tapered beam not supported: {name} at X/XB = {xxb:g} is {value:g}, at end A "
-                     f"{end_a:g} (only prismatic beams: every station equal to end A, to printing "
-                     f"precision)")
+        return None
+    return value
 
 
 _A_FIELD = {"A": 4, "I1": 5, "I2": 6, "I12": 7, "J": 8}
 
 
 def _pbeam(r, c) -> None:
-    """PBEAM as a prismatic beam: PID MID A I1 I2 I12 J NSM / C1..F2 (end A stress points) /
-    [SO X/XB A I1 I2 I12 J NSM [/ C1..F2 when SO = YES]] ... / K1 K2 S1 S2 NSI(A) NSI(B) CW(A)
-    CW(B) / M1(A) M2(A) M1(B) M2(B) N1(A) N2(A) N1(B) N2(B) (MSC QRG).
+    """PBEAM: PID MID A I1 I2 I12 J NSM / C1..F2 (end A stress points) / [SO X/XB A I1 I2 I12
+    J NSM [/ C1..F2 when SO = YES]] ... / K1 K2 S1 S2 NSI(A) NSI(B) CW(A) CW(B) / M1(A) M2(A)
+    M1(B) M2(B) N1(A) N2(A) N1(B) N2(B) (MSC QRG).
 
-    Every station (end B included) must have end A's A, I1, I2, I12, J (blank: end A's value;
-    a value that differs only in printed digits is taken as end A's, with a note); another
-    value is a tapered beam (error). K1, K2 default 1.0 (shear stiffness K A G, as in NASTRAN;
-    0.0: rigid in shear). Shear relief S1, S2 must be blank or 0. The warping coefficients CW
-    are ignored with a note, as NASTRAN ignores them on a CBEAM without warping scalar points
-    (SA, SB; the reader refuses those). The offsets of the centre of gravity M1, M2 carry mass
-    only: no effect on a static stiffness (a note; a GRAV load refuses such a beam). The
-    neutral axis N1, N2 (blank: 0.0), the same at both ends, is modelled: the axial force acts
-    on it, bending and shear on the shear centre axis (``PBar.n1``, ``n2``). NSM, NSI and the
-    stress recovery points are read and have no effect on the stiffness."""
+    A station's A, I1, I2, I12, J left blank, equal to end A's, or differing only in printed
+    digits (a note) are end A's. End B's (X/XB = 1.0) A, I1, I2, J may differ: a beam tapered
+    linearly from end A to end B (``PBar.taper``; every end value positive, J may be 0 at both),
+    which NASTRAN's CBEAM integrates as :func:`solver_adapters.reference.frame.tapered_local_stiffness`
+    does. A section that varies otherwise is an error: through an intermediate station, in
+    I12, or with a neutral-axis offset. K1, K2 default 1.0 (shear stiffness K A G, as in
+    NASTRAN; 0.0: rigid in shear). Shear relief S1, S2 must be blank or 0. The warping
+    coefficients CW are ignored with a note, as NASTRAN ignores them on a CBEAM without warping
+    scalar points (SA, SB; the reader refuses those). The offsets of the centre of gravity M1,
+    M2 carry mass only: no effect on a static stiffness (a note; a GRAV load refuses such a
+    beam). The neutral axis N1, N2 (blank: 0.0), the same at both ends, is modelled: the axial
+    force acts on it, bending and shear on the shear centre axis (``PBar.n1``, ``n2``). NSM,
+    NSI and the stress recovery points are read and have no effect on the stiffness."""
     n_groups = (len(c.fields) - 1 + 7) // 8
 
     def first(g: int) -> int:              # NASTRAN field number of group g's first field
@@ -87,19 +88,36 @@ def _pbeam(r, c) -> None:
     _ignored_reals(c, range(10, 18))                              # C1(A) .. F2(A)
     g = 3
     names = ("A", "I1", "I2", "I12", "J")
+    inner = []                                  # intermediate stations: (X/XB, field of X/XB)
+    end_b: dict[str, tuple[float, int]] = {}    # end B's values that differ from end A's
     while g <= n_groups and c.text(first(g)) in _SO:
         f0 = first(g)
         so = c.text(f0)
         xxb = _real(c, f0 + 1)
         if not 0.0 < xxb <= 1.0:
             raise c.error(f0 + 1, "X/XB must be in (0, 1]")
-        for k, name in enumerate(names):
-            _station_value(r, c, f0 + 2 + k, end_a[k], name, xxb)
+        differs = {name: (v, f0 + 2 + k) for k, name in enumerate(names)
+                   if (v := _station_value(r, c, f0 + 2 + k, end_a[k], name)) is not None}
+        if xxb == 1.0:
+            end_b = differs
+        else:
+            inner.append((xxb, f0 + 1, differs))
         _real(c, f0 + 7, 0.0)
         g += 1
         if so == "YES":
             _ignored_reals(c, range(first(g), first(g) + 8))
             g += 1
+    for xxb, i, differs in inner:
+        if differs or end_b:
+            name, (value, f) = next(iter(differs.items())) if differs else (None, (None, i))
+            raise c.error(f, f"a section that varies through an intermediate station (X/XB = {xxb:g}"
+                             + (f": {name} {value:g}, at end A {end_a[names.index(name)]:g}" if name else "")
+                             + ") is not supported: only a beam tapered linearly from end A to end B "
+                               "(no intermediate station)")
+    if "I12" in end_b:
+        value, f = end_b["I12"]
+        raise c.error(f, f"a product of inertia that varies along the beam (I12 {value:g} at end B, "
+                         f"{end_a[3]:g} at end A) is not supported")
     if n_groups - g + 1 > 2:
         raise c.error(first(g + 2), "PBEAM has fields after its M/N line (or a station without "
                                     "SO = YES, YESA or NO)")
@@ -133,6 +151,19 @@ def _pbeam(r, c) -> None:
                                        f"N{j + 1}(A) = {n_a[j]:g}: a neutral axis that is not parallel "
                                        f"to the shear-centre axis is not supported")
     a, i1, i2, i12, j = end_a
+    taper = None
+    if end_b:
+        if any(n_a):
+            raise c.error(kf + 12, "a tapered beam with a neutral-axis offset (N1, N2) is not supported")
+        if i12 != 0.0:
+            raise c.error(7, "a tapered beam with a product of inertia I12 is not supported")
+        taper = tuple(end_b[name][0] if name in end_b else end_a[names.index(name)] for name in ("A", "I1", "I2", "J"))
+        for name, va, vb in zip(("A", "I1", "I2", "J"), (a, i1, i2, j), taper):
+            if name != "J" and not (va > 0.0 and vb > 0.0):
+                raise c.error(end_b[name][1] if name in end_b and vb <= 0.0 else _A_FIELD[name],
+                              f"a tapered beam needs {name} > 0 at both ends (end A {va:g}, end B {vb:g})")
+            if name == "J" and (va < 0.0 or vb < 0.0):
+                raise c.error(end_b[name][1] if vb < 0.0 else 8, f"J must be >= 0 (end A {va:g}, end B {vb:g})")
     if i12 != 0.0:
         if not i1 * i2 > i12 * i12:
             raise c.error(7, "product of inertia I12 needs I1 * I2 > I12^2")
@@ -141,7 +172,7 @@ def _pbeam(r, c) -> None:
                               "I12 is not supported: set K1 = K2 = 0.0 or I12 = 0.0")
     r.claim("property", pid, c, 2)
     r.deck.pbars[pid] = PBar(pid, mid, a, i1, i2, j, c.src, k[0], k[1], i12, card="PBEAM",
-                             n1=n_a[0], n2=n_a[1])
+                             n1=n_a[0], n2=n_a[1], taper=taper)
 
 
 def _pbeaml(r, c) -> None:

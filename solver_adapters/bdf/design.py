@@ -34,7 +34,8 @@ on a static solution and are accepted. Refused with a located error naming the c
 DVCREL2 on an element with stiffness, an equation that cannot be read or evaluated (named
 at its DEQATN), a relation on a card the reader does not model (a PSHELL kept for
 MYSTRAN would reach it undesigned) or on a PBUSH (handed to MYSTRAN as written), a negative FID
-(a word of NASTRAN's element property table), a PBEAM station other than end A.
+(a word of NASTRAN's element property table), a PBEAM station other than end A and end B
+(``I1(B)``: the field of its station at X/XB = 1.0).
 """
 
 from __future__ import annotations
@@ -272,6 +273,22 @@ def _values(r) -> dict[int, tuple[float, object]]:
     return out
 
 
+_PBEAM_STATION = {"A": 2, "I1": 3, "I2": 4, "I12": 5, "J": 6, "NSM": 7}   # from a station's SO field
+
+
+def _pbeam_end_b(card) -> int | None:
+    """The field number of the SO field of PBEAM ``card``'s end B station (X/XB = 1.0), or
+    ``None`` when it has none."""
+    g, found = 3, None
+    while True:
+        f0 = 8 * (g - 1) + 2
+        if f0 > len(card.fields) or card.text(f0) not in ("YES", "YESA", "NO"):
+            return found
+        if _real(card, f0 + 1, 0.0) == 1.0:
+            found = f0
+        g += 2 if card.text(f0) == "YES" else 1
+
+
 def _field_of(c, target: str, pname: str, card) -> tuple[int, str]:
     """(field number, property name) of ``pname`` on the target ``card``."""
     if pname.lstrip("+-").isdigit():
@@ -293,10 +310,16 @@ def _field_of(c, target: str, pname: str, card) -> tuple[int, str]:
             return 10 + n, pname
         raise c.error(5, f"{pname} is not a dimension of PBARL {card.text(2)} (TYPE {card.text(5)}: "
                          f"DIM1 ... DIM{n}, NSM)")
+    if target == "PBEAM" and pname.endswith("(B)") and pname[:-3] in _PBEAM_STATION:
+        f0 = _pbeam_end_b(card)
+        if f0 is None:
+            raise c.error(5, f"{pname}: PBEAM {card.text(2)} has no end B station (SO, X/XB = 1.0) whose "
+                             f"value the relation could design")
+        return f0 + _PBEAM_STATION[pname[:-3]], pname
     name = pname[:-3] if target == "PBEAM" and pname.endswith("(A)") else pname
     if target == "PBEAM" and "(" in name:
-        raise c.error(5, f"{pname}: a PBEAM station other than end A; the reader models prismatic "
-                         f"beams, whose properties are end A's")
+        raise c.error(5, f"{pname}: a PBEAM station other than end A or end B (the reader models beams "
+                         f"tapered from end A to end B, without intermediate stations)")
     names = NAMES.get(target, {})
     if name not in names:
         raise c.error(5, f"{pname} is not a property of {target} (designable: {', '.join(names)})")

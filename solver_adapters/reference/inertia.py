@@ -44,7 +44,7 @@ import scipy.sparse as sp
 
 from solver_adapters.errors import ModelError, UnstableStructureError
 from solver_adapters.protocol import DeckFormatError
-from solver_adapters.reference.loads import Masses, bar_frame
+from solver_adapters.reference.loads import Masses, bar_end_masses, bar_frame
 from solver_adapters.reference.model import Factorization, assemble, displacement_transform
 
 SUPORT_CARDS = ("SUPORT", "SUPORT1")
@@ -92,8 +92,9 @@ def mass_matrix(deck, masses: Masses, grid_ids: np.ndarray) -> sp.csr_matrix:
         mpl = masses.bar_pid.get(b.pid, 0.0)
         if mpl:
             _, L, wa, wb = bar_frame(deck, b)
-            add(b.ga, point_mass(0.5 * mpl * L, wa))
-            add(b.gb, point_mass(0.5 * mpl * L, wb))
+            ma, mb = bar_end_masses(mpl, L)
+            add(b.ga, point_mass(ma, wa))
+            add(b.gb, point_mass(mb, wb))
     for r in deck.rods.values():
         mpl = masses.conrod.get(r.eid, 0.0) if r.pid is None else masses.rod_pid.get(r.pid, 0.0)
         if mpl:

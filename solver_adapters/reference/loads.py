@@ -72,8 +72,13 @@ def bar_frame(deck, b) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
 
 
 def _local_stiffness(deck, b, lengths: np.ndarray) -> np.ndarray:
-    """Local stiffnesses ``(n, 12, 12)`` of pieces of bar ``b`` with the given lengths."""
+    """Local stiffnesses ``(n, 12, 12)`` of pieces of bar ``b`` with the given lengths;
+    :class:`LoadError` for a tapered beam (the loads NASTRAN puts on its ends from a load along
+    it, or from a temperature, were not measured)."""
     p = deck.pbars[b.pid]
+    if p.taper is not None:
+        raise LoadError(1, f"a load along bar {b.eid} or a temperature on it, whose {p.card} {p.pid} is "
+                           f"tapered: its end loads are not modelled (only loads at its ends)")
     m = deck.mat1s[p.mid]
     n = len(lengths)
     full = lambda v: np.full(n, float(v))
@@ -219,7 +224,8 @@ def thermal_rod_loads(deck, r, strain: float) -> dict[tuple[int, int], float]:
 @dataclass
 class Masses:
     """The mass a GRAV load acts on, from the deck's cards: mass per unit length of each bar
-    property and rod (``rho A + NSM``; a CONROD by its EID), the CONM2 masses ``(grid, mass,
+    property and rod (``rho A + NSM``; a CONROD by its EID; a bar property whose mass varies
+    along it, end A's and end B's, :func:`bar_end_masses`), the CONM2 masses ``(grid, mass,
     offset in basic)`` and their inertia about the centre of gravity (``conm2_inertia``: no part
     of a GRAV load), the CONM1 mass matrices ``(grid, 6x6 in basic)``, the scalar masses to
     ground ``(grid, component, mass)`` (CMASS1, CMASS2; the component in the grid's CD system)
@@ -232,6 +238,17 @@ class Masses:
     conm1: list[tuple[int, np.ndarray]] = None
     scalar: list[tuple[int, int, float]] = None
     conm2_inertia: list[tuple[int, np.ndarray]] = None   # (grid, 3x3 about the CG, basic)
+
+
+def bar_end_masses(mpl, L: float) -> tuple[float, float]:
+    """The lumped masses at a bar's two ends from its mass per length ``mpl`` (one value, or end
+    A's and end B's of a tapered beam): half each, or ``L (2 a + b) / 6`` and ``L (a + 2 b) / 6``
+    when it varies linearly from ``a`` to ``b`` (NASTRAN's lumped CBEAM mass: pyNastran's
+    ``model_200`` GRAV case, NSM tapered, matched to NX NASTRAN's single-precision OP2)."""
+    if isinstance(mpl, tuple):
+        a, b = mpl
+        return L * (2.0 * a + b) / 6.0, L * (a + 2.0 * b) / 6.0
+    return 0.5 * mpl * L, 0.5 * mpl * L
 
 
 def gravity_loads(deck, masses: Masses, accel) -> dict[tuple[int, int], float]:
@@ -256,7 +273,8 @@ def gravity_loads(deck, masses: Masses, accel) -> dict[tuple[int, int], float]:
         mpl = masses.bar_pid.get(b.pid, 0.0)
         if mpl:
             R, L, wa, wb = bar_frame(deck, b)
-            ha, hb = R @ (0.5 * mpl * L * g(b.ga)), R @ (0.5 * mpl * L * g(b.gb))
+            ma, mb = bar_end_masses(mpl, L)
+            ha, hb = R @ (ma * g(b.ga)), R @ (mb * g(b.gb))
             for key, v in _to_grids(b, R, wa, wb, np.concatenate([ha, np.zeros(3), hb, np.zeros(3)])).items():
                 add(key, v)
     for r in deck.rods.values():

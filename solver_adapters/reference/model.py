@@ -155,6 +155,12 @@ def _element_arrays(deck: Deck, grid_ids: np.ndarray, xyz: np.ndarray):
         if nax is None:
             nax = np.zeros((ne, 2))
         nax[:nb][pids == pid] = (deck.pbars[pid].n1, deck.pbars[pid].n2)
+    taper = None                        # tapered PBEAMs: element index -> (end A, end B) sections
+    for pid in [p for p in table if deck.pbars[p].taper is not None]:
+        pb = deck.pbars[pid]
+        taper = taper or {}
+        for k in np.flatnonzero(pids == pid).tolist():
+            taper[k] = ((pb.a, pb.i1, pb.i2, pb.j), pb.taper, pb.k1, pb.k2)
     for k, b in enumerate(bars):
         if b.pa or b.pb:
             pins[k] = sum(1 << (int(ch) - 1) for ch in b.pa) + sum(1 << (int(ch) + 5) for ch in b.pb)
@@ -162,7 +168,7 @@ def _element_arrays(deck: Deck, grid_ids: np.ndarray, xyz: np.ndarray):
             if offs is None:
                 offs = np.zeros((ne, 6))
             offs[k] = (*(b.wa or (0.0, 0.0, 0.0)), *(b.wb or (0.0, 0.0, 0.0)))
-    return elems, ia, ib, xa, xb, v, props, pins, offs, nax
+    return elems, ia, ib, xa, xb, v, props, pins, offs, nax, taper
 
 
 def _pins_and_offsets(kl: np.ndarray, kg_of, s: int, pins: np.ndarray, offs, elems,
@@ -202,11 +208,13 @@ def _pins_and_offsets(kl: np.ndarray, kg_of, s: int, pins: np.ndarray, offs, ele
 def _assemble_bars(ia: np.ndarray, ib: np.ndarray, R: np.ndarray, L: np.ndarray,
                    props: np.ndarray, n_grids: int, pins: np.ndarray | None = None,
                    offs: np.ndarray | None = None, elems=None,
-                   nax: np.ndarray | None = None) -> sp.csr_matrix:
+                   nax: np.ndarray | None = None, taper: dict | None = None) -> sp.csr_matrix:
     """Sum of the bars' global stiffness matrices, assembled by 6x6 grid blocks.
 
     ``pins`` (bit masks of released local DOFs) and ``offs`` (WA, WB per element, ``(ne, 6)``)
-    are applied by :func:`_pins_and_offsets`; ``elems`` names the element in errors.
+    are applied by :func:`_pins_and_offsets`; ``elems`` names the element in errors. ``taper``
+    (element index -> end A and end B sections, K1, K2): tapered beams, whose local matrices
+    replace the prismatic ones (:func:`frame.tapered_local_stiffness`).
 
     Each bar adds four 6x6 blocks (aa, bb, ab, ba). The distinct grid pairs (the block pattern)
     come from one ``np.unique`` over 4 * n_bars keys, the block sums from one sparse product
@@ -218,6 +226,10 @@ def _assemble_bars(ia: np.ndarray, ib: np.ndarray, R: np.ndarray, L: np.ndarray,
     for s in range(0, ne, _CHUNK):
         e = slice(s, s + _CHUNK)
         kl = frame.local_stiffness_em(L[e], *props[e].T)
+        for k in [k for k in taper or () if s <= k < s + _CHUNK]:
+            end_a, end_b, k1, k2 = taper[k]
+            kl[:, :, k - s] = frame.tapered_local_stiffness(float(L[k]), float(props[k, 0]), float(props[k, 1]),
+                                                            end_a, end_b, k1, k2)
         if (pins is not None and pins[e].any()) or (offs is not None and offs[e].any()) or \
                 (nax is not None and nax[e].any()):
             kg = _pins_and_offsets(kl, lambda k: frame.global_stiffness_em(R[e], k), s, pins,
@@ -255,7 +267,7 @@ def assemble(deck: Deck, extra_springs: tuple[ScalarSpring, ...] = (),
     grid_ids = np.array(sorted(deck.grids), dtype=np.int64)
     n_g = 6 * len(grid_ids)
     xyz = np.array([deck.grids[g].xyz for g in grid_ids.tolist()], float).reshape(-1, 3)
-    bars, ia, ib, xa, xb, v, props, pins, offs, nax = _element_arrays(deck, grid_ids, xyz)
+    bars, ia, ib, xa, xb, v, props, pins, offs, nax, taper = _element_arrays(deck, grid_ids, xyz)
     tm["elements_read_s"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     K_gg = sp.csr_matrix((n_g, n_g))
@@ -273,7 +285,7 @@ def assemble(deck: Deck, extra_springs: tuple[ScalarSpring, ...] = (),
             b = bars[int(np.flatnonzero(L <= 0)[0])]
             raise ModelError(f"{b.src}: {getattr(b, 'card', 'CBAR')} {b.eid}: zero length "
                              f"(GA={b.ga}, GB={b.gb} coincide)")
-        K_gg = _assemble_bars(ia, ib, R, L, props, len(grid_ids), pins, offs, bars, nax)
+        K_gg = _assemble_bars(ia, ib, R, L, props, len(grid_ids), pins, offs, bars, nax, taper)
     if deck.bushes:
         K_gg = (K_gg + bush_stiffness(deck, grid_ids, xyz)).tocsr()
     if getattr(deck, "gaps", None):
