@@ -70,8 +70,10 @@ NO_EFFECT = frozenset({
     # PBUSH's nominal K (MSC QRG PBUSH remark 1; a note names every PBUSHT, PBUSHT_NOTE)
     "PBUSHT",
     # static condensation sets: the reduction of a linear static solution to them is exact;
-    # resequencing (SEQGP): the order of the unknowns in the solver's matrices, not the solution
-    "ASET", "ASET1", "OMIT", "OMIT1", "SEQGP",
+    # generalized coordinates of a dynamic reduction (QSET: component modes added to that exact
+    # static basis, which leave the static solution as it is); resequencing (SEQGP): the order
+    # of the unknowns in the solver's matrices, not the solution
+    "ASET", "ASET1", "OMIT", "OMIT1", "QSET", "QSET1", "SEQGP",
     # COSMIC's pressure stiffness elements and their property: differential stiffness only, "no
     # structural stiffness and no structural mass" (NASTRAN-95 User's Manual, CPSEi remark 2)
     "CPSE2", "CPSE3", "CPSE4", "PPSE",
