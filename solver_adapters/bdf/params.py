@@ -87,7 +87,7 @@ NO_EFFECT = frozenset({
     "AERO", "AEROS", "CAERO1", "CAERO2", "CAERO3", "CAERO4", "CAERO5", "PAERO1", "PAERO2",
     "PAERO3", "PAERO4", "PAERO5", "SPLINE1", "SPLINE2", "SPLINE4", "SPLINE5", "SET1", "SET2",
     "AEFACT", "AELIST", "AESTAT", "AESURF", "AESURFS", "AELINK", "AEPARM", "TRIM", "FLFACT",
-    "FLUTTER", "MKAERO1", "MKAERO2", "GUST",
+    "FLUTTER", "MKAERO1", "MKAERO2", "GUST", "DIVERG",
 })
 """Cards with no effect on a linear static solve: accepted, counted in ``Deck.no_effect`` (one
 line of :meth:`~solver_adapters.deck.Deck.summary`), never handed to an external solver but
