@@ -352,7 +352,7 @@ class MassReader:
         while 8 * (g - 1) + 2 <= len(fields) and fields[8 * (g - 1) + 1] in ("YES", "YESA", "NO"):
             f0 = 8 * (g - 1) + 2
             if _real(c, f0 + 1) == 1.0:
-                end_b = _real(c, f0 + 7, value)
+                end_b = card_value(deck, c, f0 + 7, value)
             elif _real(c, f0 + 7, value) != value:
                 raise refuse(c, f"has a mass per length NSM varying through an intermediate station "
                                 f"(field {f0 + 7})")

@@ -88,7 +88,7 @@ def _pbeam(r, c) -> None:
     _ignored_reals(c, range(10, 18))                              # C1(A) .. F2(A)
     g = 3
     names = ("A", "I1", "I2", "I12", "J")
-    inner = []                                  # intermediate stations: (X/XB, field of X/XB)
+    inner = []                                  # intermediate stations: (X/XB, its field, values)
     end_b: dict[str, tuple[float, int]] = {}    # end B's values that differ from end A's
     while g <= n_groups and c.text(first(g)) in _SO:
         f0 = first(g)
@@ -157,7 +157,8 @@ def _pbeam(r, c) -> None:
             raise c.error(kf + 12, "a tapered beam with a neutral-axis offset (N1, N2) is not supported")
         if i12 != 0.0:
             raise c.error(7, "a tapered beam with a product of inertia I12 is not supported")
-        taper = tuple(end_b[name][0] if name in end_b else end_a[names.index(name)] for name in ("A", "I1", "I2", "J"))
+        taper = tuple(end_b[name][0] if name in end_b else end_a[names.index(name)]
+                      for name in ("A", "I1", "I2", "J"))
         for name, va, vb in zip(("A", "I1", "I2", "J"), (a, i1, i2, j), taper):
             if name != "J" and not (va > 0.0 and vb > 0.0):
                 raise c.error(end_b[name][1] if name in end_b and vb <= 0.0 else _A_FIELD[name],
