@@ -6,6 +6,7 @@ and how the solution agrees with MYSTRAN's (issue 20's last target).
     python benchmarks/unseen_decks.py FOLDER2 --second --collect --mirror OWNER/NAME=GITDIR ...
     python benchmarks/unseen_decks.py FOLDER2 --second [--no-mystran]
     python benchmarks/unseen_decks.py FOLDER3 --third [--collect --mirror ...]
+    python benchmarks/unseen_decks.py FOLDER4 --fourth [--collect --mirror ...]
 
 The decks (``DECKS`` below) are every whole input file (a CEND and a BEGIN BULK) of four public
 repositories, at the commits of ``COMMITS``, that has a line element (CBAR, CBEAM, CROD, CONROD,
@@ -35,6 +36,10 @@ A third corpus, ``--third`` (``decks_third.csv``), was collected on 2026-11-27 b
 from nine more public repositories, found and fetched for it (course decks, an OpenMDAO NASTRAN
 wrapper's tests, DMAP examples, a MYSTRAN pre-processor's exports, ...; every other repository
 searched had no such deck), and run once before any change for it.
+
+A fourth corpus, ``--fourth`` (``decks_fourth.csv``), was collected on 2026-11-27 by the same rule
+from repositories used by none of the three above nor searched for them, by a helper that did
+not run the import on them, and run once before any change for it.
 
 For each deck, one row: the half, whether ``blackbox import`` accepts it (else the first line of
 its message), the subcases imported, and the largest difference of the reference solver's
@@ -268,7 +273,7 @@ _INCLUDE_LINE = re.compile(rb"^[ \t]*INCLUDE[ \t]+'([^']+)'", re.I | re.M)
 
 
 def collect_second(folder: Path, mirrors: dict[str, str], corpus: str = "second") -> None:
-    """A listed corpus (``decks_second.csv``, ``decks_third.csv``) out of git mirrors, each deck
+    """A listed corpus (``decks_second.csv``, ``decks_third.csv``, ``decks_fourth.csv``) out of git mirrors, each deck
     at its commit, with the files its INCLUDE lines name (relative to the including file's
     folder, recursively)."""
     import csv
@@ -413,8 +418,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", help="decks whose path contains this text")
     ap.add_argument("--second", action="store_true", help="the second corpus (decks_second.csv)")
     ap.add_argument("--third", action="store_true", help="the third corpus (decks_third.csv)")
+    ap.add_argument("--fourth", action="store_true", help="the fourth corpus (decks_fourth.csv)")
     a = ap.parse_args(argv)
-    listed = "third" if a.third else "second" if a.second else None
+    listed = "fourth" if a.fourth else "third" if a.third else "second" if a.second else None
     mirrors = dict(m.split("=", 1) for m in a.mirror)
     if a.collect:
         collect_second(a.folder, mirrors, listed) if listed else collect(a.folder, mirrors)
