@@ -172,15 +172,19 @@ def test_autospc_no_is_carried_into_the_model(tmp_path):
 def test_dynamic_excitation_and_condensation_cards_have_no_effect(tmp_path):
     """RLOAD1/TLOAD1/DLOAD/TABLED1 (selected by DLOAD only), ASET1/OMIT1 (a static reduction
     to them is exact), QSET1 (a dynamic reduction's generalized coordinates, here a scalar
-    point: component modes added to the exact static basis) and SEQGP (the order of the
-    unknowns) are accepted as cards with no effect: the reference adapter stays."""
+    point: component modes added to the exact static basis), SEQGP (the order of the unknowns)
+    and DMI (a matrix for DMAP or the aerodynamics, never added to a static solution's
+    stiffness: that is DMIG by K2GG) are accepted as cards with no effect: the reference adapter
+    stays."""
     extra = ("DLOAD   20      1.      1.      21\nRLOAD1  21      22                      23\n"
              "TLOAD1  24      22                      23\nTABLED1 23\n        0.      1.      1.      1."
              "      ENDT\nASET1   123456  2\nOMIT1   3       1\nSEQGP   1       2       2       1\n"
-             "SPOINT  90\nQSET1   0       90\n")
+             "SPOINT  90\nQSET1   0       90\n"
+             "DMI     WKK     0       3       1       0               2       1\n"
+             "DMI     WKK     1       1       1.12    1.12\n")
     result = import_deck.run(_deck(tmp_path, "101", "SPC = 1\nLOAD = 5\n", FORCE + extra))
     assert result.loads_csv == STATIC_LOADS
-    assert set(result.deck.no_effect) >= {"DLOAD", "RLOAD1", "TLOAD1", "TABLED1", "ASET1", "OMIT1", "SEQGP", "QSET1"}
+    assert set(result.deck.no_effect) >= {"DLOAD", "RLOAD1", "TLOAD1", "TABLED1", "ASET1", "OMIT1", "SEQGP", "QSET1", "DMI"}
     assert not result.deck.unmodelled and 'adapter = "reference"' in result.study_toml
 
 

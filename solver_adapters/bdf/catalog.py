@@ -61,10 +61,10 @@ KNOWN_UNMODELLED = frozenset({
     # rigid elements other than RBE2, RBE3
     "RBAR1", "RBE1", "RROD", "RTRPLT", "RTRPLT1", "RSPLINE", "RJOINT",
     # degree-of-freedom sets, scalar points, sequencing
-    "QSET", "QSET1", "BSET", "BSET1",
+    "BSET", "BSET1",
     "CSET", "CSET1", "USET", "USET1", "SEQGP", "EPOINT",
     # other coordinate systems, direct matrix input, tables, functions
-    "CORD3G", "CORD3R", "DTI", "DMI", "DMIJ", "DMIK", "BEAMOR",
+    "CORD3G", "CORD3R", "DTI", "BEAMOR",
 })
 """NASTRAN cards the reader knows and does not model: with ``unmodelled="keep"`` they are kept
 for an external solver (which refuses those it cannot run), otherwise they are errors. A name

@@ -88,6 +88,9 @@ NO_EFFECT = frozenset({
     "PAERO3", "PAERO4", "PAERO5", "SPLINE1", "SPLINE2", "SPLINE4", "SPLINE5", "SET1", "SET2",
     "AEFACT", "AELIST", "AESTAT", "AESURF", "AESURFS", "AELINK", "AEPARM", "TRIM", "FLFACT",
     "FLUTTER", "MKAERO1", "MKAERO2", "GUST", "DIVERG",
+    # direct matrix input for DMAP and the aerodynamic solutions (W2GJ, WKK, FA2J ...): a linear
+    # static solution adds none of them (a stiffness added by matrix is DMIG, selected by K2GG)
+    "DMI", "DMIJ", "DMIK",
 })
 """Cards with no effect on a linear static solve: accepted, counted in ``Deck.no_effect`` (one
 line of :meth:`~solver_adapters.deck.Deck.summary`), never handed to an external solver but
