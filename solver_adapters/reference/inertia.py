@@ -30,7 +30,8 @@ carry the round-off of ``K_ll^-1``.
 
 The mass is NASTRAN's default lumped mass (PARAM,COUPMASS off), the one a GRAV load acts on
 (:class:`~solver_adapters.reference.loads.Masses`): half of each bar's and rod's (rho A + NSM) L
-at its ends (a bar's offset ends, carried rigidly to the grid), a CONM2's mass at its centre of
+at its ends (a tapered beam's by :func:`~solver_adapters.reference.loads.bar_end_masses`; a bar's
+offset ends, carried rigidly to the grid), a CONM2's mass at its centre of
 gravity with its inertia, a CONM1's matrix, a CMASS1/CMASS2 to ground on its component, all
 times PARAM,WTMASS. The lumped mass of a bar or rod has no rotational inertia.
 """
