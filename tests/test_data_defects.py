@@ -114,6 +114,7 @@ def test_case_swap(tmp_module):
     doc = _diagnose(study)
     a = _only(doc, "case_swap")
     assert len(doc["added"]) == 1 and a["where"] == ["L3", "L8"] and a["of"] == "data"
+    assert a["pattern"] == "exchanged" and "cases L3 and L8 are each other's" in a["pattern_detail"]
     _within(a["parameters"][0], 1.0)
 
 
@@ -226,6 +227,10 @@ def test_bad_case(tmp_module):
     a = _only(doc, "bad_case")
     assert len(doc["added"]) == 1 and a["where"] == ["L9"] and a["of"] == "data"
     assert a["pattern"] == "scale" and "millimetres read as metres" in a["pattern_detail"], a["pattern_detail"]
+    from blackbox.reports.diagnose import diagnosis_report
+    from blackbox.study import load_study
+    report = diagnosis_report(load_study(study), doc, [])
+    assert f"What the readings show: {a['pattern_detail']}." in report
 
 
 def test_rigid_motion(tmp_module):

@@ -122,6 +122,8 @@ def diagnosis_report(study: Study, doc: dict, files: list[str]) -> str:
         what = " -- the data, not the structure" if e.get("of") == "data" else ""
         out += [f"### {i}. {e['effect']} at {', '.join(map(str, e['where']))}{extra}{what}", "",
                 f"delta BIC {_g(e['delta_bic'])}, LR p-value {_g(e['lr_p_value'], 3)}", ""]
+        if e.get("pattern_detail"):                 # what readings set aside or exchanged look like
+            out += [f"What the readings show: {e['pattern_detail']}.", ""]
         if e.get("alternatives"):
             out += ["The data hardly tell this effect from (evidence, delta BIC + hold-out chi2, within "
                     f"{_g(10.0)} of it): " + "; ".join(

@@ -87,5 +87,11 @@ class CaseSwap(ReadsAnother, Effect):
     def share_read(self, t: float) -> str:
         return f"the cases mix by {t:.3g}"
 
+    def findings(self, fit) -> dict:
+        a, b = self.where
+        return {"pattern": "exchanged",
+                "pattern_detail": f"the readings of cases {a} and {b} are each other's (two files saved under "
+                                  f"each other's names, two runs logged in the wrong order?)"}
+
     def label(self) -> str:
         return f"{self.kind} @ cases {self.where[0]}, {self.where[1]}"
