@@ -99,13 +99,14 @@ def test_a_taper_the_reader_does_not_model_is_a_located_error(station, field, sa
 def test_external_adapters_refuse_a_tapered_beam():
     """MYSTRAN 18 has no CBEAM (the run deck writes CBARs, prismatic), OpenSees's elastic beams
     and FRAMESOLVE's are prismatic: each adapter names the property before any run."""
+    from solver_adapters import legacy, opensees
     from solver_adapters.nastran import check_writable
-    from solver_adapters.legacy import unsupported_features
     deck = read_deck_text(_cantilever(1, 8e-6, 2e-6))
     with pytest.raises(DeckFormatError, match="cannot run PBEAM 1: it is tapered") as err:
         check_writable(deck)
     assert err.value.card == "PBEAM"
-    assert any("tapered" in why for _, _, why in unsupported_features(deck))
+    for adapter in (legacy, opensees):
+        assert [card for card, _, why in adapter.unsupported_features(deck) if "tapered" in why] == ["PBEAM 1"]
 
 
 def test_a_load_along_a_tapered_beam_is_refused_at_its_card(tmp_path):
