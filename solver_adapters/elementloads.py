@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver_adapters.bdf import parse_int, parse_real
-from solver_adapters.bdf.sections import PBARL_DIMS
+from solver_adapters.bdf.sections import PBARL_DIMS, pbeam_stations
 from solver_adapters.protocol import DeckFormatError
 from solver_adapters.reference.loads import (SCALES, TYPES, LoadError, Masses, Pload1,
                                              gravity_loads, pload1_loads)
@@ -347,18 +347,14 @@ class MassReader:
         pid = _int(c, 2)
         value = card_value(deck, c, 9, 0.0)
         end_b = value
-        fields = [c.text(i) for i in range(1, len(c.fields) + 1)]
-        g = 3
-        while 8 * (g - 1) + 2 <= len(fields) and fields[8 * (g - 1) + 1] in ("YES", "YESA", "NO"):
-            f0 = 8 * (g - 1) + 2
+        stations, kf = pbeam_stations(c)
+        for f0 in stations:
             if _real(c, f0 + 1) == 1.0:
                 end_b = card_value(deck, c, f0 + 7, value)
             elif _real(c, f0 + 7, value) != value:
                 raise refuse(c, f"has a mass per length NSM varying through an intermediate station "
                                 f"(field {f0 + 7})")
-            g += 2 if fields[f0 - 1] == "YES" else 1
         nsm["bar"][pid] = value if end_b == value else (value, end_b)
-        kf = 8 * (g - 1) + 2
         if any(_real(c, i, 0.0) for i in range(kf + 8, kf + 12)):
             raise refuse(c, "has centre-of-gravity offsets M1, M2: its mass is not on the beam's axis")
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from solver_adapters.bdf.bars import _offt, bulk_bars
 from solver_adapters.bdf.fields import _ignored_reals, _int, _max_fields, _orientation, _pin, _real
 from solver_adapters.bdf.numbers import _real_or_none, same_printed
-from solver_adapters.bdf.sections import UNSYMMETRIC, library_pbar, library_section
+from solver_adapters.bdf.sections import PBEAM_SO, UNSYMMETRIC, library_pbar, library_section, pbeam_stations
 from solver_adapters.deck import CBar, PBar
 
 
@@ -35,9 +35,6 @@ def _cbeam(r, c) -> None:
     r.cbar_offt[eid] = c.text(9) or "GGG"          # BAROR does not apply to CBEAM
     r.deck.cbars[eid] = CBar(eid, pid, ga, gb, x, g0, c.src, pa, pb,
                              wa if any(wa) else None, wb if any(wb) else None, card="CBEAM")
-
-
-_SO = ("YES", "YESA", "NO")
 
 
 def _station_value(r, c, i: int, end_a: float, name: str) -> float | None:
@@ -77,22 +74,15 @@ def _pbeam(r, c) -> None:
     beam). The neutral axis N1, N2 (blank: 0.0), the same at both ends, is modelled: the axial
     force acts on it, bending and shear on the shear centre axis (``PBar.n1``, ``n2``). NSM,
     NSI and the stress recovery points are read and have no effect on the stiffness."""
-    n_groups = (len(c.fields) - 1 + 7) // 8
-
-    def first(g: int) -> int:              # NASTRAN field number of group g's first field
-        return 8 * (g - 1) + 2
-
     pid, mid = _int(c, 2), _int(c, 3)
     end_a = tuple(_real(c, i, 0.0) for i in (4, 5, 6, 7, 8))     # A I1 I2 I12 J
     _real(c, 9, 0.0)                                              # NSM
     _ignored_reals(c, range(10, 18))                              # C1(A) .. F2(A)
-    g = 3
     names = ("A", "I1", "I2", "I12", "J")
     inner = []                                  # intermediate stations: (X/XB, its field, values)
     end_b: dict[str, tuple[float, int]] = {}    # end B's values that differ from end A's
-    while g <= n_groups and c.text(first(g)) in _SO:
-        f0 = first(g)
-        so = c.text(f0)
+    stations, kf = pbeam_stations(c)
+    for f0 in stations:
         xxb = _real(c, f0 + 1)
         if not 0.0 < xxb <= 1.0:
             raise c.error(f0 + 1, "X/XB must be in (0, 1]")
@@ -103,10 +93,8 @@ def _pbeam(r, c) -> None:
         else:
             inner.append((xxb, f0 + 1, differs))
         _real(c, f0 + 7, 0.0)
-        g += 1
-        if so == "YES":
-            _ignored_reals(c, range(first(g), first(g) + 8))
-            g += 1
+        if c.text(f0) == "YES":
+            _ignored_reals(c, range(f0 + 8, f0 + 16))
     for xxb, i, differs in inner:
         if differs or end_b:
             name, (value, f) = next(iter(differs.items())) if differs else (None, (None, i))
@@ -118,10 +106,9 @@ def _pbeam(r, c) -> None:
         value, f = end_b["I12"]
         raise c.error(f, f"a product of inertia that varies along the beam (I12 {value:g} at end B, "
                          f"{end_a[3]:g} at end A) is not supported")
-    if n_groups - g + 1 > 2:
-        raise c.error(first(g + 2), "PBEAM has fields after its M/N line (or a station without "
+    if kf + 16 <= len(c.fields):            # a line after the K line and the M/N line
+        raise c.error(kf + 16, "PBEAM has fields after its M/N line (or a station without "
                                     "SO = YES, YESA or NO)")
-    kf = first(g)
     k = []
     for i in (kf, kf + 1):
         value = _real(c, i, 1.0)
@@ -193,7 +180,7 @@ def _pbeaml(r, c) -> None:
     while f <= len(c.fields):
         if not any(c.text(i) for i in range(f, len(c.fields) + 1)):
             break
-        if c.text(f) not in _SO:
+        if c.text(f) not in PBEAM_SO:
             raise c.error(f, "expected SO (YES, YESA or NO) of the next station")
         xxb = _real(c, f + 1)
         if not 0.0 < xxb <= 1.0:

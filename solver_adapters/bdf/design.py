@@ -44,7 +44,7 @@ from dataclasses import dataclass
 
 from solver_adapters.bdf import equations
 from solver_adapters.bdf.fields import _int, _max_fields, _real
-from solver_adapters.bdf.sections import PBARL_DIMS
+from solver_adapters.bdf.sections import PBARL_DIMS, pbeam_stations
 from solver_adapters.bdf.tokens import _Card, _Field
 from solver_adapters.protocol import DeckFormatError
 
@@ -279,14 +279,7 @@ _PBEAM_STATION = {"A": 2, "I1": 3, "I2": 4, "I12": 5, "J": 6, "NSM": 7}   # from
 def _pbeam_end_b(card) -> int | None:
     """The field number of the SO field of PBEAM ``card``'s end B station (X/XB = 1.0), or
     ``None`` when it has none."""
-    g, found = 3, None
-    while True:
-        f0 = 8 * (g - 1) + 2
-        if f0 > len(card.fields) or card.text(f0) not in ("YES", "YESA", "NO"):
-            return found
-        if _real(card, f0 + 1, 0.0) == 1.0:
-            found = f0
-        g += 2 if card.text(f0) == "YES" else 1
+    return next((f0 for f0 in reversed(pbeam_stations(card)[0]) if _real(card, f0 + 1, 0.0) == 1.0), None)
 
 
 def _field_of(c, target: str, pname: str, card) -> tuple[int, str]:

@@ -9,6 +9,22 @@ from solver_adapters.deck import PBar
 
 # PBARL section types: number of dimensions DIM1..DIMn (MSC QRG, PBARL)
 PBARL_DIMS = {"ROD": 1, "TUBE": 2, "TUBE2": 2, "BAR": 2, "BOX": 4, "I": 6, "CHAN": 4, "T": 4, "L": 4}
+PBEAM_SO = ("YES", "YESA", "NO")
+"""A PBEAM or PBEAML station's stress-output option, the first field of its station line."""
+
+
+def pbeam_stations(c) -> tuple[list[int], int]:
+    """The stations of PBEAM card ``c`` after end A (MSC QRG PBEAM: a line SO X/XB A I1 I2 I12 J
+    NSM each, and a line of stress points after it when SO = YES): the field number of each
+    station's SO, in card order, and the field number where the line after them (K1 K2 ...)
+    starts."""
+    f0, out = 18, []
+    while f0 <= len(c.fields) and c.text(f0) in PBEAM_SO:
+        out.append(f0)
+        f0 += 16 if c.text(f0) == "YES" else 8
+    return out, f0
+
+
 # types whose section is not symmetric about y or z (I12 != 0): PBARL only (see _pbeaml)
 UNSYMMETRIC = frozenset({"L"})
 
