@@ -513,7 +513,8 @@ class ReadsAnother:
     channels read (0 nested, 1 the whole defect: two channels swapped, a sensor on the
     neighbouring grid) does on top of :class:`Effect`: its refit also starts at the whole defect,
     and a share below 1/2 (mostly the channels' own reading) or above 3/2 (more than the defect
-    can explain) is no defect of its kind. Mixed into an :class:`Effect` dataclass that says how
+    can explain) is no defect of its kind. The share is nested at 0, one-sided, bounded to
+    [0, 2], and acts on the readings only. Mixed into an :class:`Effect` dataclass that says how
     its share reads (:meth:`share_read`), what a low share is (:attr:`not_low`) and what the whole
     defect is called (:attr:`summary_noun`), and where it reads (:meth:`Effect.mix_rows`, one
     parameter), from which its score columns follow."""
@@ -522,6 +523,24 @@ class ReadsAnother:
 
     def share_read(self, t: float) -> str:
         raise NotImplementedError
+
+    @property
+    def nominal(self) -> np.ndarray:
+        return np.zeros(1)
+
+    @property
+    def bounds(self):
+        # beyond 1 (unphysical) only so that a defect of exactly 1 is an interior optimum with an
+        # interval on both sides; a refit beyond 1.5 is rejected (rejection)
+        return np.zeros(1), np.full(1, 2.0)
+
+    @property
+    def one_sided(self) -> np.ndarray:
+        return np.ones(1, bool)
+
+    @property
+    def acts_on_output(self) -> bool:
+        return True
 
     def refit_starts(self, x2, step, lo, hi, first):
         whole = x2.copy()

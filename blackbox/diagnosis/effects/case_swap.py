@@ -50,24 +50,6 @@ class CaseSwap(ReadsAnother, Effect):
         return [cls((a, b), (f"swap_{a}_{b}",)) for i, a in enumerate(fitted) for b in fitted[i + 1:]
                 if channels[a] == channels[b]]
 
-    @property
-    def nominal(self) -> np.ndarray:
-        return np.zeros(1)
-
-    @property
-    def bounds(self):
-        # beyond 1 (unphysical) only so that an exchange of exactly 1 is an interior optimum with
-        # an interval on both sides; a refit beyond 1.5 is rejected (rejection)
-        return np.zeros(1), np.full(1, 2.0)
-
-    @property
-    def one_sided(self) -> np.ndarray:
-        return np.ones(1, bool)
-
-    @property
-    def acts_on_output(self) -> bool:
-        return True
-
     def mix_rows(self, om, o_index):
         labels = list(om.labels)
         a, b = (str(w) for w in self.where)

@@ -50,24 +50,6 @@ class ChannelSwap(ReadsAnother, Effect):
     def key(self) -> tuple:
         return (self.kind, tuple(self.where), self.component)
 
-    @property
-    def nominal(self) -> np.ndarray:
-        return np.zeros(1)
-
-    @property
-    def bounds(self):
-        # beyond 1 (unphysical) only so that a defect of exactly 1 is an interior optimum with an
-        # interval on both sides; a refit beyond 1.5 is rejected (rejection)
-        return np.zeros(1), np.full(1, 2.0)
-
-    @property
-    def one_sided(self) -> np.ndarray:
-        return np.ones(1, bool)
-
-    @property
-    def acts_on_output(self) -> bool:
-        return True
-
     def mix_rows(self, om, o_index):
         a, b = (int(w) for w in self.where)
         c = self.component

@@ -93,24 +93,6 @@ class MisplacedSensor(ReadsAnother, Effect):
     def key(self) -> tuple:
         return (self.kind, tuple(self.where), self.read_at, self.components)
 
-    @property
-    def nominal(self) -> np.ndarray:
-        return np.zeros(1)
-
-    @property
-    def bounds(self):
-        # beyond 1 (unphysical) only so that a defect of exactly 1 is an interior optimum with an
-        # interval on both sides; a refit beyond 1.5 is rejected (rejection)
-        return np.zeros(1), np.full(1, 2.0)
-
-    @property
-    def one_sided(self) -> np.ndarray:
-        return np.ones(1, bool)
-
-    @property
-    def acts_on_output(self) -> bool:
-        return True
-
     def _terms(self, c: int, w, o_index, n: int):
         first = 1 if c <= 3 else 4
         return [(np.full(n, o_index[(self.read_at, first + j)]), float(w[j])) for j in range(3)
