@@ -387,6 +387,8 @@ def test_clean_data_raise_no_data_defect(tmp_module):
     kinds = doc["settings"]["candidates_by_effect"]
     assert kinds["outlier"] == 300 and kinds["channel_swap"] > 20 and kinds["joint_gap"] == 1
     assert kinds["case_swap"] == 45             # every pair of the 10 fitted cases
+    assert kinds["load_tilt"] == 38             # every force and moment of the 10 fitted cases
+    assert kinds["misplaced_load"] == 71        # every grid they load, with each free neighbour
 
 
 def test_holdout_veto_is_calibrated():
@@ -487,3 +489,199 @@ def test_a_share_of_another_reading_is_judged_alike_for_a_swap_and_a_misplaced_s
     assert swap.rejection(np.array([1.7])) == "the channels mix by 1.7: more than a swap can explain"
     assert moved.rejection(np.array([0.3])) == "the channels read 0.3 of grid 9: mostly their own grid, not misplaced"
     assert moved.rejection(np.array([1.7])) == "the channels read 1.7 of grid 9: more than a misplacement can explain"
+
+
+def _turned_loads(loads, case: str, grid: int, first: int, t: np.ndarray):
+    """``loads`` with the vector (force: ``first`` 1, moment: 4) at ``grid`` in ``case`` turned by
+    the tilt angles ``t`` about :func:`perpendicular_axes` of it (the planted truth)."""
+    import scipy.sparse as sp
+    from blackbox.diagnosis.effects.load_tilt import perpendicular_axes, tilt
+    from solver_adapters.protocol import LoadMatrix
+    V = loads.values.toarray()
+    dofs = list(loads.dofs)
+    j = list(loads.cases).index(case)
+    for k in range(3):
+        if (grid, first + k) not in dofs:
+            dofs.append((grid, first + k))
+            V = np.vstack([V, np.zeros((1, V.shape[1]))])
+    rows = [dofs.index((grid, first + k)) for k in range(3)]
+    v = V[rows, j].copy()
+    V[rows, j] += tilt(v, perpendicular_axes(v), t)
+    return LoadMatrix(tuple(dofs), sp.csc_matrix(V), loads.cases)
+
+
+def test_load_tilt_model_is_the_turned_load(cube_prepared):
+    """With the force at grid 5 in case L3 turned by t = (0.2, -0.15) rad, the augmented model
+    predicts what the reference solver gives for the declared structure (springs at the
+    declared fit's estimate) under the turned loads, to 1e-12 of the largest response (both
+    double precision, one linear solve each); at t = 0 it is the declared model exactly; its
+    Jacobian matches central differences (h = 1e-6 rad: truncation ~1e-12, rounding ~1e-10
+    relative, 1e-7 allowed); the rotation's own derivatives (``tilt_derivatives``) match
+    differences of ``tilt`` to 1e-8, and a turn keeps the vector's length."""
+    from blackbox.diagnosis.effects import LoadTilt
+    from blackbox.diagnosis.effects.load_tilt import tilt, tilt_derivatives
+    from blackbox.structures import make_joint, spring_network
+    pr = cube_prepared
+    tilts = [e for e in pr.candidates if isinstance(e, LoadTilt)]
+    e = next(e for e in tilts if e.case == "L3" and e.grid == 5 and e.first == 1)
+    spec, x = dg.ModelSpec(tuple(pr.joints)).add(e, pr.ident.k)
+    o = list(dict.fromkeys(pr.study.measurements.all_dofs))
+    om = dg.ObsMap.of(pr.fit_obs, {d: i for i, d in enumerate(o)})
+    model = dg.AugmentedModel(pr.base, spec, pr.boundary, pr.K_deck, o)
+    declared = dg.AugmentedModel(pr.base, dg.ModelSpec(tuple(pr.joints)), pr.boundary, pr.K_deck, o)
+    assert np.array_equal(model.predict(x, om), declared.predict(x[:-2], om))
+    t = np.array([0.2, -0.15])
+    x[-2:] = t
+    j = pr.joints[0]
+    adapter = ReferenceAdapter(pr.deck).with_springs(spring_network(make_joint(j.name, j.grids, "simple"), pr.ident.k))
+    want = om.pick(adapter.solve(_turned_loads(pr.study.loads, "L3", 5, 1, t), o).values)
+    assert np.max(np.abs(model.predict(x, om) - want)) < 1e-12 * np.max(np.abs(want))
+    J = model.jacobian(x, om)
+    h = 1e-6
+    for q in (-2, -1):
+        xp, xm = x.copy(), x.copy()
+        xp[q] += h
+        xm[q] -= h
+        fd = (model.predict(xp, om) - model.predict(xm, om)) / (2 * h)
+        assert np.max(np.abs(fd - J[:, q])) < 1e-7 * np.max(np.abs(J[:, q]))
+    v, axes = np.array(e.v), np.array(e.axes)
+    for tt in (np.zeros(2), t, np.array([1e-6, 2e-6]), np.array([2.0, -1.0])):
+        assert abs(np.linalg.norm(v + tilt(v, axes, tt)) - np.linalg.norm(v)) < 1e-12 * np.linalg.norm(v)
+        D = tilt_derivatives(v, axes, tt)
+        for k in range(2):
+            dt = np.zeros(2)
+            dt[k] = 1e-6
+            fd = (tilt(v, axes, tt + dt) - tilt(v, axes, tt - dt)) / 2e-6
+            assert np.max(np.abs(fd - D[k])) < 1e-8 * np.linalg.norm(v)
+
+
+def test_load_tilt_found(tmp_module, cube_prepared):
+    """Case L3's force at grid 5 went in turned 15 degrees (the cube's truth, springs 1e4, and
+    fresh noise at each reading's declared sigma): found as load_tilt at grid 5 in L3, alone,
+    a defect of the data, its angle within 4 std of 15 degrees."""
+    from blackbox.structures import make_joint, spring_network
+    pr = cube_prepared
+    j = pr.joints[0]
+    study = _copy(tmp_module, "tilt")
+    rows = _rows(study)
+    o = list(dict.fromkeys((int(r["grid"]), int(r["component"])) for r in rows))
+    k = np.full(j.n_params, 1.0e4)                   # the fixture's truth (Table 5.12 setting)
+    t = np.radians(15.0) * np.array([np.cos(0.7), np.sin(0.7)])
+    adapter = ReferenceAdapter(pr.deck).with_springs(spring_network(make_joint(j.name, j.grids, "simple"), k))
+    U = adapter.solve(_turned_loads(pr.study.loads, "L3", 5, 1, t), o).values
+    cases = list(pr.study.loads.cases)
+    oi = {d: i for i, d in enumerate(o)}
+    rng = np.random.default_rng(12)
+    for r in rows:
+        u = U[oi[(int(r["grid"]), int(r["component"]))], cases.index(r["case"])]
+        r["value"] = repr(float(u + rng.normal() * float(r["sigma"])))
+    _write(study, rows)
+    a = _only(_diagnose(study), "load_tilt")
+    assert a["where"] == [5] and a["case"] == "L3" and a["vector"] == "force" and a["of"] == "data"
+    std = np.degrees(max(p["std"] for p in a["parameters"]))
+    assert abs(a["angle_deg"] - 15.0) <= 4.0 * std, (a["angle_deg"], std)
+    assert "turned" in a["pattern_detail"]
+
+
+def _moved_loads(loads, case: str, e, t: float):
+    """``loads`` with the share ``t`` of ``case``'s load at ``e.grid`` moved to ``e.moved_to``,
+    as the candidate ``e`` carries it over (the planted truth)."""
+    import scipy.sparse as sp
+    from solver_adapters.protocol import LoadMatrix
+    V = loads.values.toarray()
+    dofs = list(loads.dofs)
+    j = list(loads.cases).index(case)
+    for g, sign, part in ((e.grid, -1.0, e.at_g), (e.moved_to, 1.0, e.at_h)):
+        for c, v in part:
+            if (g, c) not in dofs:
+                dofs.append((g, c))
+                V = np.vstack([V, np.zeros((1, V.shape[1]))])
+            V[dofs.index((g, c)), j] += sign * t * v
+    return LoadMatrix(tuple(dofs), sp.csc_matrix(V), loads.cases)
+
+
+def test_misplaced_load_model_is_the_moved_load(cube_prepared):
+    """Case L3's load at grid 5, 0.7 of it moved to grid 6: the augmented model predicts what
+    the reference solver gives under the moved loads, to 1e-12 of the largest response (one
+    linear solve each, double precision); at t = 0 the declared model exactly; its Jacobian
+    matches central differences (linear in t: rounding only, 1e-7 allowed). The candidates are
+    every grid a fitted case loads with each neighbour that is not held in all six components."""
+    from blackbox.diagnosis.effects import MisplacedLoad
+    from blackbox.structures import make_joint, spring_network
+    pr = cube_prepared
+    moves = [e for e in pr.candidates if isinstance(e, MisplacedLoad)]
+    assert {(e.grid, e.moved_to) for e in moves if e.case == "L3"} == {(3, 2), (3, 4), (3, 7), (5, 6), (5, 8)}
+    e = next(e for e in moves if e.case == "L3" and e.grid == 5 and e.moved_to == 6)
+    spec, x = dg.ModelSpec(tuple(pr.joints)).add(e, pr.ident.k)
+    o = list(dict.fromkeys(pr.study.measurements.all_dofs))
+    om = dg.ObsMap.of(pr.fit_obs, {d: i for i, d in enumerate(o)})
+    model = dg.AugmentedModel(pr.base, spec, pr.boundary, pr.K_deck, o)
+    declared = dg.AugmentedModel(pr.base, dg.ModelSpec(tuple(pr.joints)), pr.boundary, pr.K_deck, o)
+    assert np.array_equal(model.predict(x, om), declared.predict(x[:-1], om))
+    x[-1] = 0.7
+    j = pr.joints[0]
+    adapter = ReferenceAdapter(pr.deck).with_springs(spring_network(make_joint(j.name, j.grids, "simple"), pr.ident.k))
+    want = om.pick(adapter.solve(_moved_loads(pr.study.loads, "L3", e, 0.7), o).values)
+    assert np.max(np.abs(model.predict(x, om) - want)) < 1e-12 * np.max(np.abs(want))
+    J = model.jacobian(x, om)[:, -1]
+    xp, xm = x.copy(), x.copy()
+    xp[-1] += 1e-6
+    xm[-1] -= 1e-6
+    fd = (model.predict(xp, om) - model.predict(xm, om)) / 2e-6
+    assert np.max(np.abs(fd - J)) < 1e-7 * np.max(np.abs(J))
+
+
+def test_misplaced_load_found(tmp_module, cube_prepared):
+    """Case L3's load at grid 5 went in at grid 6 (the cube's truth, springs 1e4, fresh noise at
+    each reading's declared sigma): found as misplaced_load at grid 5 in L3 moved to 6, alone, a
+    defect of the data, its share within 4 std of 1."""
+    from blackbox.diagnosis.effects import MisplacedLoad
+    from blackbox.structures import make_joint, spring_network
+    pr = cube_prepared
+    j = pr.joints[0]
+    e = next(e for e in pr.candidates if isinstance(e, MisplacedLoad) and e.case == "L3" and e.grid == 5
+             and e.moved_to == 6)
+    study = _copy(tmp_module, "moved")
+    rows = _rows(study)
+    o = list(dict.fromkeys((int(r["grid"]), int(r["component"])) for r in rows))
+    k = np.full(j.n_params, 1.0e4)                   # the fixture's truth (Table 5.12 setting)
+    adapter = ReferenceAdapter(pr.deck).with_springs(spring_network(make_joint(j.name, j.grids, "simple"), k))
+    U = adapter.solve(_moved_loads(pr.study.loads, "L3", e, 1.0), o).values
+    cases = list(pr.study.loads.cases)
+    oi = {d: i for i, d in enumerate(o)}
+    rng = np.random.default_rng(13)
+    for r in rows:
+        u = U[oi[(int(r["grid"]), int(r["component"]))], cases.index(r["case"])]
+        r["value"] = repr(float(u + rng.normal() * float(r["sigma"])))
+    _write(study, rows)
+    a = _only(_diagnose(study), "misplaced_load")
+    assert a["where"] == [5] and a["case"] == "L3" and a["moved_to"] == 6 and a["of"] == "data"
+    _within(a["parameters"][0], 1.0)
+    assert "grid 6" in a["pattern_detail"]
+
+
+def test_load_candidates_keep_within_their_column_budget(monkeypatch, tmp_path):
+    """On a model too large for every loaded grid's unit-load columns (the budget lowered to 20
+    columns on the car), each load family keeps the grids loaded in the most fitted cases whose
+    columns fit, says how many it considered of how many, and every candidate kept has its
+    columns in the split run."""
+    from blackbox.diagnosis.effects import load_tilt
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    pr0 = diagnose_command.prepare(FIXTURES / "car", tmp_path / "a")
+    n_dofs = 6 * len(pr0.deck.grids)
+    monkeypatch.setattr(load_tilt, "LOAD_DOF_COLUMNS", 20.0 * n_dofs)
+    pr = diagnose_command.prepare(FIXTURES / "car", tmp_path / "b")
+    lim = {x.kind: x for x in pr.limits}
+    for kind in ("load_tilt", "misplaced_load"):
+        before = [e for e in pr0.candidates if e.kind == kind]
+        kept = [e for e in pr.candidates if e.kind == kind]
+        cols = {d for e in kept for d in e.load_dofs}
+        assert 0 < len(kept) < len(before) and len(cols) <= 20
+        assert (lim[kind].considered, lim[kind].available) == (len(kept), len(before))
+        assert all(d in pr.base.col_of for d in cols)
+        cases = {}
+        for e in before:
+            cases.setdefault(e.grid, set()).add(e.case)
+        most = max(len(c) for c in cases.values())
+        assert any(len(cases[e.grid]) == most for e in kept)

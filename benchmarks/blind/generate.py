@@ -914,6 +914,12 @@ def _try_study(rng: np.random.Generator, index: int, kinds: tuple[str, ...], fam
     # every pair of fitted cases read at the same channels may have been exchanged (case_swap):
     # every case here is read at the same channels
     m_k["case_swap"] = len(fit_labels) * (len(fit_labels) - 1) // 2
+    # every force and every moment of a fitted case may have gone in turned (load_tilt)
+    m_k["load_tilt"] = len({(c, g, 1 if k <= 3 else 4) for c, g, k, v in loads if c in fit_labels and v != 0.0})
+    # and every grid a fitted case loads may have been the wrong one, its neighbour the right
+    # one (misplaced_load; a neighbour held in all six components is none)
+    m_k["misplaced_load"] = sum(1 for c, g in {(c, g) for c, g, _, v in loads if c in fit_labels and v != 0.0}
+                                for h in neighbours_of(declared, g) if f.spcs.get(h) != "123456")
     m_k = {k: v for k, v in m_k.items() if v}
     # the diagnosis's first-round multiplier of one hypothesis of a kind (search.multipliers): 2 K M_k
     mult = {k: 2 * len(m_k) * m for k, m in m_k.items()}

@@ -381,7 +381,9 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
                 # an external solver's split runs (this one and the loop's later columns) cut into
                 # column chunks, one solver process per worker (blackbox.parallel.use_executor)
                 sadapter = use_executor(sadapter, remote.executor)
-            base = SplitBase(sadapter, study.loads, sd.pairs, list(dict.fromkeys(boundary + o_dofs)),
+            # unit loads the families' candidates need beyond those (the loaded grids' components)
+            extra_units = [d for fam in fams for d in fam.split_columns(sctx, sd)]
+            base = SplitBase(sadapter, study.loads, sd.pairs, list(dict.fromkeys(boundary + o_dofs + extra_units)),
                              list(dict.fromkeys(boundary + o_dofs + extra_rows)), log, deck=spath.name)
             return sctx, sd, base, (spath.name, text)
 

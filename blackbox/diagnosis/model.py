@@ -20,6 +20,13 @@ and by implicit differentiation (``A z = b``): ``dz/dk = -A^-1 [G~_SS dK' u_S; (
 ``dz/dtheta_i = -A^-1 [0; D_i (f + K0 delta)]`` with ``delta = P u`` the relative motion of the
 pairs (``f + K0 delta`` is the whole force through the connection).
 
+*Input side.* An effect that changes the study's loads (a load turned off its declared
+direction, a load at the neighbouring grid) adds ``dF(x)`` at its DOFs ``L``: by linearity the
+right-hand sides become ``u~0 + G~[:, L] dF`` and ``P_a u~0 + Z~[L]^T dF`` (the split run's
+unit-load columns at ``L``), and ``d/dx_q`` enters like a stiffness parameter's with
+``-[G~_SL; (I - D K0) Z~_L^T] dF_q`` as its right-hand side, plus ``G~_OL dF_q`` at the
+observed DOFs.
+
 *Output side.* A factor on some measured rows (a load scale on its cases, a sensor gain on its
 grid) multiplies the prediction there (linearity): exact, no run. An offset on some rows (a
 sensor's zero offset on one channel) is added after the factors: ``f = mult * U + offset``.
@@ -264,6 +271,20 @@ class AugmentedModel:
         self.Zs, self.Zo = cond.Z(S), cond.Z(self.o_dofs)
         self.St, self.dt0 = cond.St, cond.dt0
         self.us0, self.uo0 = cond.u0(S), cond.u0(self.o_dofs)
+        # effects that change the study's loads (a load turned off its declared direction):
+        # the split structure's response to unit loads at their DOFs L, at S and O, and the cut
+        # pairs' relative motion under them (``P_a G~[:, L] = Z~[L]^T`` by symmetry)
+        L = list(dict.fromkeys(d for e in spec.effects for d in e.load_dofs))
+        self.L = tuple(L)
+        self._loads = []            # (parameter slice, effect, indices of its load DOFs in L)
+        if L:
+            lidx = {d: i for i, d in enumerate(L)}
+            self.Gsl = cond.G(S, L) if nS else np.zeros((0, len(L)))
+            self.Gol = cond.G(self.o_dofs, L)
+            self.Zl = cond.Z(L)
+            for e, sl in zip(spec.effects, spec.effect_slices()):
+                if e.load_dofs:
+                    self._loads.append((sl, e, np.array([lidx[d] for d in e.load_dofs], dtype=int)))
         self.K0 = np.array([base.pairs[i].k0 for i in a])
         self.cond = cond
         self.nS, self.m = nS, len(a)
@@ -356,7 +377,8 @@ class AugmentedModel:
         nS, m = self.nS, self.m
         IDK = np.eye(m) - D * self.K0[None, :]                      # I - D K0
         Ainv = self._inverse(dK, D, IDK)
-        b = np.vstack([self.us0, IDK @ self.dt0])
+        us0, dt0, uo0 = self.loaded(x)
+        b = np.vstack([us0, IDK @ dt0])
         z = Ainv @ b
         if not np.all(np.isfinite(z)):
             raise np.linalg.LinAlgError("singular augmented system")
@@ -372,9 +394,27 @@ class AugmentedModel:
             dKu = np.zeros_like(u_S)
             for cols, dKg, _, _ in groups:
                 dKu[:, cols] = dKg @ u_S[:, cols]
-        delta = self.dt0 - self.Zs.T @ dKu - self.St @ f
-        U_O = self.uo0 - self.Gos @ dKu - self.Zo @ f
+        delta = dt0 - self.Zs.T @ dKu - self.St @ f
+        U_O = uo0 - self.Gos @ dKu - self.Zo @ f
         return State(dK, D, Ainv, u_S, f, delta, U_O, groups, stacked)
+
+    def load_change(self, x: np.ndarray) -> np.ndarray | None:
+        """``(len(L), cases)``: the change of the study's loads at the DOFs ``L`` that the load
+        effects make at ``x`` (``None`` without one)."""
+        if not self._loads:
+            return None
+        dF = np.zeros((len(self.L), self.base.n_cases))
+        for sl, e, li in self._loads:
+            dF[li] += e.load_change(x[sl], self.base.cases)
+        return dF
+
+    def loaded(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(u0_S, delta0, u0_O)``: the split structure's response to the study's loads as the
+        load effects change them at ``x`` (linear in the loads: the unit-load columns at ``L``)."""
+        dF = self.load_change(x)
+        if dF is None:
+            return self.us0, self.dt0, self.uo0
+        return self.us0 + self.Gsl @ dF, self.dt0 + self.Zl.T @ dF, self.uo0 + self.Gol @ dF
 
     def _inverse(self, dK: np.ndarray, D: np.ndarray, IDK: np.ndarray) -> np.ndarray:
         nS, m = self.nS, self.m
@@ -524,6 +564,14 @@ class AugmentedModel:
             if any(sl.start <= i < sl.stop for i in which):
                 for q, K_q in enumerate(e.stiffness_derivatives(x[sl])):
                     stiff.setdefault(sl.start + q, []).append((idx, K_q))
+        load_B = {}                 # a load parameter's change of the loads at L, per unit
+        for sl, e, li in self._loads:
+            if any(sl.start <= i < sl.stop for i in which):
+                dB = e.load_change_derivatives(x[sl], self.base.cases)
+                for q in range(e.n_params):
+                    B = np.zeros((len(self.L), L))
+                    B[li] = dB[q]
+                    load_B[sl.start + q] = B
         case_of = {}
         for e, sl, js, E in self._case:
             for q, i in enumerate(range(sl.start, sl.stop)):
@@ -556,6 +604,9 @@ class AugmentedModel:
             return None
 
         def rhs_of(i, v, cols):
+            if i in load_B:             # the loads change, the structure does not
+                B = load_B[i][:, cols]
+                return -np.vstack([self.Gsl @ B, IDK @ (self.Zl.T @ B)])
             if v is not None:
                 return np.vstack([self.Gss @ v, IDK @ (self.Zs.T @ v)])
             return np.vstack([np.zeros((nS, force[:, cols].shape[1])), basis[i] @ force[:, cols]])
@@ -573,6 +624,8 @@ class AugmentedModel:
                 if v is not None:
                     w = w + v
                 out[q] = -self.Gos @ w - self.Zo @ dz[nS:]
+                if i in load_B:
+                    out[q] += self.Gol @ load_B[i]
             return out
         for cols, dKg, Ainv, phi in st.each():
             u = st.u_S[:, cols]
@@ -587,6 +640,8 @@ class AugmentedModel:
                 if v is not None:
                     w = w + v
                 out[q][:, cols] = -self.Gos @ w - self.Zo @ df
+                if which[q] in load_B:
+                    out[q][:, cols] += self.Gol @ load_B[which[q]][:, cols]
         return out
 
     def jacobian(self, x: np.ndarray, om: ObsMap, st: State | None = None) -> np.ndarray:

@@ -72,8 +72,8 @@ class CandidateLimit:
                 "chosen_by": self.chosen_by, "option": self.option}
 
     def sentence(self) -> str:
-        return (f"{self.kind}: {self.considered} of {self.available} candidates considered ({self.chosen_by}); "
-                f"raise {self.option} to consider more")
+        return (f"{self.kind}: {self.considered} of {self.available} candidates considered ({self.chosen_by})"
+                + (f"; raise {self.option} to consider more" if self.option else ""))
 
 
 @dataclass(frozen=True, eq=False)
@@ -197,6 +197,12 @@ class Effect:
         reports (the joint boundary, the measured DOFs, both sides of every cut pair)."""
         return ()
 
+    @classmethod
+    def split_columns(cls, ctx: CandidateContext, split: "SplitDeck") -> tuple[DofLabel, ...]:
+        """DOFs the split run must load one by one for this family's candidates, beyond the
+        joint boundary and the measured DOFs (the split run's own unit loads)."""
+        return ()
+
     # ---- identity and parameters ------------------------------------------------------------------
     @property
     def key(self) -> tuple:
@@ -254,6 +260,22 @@ class Effect:
     def stiffness_derivatives(self, x_effect: np.ndarray) -> np.ndarray | None:
         """``d dK / dx_q`` of :meth:`stiffness_matrix` at ``x_effect``: ``(n_params, n_dofs, n_dofs)``."""
         return None
+
+    @property
+    def load_dofs(self) -> tuple[DofLabel, ...]:
+        """DOFs at which the effect changes the study's loads (:meth:`load_change`); their
+        unit-load columns must be in the split run (:meth:`split_columns`)."""
+        return ()
+
+    def load_change(self, x_effect: np.ndarray, cases: Sequence[str]) -> np.ndarray:
+        """``(len(load_dofs), len(cases))``: what the effect adds to the study's loads at
+        :attr:`load_dofs` in each of ``cases`` (the split run's case labels), exactly 0 at
+        :attr:`nominal`. The structure's response follows by linearity."""
+        raise NotImplementedError
+
+    def load_change_derivatives(self, x_effect: np.ndarray, cases: Sequence[str]) -> np.ndarray:
+        """``d load_change / dx_q``: ``(n_params, len(load_dofs), len(cases))``."""
+        raise NotImplementedError
 
     @property
     def case_joint(self) -> str | None:
@@ -508,16 +530,14 @@ class OnChannel:
         return [xyz[self.grid]] if self.grid in xyz else []
 
 
-class ReadsAnother:
-    """What an effect whose one parameter ``t`` is the share of another DOF's displacement that
-    channels read (0 nested, 1 the whole defect: two channels swapped, a sensor on the
-    neighbouring grid) does on top of :class:`Effect`: its refit also starts at the whole defect,
-    and a share below 1/2 (mostly the channels' own reading) or above 3/2 (more than the defect
-    can explain) is no defect of its kind. The share is nested at 0, one-sided, bounded to
-    [0, 2], and acts on the readings only. Mixed into an :class:`Effect` dataclass that says how
-    its share reads (:meth:`share_read`), what a low share is (:attr:`not_low`) and what the whole
-    defect is called (:attr:`summary_noun`), and where it reads (:meth:`Effect.mix_rows`, one
-    parameter), from which its score columns follow."""
+class Share:
+    """What an effect whose one parameter ``t`` is the share of a whole defect (0 nested, 1 the
+    whole defect: two channels swapped, a sensor or a load on the neighbouring grid) does on top
+    of :class:`Effect`: its refit also starts at the whole defect, and a share below 1/2 (mostly
+    as declared) or above 3/2 (more than the defect can explain) is no defect of its kind. The
+    share is nested at 0, one-sided and bounded to [0, 2]. Mixed into an :class:`Effect`
+    dataclass that says how its share reads (:meth:`share_read`), what a low share is
+    (:attr:`not_low`) and what the whole defect is called (:attr:`summary_noun`)."""
     not_low = ""
     summary_noun = ""
 
@@ -538,14 +558,29 @@ class ReadsAnother:
     def one_sided(self) -> np.ndarray:
         return np.ones(1, bool)
 
-    @property
-    def acts_on_output(self) -> bool:
-        return True
-
     def refit_starts(self, x2, step, lo, hi, first):
         whole = x2.copy()
         whole[first:] = 1.0
         return super().refit_starts(x2, step, lo, hi, first) + [whole]
+
+    def rejection(self, x_effect: np.ndarray) -> str | None:
+        t = float(np.asarray(x_effect)[0])
+        if t < 0.5:
+            return f"{self.share_read(t)}: {self.not_low}"
+        if t > 1.5:
+            return f"{self.share_read(t)}: more than {self.summary_noun} can explain"
+        return None
+
+
+class ReadsAnother(Share):
+    """A :class:`Share` that channels read: the share of another DOF's displacement, or another
+    case's, that they read (two channels swapped, a sensor on the neighbouring grid, two cases
+    exchanged). It acts on the readings only, where it reads (:meth:`Effect.mix_rows`, one
+    parameter), from which its score columns follow."""
+
+    @property
+    def acts_on_output(self) -> bool:
+        return True
 
     @classmethod
     def sparse_columns(cls, model, st, x, om, effects):
@@ -563,14 +598,6 @@ class ReadsAnother:
             out.append((np.concatenate(rows_all) if rows_all else np.zeros(0, int),
                         np.concatenate(vals_all) if vals_all else np.zeros(0)))
         return out
-
-    def rejection(self, x_effect: np.ndarray) -> str | None:
-        t = float(np.asarray(x_effect)[0])
-        if t < 0.5:
-            return f"{self.share_read(t)}: {self.not_low}"
-        if t > 1.5:
-            return f"{self.share_read(t)}: more than {self.summary_noun} can explain"
-        return None
 
 
 class JointCaseEffect(Effect):
