@@ -7,6 +7,7 @@ and how the solution agrees with MYSTRAN's (issue 20's last target).
     python benchmarks/unseen_decks.py FOLDER2 --second [--no-mystran]
     python benchmarks/unseen_decks.py FOLDER3 --third [--collect --mirror ...]
     python benchmarks/unseen_decks.py FOLDER4 --fourth [--collect --mirror ...]
+    python benchmarks/unseen_decks.py FOLDER5 --fifth [--collect --mirror ...]
 
 The decks (``DECKS`` below) are every whole input file (a CEND and a BEGIN BULK) of four public
 repositories, at the commits of ``COMMITS``, that has a line element (CBAR, CBEAM, CROD, CONROD,
@@ -40,6 +41,9 @@ searched had no such deck), and run once before any change for it.
 A fourth corpus, ``--fourth`` (``decks_fourth.csv``), was collected on 2026-11-27 by the same rule
 from repositories used by none of the three above nor searched for them, by a helper that did
 not run the import on them, and run once before any change for it.
+
+A fifth corpus, ``--fifth`` (``decks_fifth.csv``), was collected the same way on 2026-11-27 from
+thirteen further repositories (125 tried), the four lists above and their forks excluded.
 
 For each deck, one row: the half, whether ``blackbox import`` accepts it (else the first line of
 its message), the subcases imported, and the largest difference of the reference solver's
@@ -273,7 +277,7 @@ _INCLUDE_LINE = re.compile(rb"^[ \t]*INCLUDE[ \t]+'([^']+)'", re.I | re.M)
 
 
 def collect_second(folder: Path, mirrors: dict[str, str], corpus: str = "second") -> None:
-    """A listed corpus (``decks_second.csv``, ``decks_third.csv``, ``decks_fourth.csv``) out of git mirrors, each deck
+    """A listed corpus (``decks_second.csv`` ... ``decks_fifth.csv``) out of git mirrors, each deck
     at its commit, with the files its INCLUDE lines name (relative to the including file's
     folder, recursively)."""
     import csv
@@ -419,8 +423,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--second", action="store_true", help="the second corpus (decks_second.csv)")
     ap.add_argument("--third", action="store_true", help="the third corpus (decks_third.csv)")
     ap.add_argument("--fourth", action="store_true", help="the fourth corpus (decks_fourth.csv)")
+    ap.add_argument("--fifth", action="store_true", help="the fifth corpus (decks_fifth.csv)")
     a = ap.parse_args(argv)
-    listed = "fourth" if a.fourth else "third" if a.third else "second" if a.second else None
+    listed = ("fifth" if a.fifth else "fourth" if a.fourth else "third" if a.third else "second" if a.second
+              else None)
     mirrors = dict(m.split("=", 1) for m in a.mirror)
     if a.collect:
         collect_second(a.folder, mirrors, listed) if listed else collect(a.folder, mirrors)
