@@ -300,3 +300,29 @@ def test_nasas_free_field_truss_agrees_with_mystran(tmp_path):
     study = load_study(tmp_path / "study")
     out = make_adapter_for(study, "mystran", cache=False).solve(study.loads, report)
     assert np.abs(out.values[:, 0] - ours[:, 0]).max() <= 1e-6 * scale
+
+
+def test_continuations_away_from_their_parents_in_fixed_field(tmp_path):
+    """NASTRAN-95 sorts the bulk data and matches a continuation by its ID, so a fixed-field deck
+    may put continuations anywhere (NASA's ACOSS decks list six CONM2s, then their six
+    continuations): the frame with its PBAR continuations moved below the MAT1, in the other
+    order, is the frame as written, to the last bit; a continuation no card names is still an
+    error at its line."""
+    def pbar(n: int, a: str, i: str, k: str) -> tuple[str, str]:
+        head = f"PBAR    {n:<8d}1       {a:<8s}.83333  .83333  1.6".ljust(72) + f"+P{n}A"
+        return head, (f"+P{n}A".ljust(72) + f"+P{n}B\n" + f"+P{n}B".ljust(8) + f"{k:<8s}{k:<8s}")
+    h1, c1 = pbar(1, "1.", ".83333", ".8333")
+    h2, c2 = pbar(2, "1.5", ".83333", ".8833")
+    body = FIXED.split("PBAR    1")[0]
+    rest = FIXED.split("MAT1")[1]
+    moved = body + f"{h1}\n{h2}\nMAT1" + rest.split("\n", 1)[0] + f"\n{c2}\n{c1}\n" + rest.split("\n", 1)[1]
+    a, b = _import(tmp_path, "moved.dat", moved), _import(tmp_path, "fixed.dat", FIXED)
+    ca, ra, ua = _solve(a)
+    cb, rb, ub = _solve(b)
+    assert (ca, ra) == (cb, rb)
+    np.testing.assert_array_equal(ua, ub)
+    assert read_deck_text(a.model_bdf).pbars[2].k1 == pytest.approx(0.8833, rel=0, abs=0)
+    orphan = moved.replace(h1 + "\n", h1 + "\n" + "+ZZ".ljust(8) + "1.\n", 1)
+    with pytest.raises(DeckFormatError) as e:
+        _import(tmp_path, "orphan.dat", orphan)
+    assert e.value.line == orphan.splitlines().index("+ZZ".ljust(8) + "1.") + 1

@@ -141,6 +141,8 @@ class Prepared:
     """The families that considered fewer candidates than the study offers (their caps)."""
     declared_condensed: CondensedModel | None = None
     """The declared model on run 1's condensation: its predictions at any joint parameters."""
+    holdout_candidates: tuple[Effect, ...] = ()
+    """Effects in a hold-out case the hold-out check may read a case it does not predict as."""
 
     @property
     def deck(self) -> Deck:
@@ -406,12 +408,15 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
     # ---- candidates (with the declared fit's residuals, as serially) ----------------------------
     ctx = context()
     cands = list(sd.connections)
+    hold_cands = []
     for fam in fams:
         cands += fam.candidates(ctx, sd)
+        if hold_obs is not None and len(hold_obs):
+            hold_cands += fam.holdout_candidates(ctx, sd)
     limits = {**sctx.limits, **ctx.limits}
     return Prepared(study, dm, fit_obs, hold_obs, tuple(dm.holdout), bool(declared_holdout), K_deck, ident,
                     K_e, e_asym, sd, base, tuple(cands), tuple(decks), log, cost, eadapter,
-                    tuple(limits.values()), held.get("condensed"))
+                    tuple(limits.values()), held.get("condensed"), tuple(hold_cands))
 
 
 # --------------------------------------------------------------------------------------------
@@ -574,7 +579,7 @@ def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float =
                             pr.candidates, alpha=alpha, refit_top=refit_top, max_steps=max_steps,
                             declared_prediction=ident.predicted if ident is not None else None,
                             xyz=xyz, progress=progress_step, executor=executor,
-                            load_magnitudes=load_magnitudes(study.loads),
+                            load_magnitudes=load_magnitudes(study.loads), holdout_loads=pr.holdout_candidates,
                             declared_predict=(functools.partial(predict_rows, pr.declared_condensed, pr.fit_obs)
                                               if pr.declared_condensed is not None else None))
         except EditedDeckError as exc:

@@ -14,7 +14,9 @@ data the model describes, the chance that any of them fires is below ``alpha``):
   then tried as what a rig gets wrong in one case (:func:`_as_case`): its prediction times one
   factor, on the load (``-1``: loaded the other way) or on the readings, noise and all
   (``1000``: another unit); another case's prediction (two files mixed up, one saved twice);
-  its prediction plus one rigid motion of the specimen. Otherwise it is not predicted.
+  its prediction plus one rigid motion of the specimen; one of its loads turned off its declared
+  direction, or put in at a neighbouring grid (the final model with that effect, its one or two
+  parameters fitted to the case's readings alone). Otherwise it is not predicted.
 * **each reading** of a case that passes: ``|z| > z*``, two-sided at ``alpha / (3 n)`` (``n``
   hold-out readings): an outlier.
 * **the rest** (the readings of no finding): its chi2 against ``chi2(n_rest)`` at ``alpha / 3``.
@@ -83,10 +85,12 @@ class HoldoutReading:
 class HoldoutCase:
     """A hold-out case beyond its level (``chi2`` over ``n`` readings, ``limit`` its level) and
     what it reads as, when one of the descriptions of :func:`_as_case` fits it (``reads_as``:
-    ``"load_scale"``, ``"readings_scale"``, ``"other_case"``, ``"rigid_motion"``; ``None``: not
-    predicted). ``scale``/``scale_std``: the factor; ``other``: the case whose prediction it
-    reads as; ``motion``: the rigid translation (length) and rotation (rad); ``fitted_chi2``:
-    the case's chi2 so described."""
+    ``"load_scale"``, ``"readings_scale"``, ``"other_case"``, ``"rigid_motion"``,
+    ``"load_tilt"``, ``"misplaced_load"``; ``None``: not predicted). ``scale``/``scale_std``:
+    the factor; ``other``: the case whose prediction it reads as; ``motion``: the rigid
+    translation (length) and rotation (rad); ``load``: the turned or misplaced load (its grid,
+    the angle or the grid it went in at, the fitted parameters); ``fitted_chi2``: the case's
+    chi2 so described."""
     case: str
     n: int
     chi2: float
@@ -98,6 +102,7 @@ class HoldoutCase:
     other: str | None = None
     other_response: bool = False            # the other case's response, its own readings set aside
     motion: tuple[float, ...] | None = None
+    load: dict | None = None
 
     @property
     def explained(self) -> bool:
@@ -106,9 +111,11 @@ class HoldoutCase:
     def sentence(self) -> str:
         if self.reads_as is None:
             return (f"hold-out case {self.case} is not predicted (chi2 {self.chi2:.4g} over {self.n} readings, "
-                    f"beyond {self.limit:.4g}); no factor on its load or readings, no other case's prediction and "
-                    "no rigid motion of the specimen fits it")
-        if self.reads_as == "other_case":
+                    f"beyond {self.limit:.4g}); no factor on its load or readings, no other case's prediction, "
+                    "no rigid motion of the specimen and no load of it turned or at a neighbouring grid fits it")
+        if self.reads_as in ("load_tilt", "misplaced_load"):
+            how = self.load["finding"]
+        elif self.reads_as == "other_case":
             how = (f"the model's response to case {self.other}'s load, whose own readings the diagnosis set aside "
                    f"(the readings of cases {self.case} and {self.other} exchanged)" if self.other_response else
                    f"case {self.other}'s readings (the files of two cases mixed up, or one saved twice)")
@@ -131,7 +138,7 @@ class HoldoutCase:
         return {"case": self.case, "n": self.n, "chi2": self.chi2, "limit": self.limit, "reads_as": self.reads_as,
                 "fitted_chi2": self.fitted_chi2, "scale": self.scale, "scale_std": self.scale_std,
                 "other": self.other, "other_response": self.other_response,
-                "motion": None if self.motion is None else list(self.motion),
+                "motion": None if self.motion is None else list(self.motion), "load": self.load,
                 "of": "data" if self.explained else "unknown", "finding": self.sentence()}
 
 
@@ -218,9 +225,48 @@ def _chi2(r: np.ndarray, A: np.ndarray) -> float:
     return float(r @ r - b @ np.linalg.solve(np.eye(A.shape[1]) + A.T @ A, b))
 
 
+def fit_load(model: AugmentedModel, x: np.ndarray, effects, rows: ObsMap,
+             iterations: int = 30) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(parameters, predictions)``: the parameters of the load effects ``effects`` (the last of
+    ``x``, just added to ``model`` in that order) fitted by Gauss-Newton within their bounds to
+    the rows ``rows`` alone, every other parameter held; started at the nested point and, for
+    shares, at the whole defect too (the better kept). ``None`` when the model cannot be
+    evaluated."""
+    k = sum(e.n_params for e in effects)
+    lo = np.concatenate([e.bounds[0] for e in effects])
+    hi = np.concatenate([e.bounds[1] for e in effects])
+    nominal = np.concatenate([e.nominal for e in effects])
+    share = all(np.all(e.nominal == 0.0) and e.one_sided.all() for e in effects)
+    starts = [np.asarray(nominal, float)] + ([np.ones(k)] if share else [])
+    best = None
+    for start in starts:
+        xk = np.clip(start, lo, hi)
+        for _ in range(iterations):
+            x2 = np.concatenate([x[:-k], xk])
+            try:
+                st = model.state(x2)
+                f = model.predict(x2, rows, st)
+                J = model.jacobian(x2, rows, st)[:, -k:] / rows.sigma[:, None]
+            except (np.linalg.LinAlgError, IdentificationError):
+                return None
+            r = (rows.y - f) / rows.sigma
+            step = np.linalg.lstsq(J, r, rcond=1e-10)[0]
+            new = np.clip(xk + step, lo, hi)
+            done = np.max(np.abs(new - xk)) < 1e-10 * max(1.0, float(np.max(np.abs(xk))))
+            xk = new
+            if done:
+                break
+        x2 = np.concatenate([x[:-k], xk])
+        f = model.predict(x2, rows)
+        q = float(np.sum(((rows.y - f) / rows.sigma) ** 2))
+        if best is None or q < best[0]:
+            best = (q, xk, f)
+    return None if best is None else (best[1], best[2])
+
+
 def check_holdout(model: AugmentedModel, fit: Fit, hold: ObsMap, alpha: float,
                   geometry: tuple | None = None, fitted: ObsMap | None = None,
-                  noise_factor: float = 1.0) -> HoldoutCheck:
+                  noise_factor: float = 1.0, loads=None) -> HoldoutCheck:
     """The tests of the module docstring on ``fit``'s predictions of the rows ``hold``
     (``model``: the final model, ``fit`` its fit). ``geometry``: ``(grid -> (xyz, frame),
     centre)`` of the measured grids (as :class:`~blackbox.diagnosis.effects.rigid_motion.RigidMotion`
@@ -228,7 +274,11 @@ def check_holdout(model: AugmentedModel, fit: Fit, hold: ObsMap, alpha: float,
     ``fitted``: the fitted rows, whose declared sigma a case read as another's takes.
     ``noise_factor``: the readings' noise taken as that many times the declared sigma, every
     reading's, fitted or not (the parameters' error then grows by the same factor, so the
-    prediction basis, in units of the noise, is the declared one)."""
+    prediction basis, in units of the noise, is the declared one). ``loads``: ``(effects_of,
+    augment)``: ``effects_of(label)`` the load effects of that hold-out case (a load turned or
+    misplaced there), which a case beyond its level is tried as, and ``augment(effects)`` the
+    final model with them added and its parameters at their nested point (``None`` when it
+    cannot be built); ``None``: not tried."""
     st = model.state(fit.x)
     f = model.predict(fit.x, hold, st)
     if model.p:
@@ -302,16 +352,77 @@ def check_holdout(model: AugmentedModel, fit: Fit, hold: ObsMap, alpha: float,
             nf = len(fitted.y)
             # the final fit's chi2 in the noise the rows now carry
             return float(r[:nf] @ r[:nf]) - fit.chi2 / noise_factor ** 2, rise_limit, float(r[nf:] @ r[nf:])
-    return read_holdout(hold, f, A, use, alpha, other_cases, rigid, loose)
+    moved = None
+    if loads is not None:
+        def moved(rows: np.ndarray, label: str) -> list:
+            """``[(kind, predictions at rows, parameters, the finding's fields)]`` of the case's
+            loads turned or misplaced, each fitted to the case's readings; with more than one
+            load, also all of them turned (each its own angles), and each loaded grid's load
+            put in at the neighbour that fits it best, together."""
+            effects_of, augment = loads
+            sub = hold.subset(rows)
+            out = []
+            singles = {}
+            mine = effects_of(label)
+            for e in mine:
+                built = augment([e])
+                if built is None:
+                    continue
+                got = fit_load(*built, [e], sub)
+                if got is None:
+                    continue
+                xk, fk = got
+                q = float(np.sum(((sub.y - fk) / sub.sigma) ** 2))
+                if e.kind == "misplaced_load" and (e.grid not in singles or q < singles[e.grid][0]):
+                    singles[e.grid] = (q, e)
+                if e.rejection(xk) is not None:
+                    continue
+                out.append((e.kind, fk, e.n_params, holdout_load([e], xk)))
+            for kind, group in (("load_tilt", [e for e in mine if e.kind == "load_tilt"]),
+                                ("misplaced_load", [e for _, e in singles.values()])):
+                if len(group) < 2:
+                    continue
+                built = augment(group)
+                if built is None:
+                    continue
+                got = fit_load(*built, group, sub)
+                if got is None:
+                    continue
+                xk, fk = got
+                parts = np.split(xk, np.cumsum([e.n_params for e in group])[:-1])
+                if any(e.rejection(p) is not None for e, p in zip(group, parts)):
+                    continue
+                out.append((kind, fk, len(xk), holdout_load(group, xk)))
+            return out
+    return read_holdout(hold, f, A, use, alpha, other_cases, rigid, loose, moved)
+
+
+def holdout_load(effects, xk: np.ndarray) -> dict:
+    """What a hold-out case read as the load effects ``effects`` (one kind) at parameters ``xk``
+    says: ``{"effect", "loads": [each one's place and size], "finding": a sentence}``."""
+    parts = np.split(np.asarray(xk, float), np.cumsum([e.n_params for e in effects])[:-1])
+    loads, said = [], []
+    for e, p in zip(effects, parts):
+        d = {"grid": e.grid, "parameters": {n: float(v) for n, v in zip(e.names, p)}, **e.details_json()}
+        if e.kind == "load_tilt":
+            deg, d0, d1 = e.turned(p)
+            d.update(angle_deg=deg, declared_direction=[float(a) for a in d0], turned_direction=[float(a) for a in d1])
+            said.append(f"its {d['vector']} at grid {e.grid} turned {deg:.3g} degrees")
+        else:
+            said.append(f"its load at grid {e.grid} put in at grid {e.moved_to} ({float(p[0]):.3g} of it)")
+        loads.append(d)
+    why = "a load mounted askew" if effects[0].kind == "load_tilt" else "an actuator on the neighbouring node"
+    return {"effect": effects[0].kind, "loads": loads, "finding": f"{'; '.join(said)} ({why})"}
 
 
 def read_holdout(hold: ObsMap, f: np.ndarray, A: np.ndarray, use: np.ndarray, alpha: float,
-                 other_cases=None, rigid=None, loose=None) -> HoldoutCheck:
+                 other_cases=None, rigid=None, loose=None, moved=None) -> HoldoutCheck:
     """The tests of the module docstring: the readings ``hold`` (rows ``use``) against the
     predictions ``f``, whose whitened covariance is ``A A^T`` (:func:`prediction_basis`);
     ``other_cases``, ``rigid``: what a case beyond its level is tried as (:func:`_as_case`);
     ``loose(rows)``: the case refitted with the fit rows, ``(their chi2 rise, its limit, the
-    case's chi2)`` or ``None`` (module docstring)."""
+    case's chi2)`` or ``None`` (module docstring); ``moved(rows, label)``: the case's loads turned
+    or misplaced, fitted (:func:`check_holdout`)."""
     r_all = (hold.y - f) / hold.sigma
     n = int(use.sum())
     labels = hold.labels
@@ -347,7 +458,8 @@ def read_holdout(hold: ObsMap, f: np.ndarray, A: np.ndarray, use: np.ndarray, al
                     out = beyond
             if out is None:
                 rest[rows] = False
-                cases.append(_as_case(labels[c], rows, hold, f, A, q, limit, a_case, other_cases, rigid))
+                cases.append(_as_case(labels[c], rows, hold, f, A, q, limit, a_case, other_cases, rigid,
+                                      None if moved is None else (lambda rr, lab=labels[c]: moved(rr, lab))))
                 continue
         for i in out:
             rest[i] = False
@@ -361,7 +473,7 @@ def read_holdout(hold: ObsMap, f: np.ndarray, A: np.ndarray, use: np.ndarray, al
 
 
 def _as_case(label: str, rows: np.ndarray, hold: ObsMap, f: np.ndarray, A: np.ndarray, q: float, limit: float,
-             a_case: float, other_cases=None, rigid=None) -> HoldoutCase:
+             a_case: float, other_cases=None, rigid=None, moved=None) -> HoldoutCase:
     """A case beyond its level, tried against what a rig gets wrong in one case, each within
     the case's level at ``a_case`` for its own degrees of freedom, the one with the least
     ``chi2 + k ln n`` (``k`` its parameters) kept:
@@ -376,10 +488,13 @@ def _as_case(label: str, rows: np.ndarray, hold: ObsMap, f: np.ndarray, A: np.nd
       mixed up, or one saved twice;
     * its prediction plus one rigid motion of the specimen (``rigid(rows)``: the readings per
       unit translation and rotation, :func:`blackbox.diagnosis.effects.rigid_motion.rigid_weights`;
-      up to six parameters).
+      up to six parameters);
+    * one of its loads turned off its declared direction or put in at a neighbouring grid
+      (``moved(rows)``: ``[(kind, predictions, parameters, fields)]``, each fitted to the case's
+      readings; two parameters or one).
 
-    The prediction's error enters the factor and the rigid motion; another case's prediction
-    is compared with the noise alone."""
+    The prediction's error enters the factor, the rigid motion and the loads; another case's
+    prediction is compared with the noise alone."""
     n = len(rows)
     y = hold.y[rows] / hold.sigma[rows]
     p = f[rows] / hold.sigma[rows]
@@ -419,6 +534,11 @@ def _as_case(label: str, rows: np.ndarray, hold: ObsMap, f: np.ndarray, A: np.nd
                 motion = np.zeros(6)
                 motion[seen] = theta
                 tries.append((qr + rank * lnn, qr, "rigid_motion", {"motion": tuple(float(v) for v in motion)}))
+    if moved is not None:
+        for kind, fk, k, fields in moved(rows):
+            qm = _chi2(y - fk / hold.sigma[rows], A[rows])
+            if qm <= level(k):
+                tries.append((qm + k * lnn, qm, kind, {"load": fields}))
     if not tries:
         return HoldoutCase(label, n, q, limit)
     _, qf, how, extra = min(tries, key=lambda t: t[0])

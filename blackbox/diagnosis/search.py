@@ -936,7 +936,8 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
              declared_prediction: np.ndarray | None = None, xyz: dict | None = None,
              progress=None, executor=None, always_map_refits: bool = False,
              load_magnitudes: tuple[float, float] | None = None, complete_refits: bool = True,
-             declared_predict: Callable[[np.ndarray], np.ndarray] | None = None) -> Diagnosis:
+             declared_predict: Callable[[np.ndarray], np.ndarray] | None = None,
+             holdout_loads: Sequence[Effect] = ()) -> Diagnosis:
     """The loop of the module docstring. ``k_start``: the declared joints' estimate (e.g. from
     :func:`blackbox.identification.identify`); ``declared_prediction``: that estimate's fit-row
     predictions on the original deck, to measure how exactly the split deck nests the declared
@@ -950,7 +951,9 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
     it: ``benchmarks/refit_schedule.py``). ``declared_predict(k)``: the declared
     model's fit-row predictions at any ``k``; when the estimate has springs beyond their rigid
     limit (:meth:`AugmentedModel.rigid_limits`, where both models are rounding), the nesting is
-    checked at those limits instead, as the fit starts there."""
+    checked at those limits instead, as the fit starts there. ``holdout_loads``: effects in a
+    hold-out case (a load turned or put in at a neighbouring grid there) that the hold-out check
+    tries a case it does not predict as (:func:`~blackbox.diagnosis.holdout.check_holdout`)."""
     t0 = time.perf_counter()
     boundary = tuple(boundary)
     o_dofs = tuple(dict.fromkeys(list(obs_fit.dofs) + [r for r in obs_fit.ref_dofs if r is not None]
@@ -1181,8 +1184,19 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
     final_model = AugmentedModel(base, fit.spec, boundary, K_deck, o_dofs)
     rig = next((e for e in candidates if e.kind == "rigid_motion"), None)     # its measured-grid geometry
     geometry = None if rig is None else (rig.geometry, rig.centre)
+    loads = None
+    if hold is not None and holdout_loads:
+        def augment(effects):
+            spec2, x2 = fit.spec, fit.x
+            for e in effects:
+                spec2, x2 = spec2.add(e, x2)
+            try:
+                return AugmentedModel(base, spec2, boundary, K_deck, o_dofs), x2
+            except (np.linalg.LinAlgError, IdentificationError):
+                return None
+        loads = (lambda label: [e for e in holdout_loads if e.case == label], augment)
     if hold is not None:
-        hc = check_holdout(final_model, fit, hold, alpha, geometry, om)
+        hc = check_holdout(final_model, fit, hold, alpha, geometry, om, loads=loads)
         warnings += [f"hold-out check: {w}" for w in hc.sentences()]
     nl = None
     if fit.reduced_chi2 > hi:
@@ -1198,7 +1212,7 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         nl = noise_level(fit.residuals[kept], h[kept], om.grid[kept], om.case[kept], om.comp[kept],
                          om.sigma[kept], predicted[kept], alpha,
                          None if hold is None else (lambda c: check_holdout(final_model, fit, hold, alpha, geometry,
-                                                                            om, noise_factor=c).predicted))
+                                                                            om, noise_factor=c, loads=loads).predicted))
         warnings.append(nl.sentence())
     kf = None
     if val.kind == "kfold":

@@ -326,15 +326,67 @@ def _reorder(lines: list[str], nums: list[int], firsts: list[str], conts: list[s
     return [lines[k] for k in out], [nums[k] for k in out]
 
 
+def orphan_continuation(bodies: list[str], start: int, split, file: str) -> bool:
+    """Whether a continuation line (from ``start`` on) names a marker other than field 10 of the
+    line above it (a continuation away from its parent, as NASTRAN-95 decks place them: the
+    bulk data is sorted before it is read, and continuations are matched by their ID)."""
+    def fields(b: str, k: int) -> tuple[str, str] | None:
+        """(field 1, field 10) of a line: columns 1-8 and 73-80 of a fixed-field small line
+        (the common case, read without the splitter), else the splitter's."""
+        if "\t" not in b:
+            if "," not in b:
+                if "*" not in b[:8]:
+                    return b[:8].strip(), b[72:80].strip()
+            else:
+                parts = b.split(",", 10)
+                if "*" not in parts[0]:
+                    return parts[0].strip(), parts[9].strip() if len(parts) > 9 else ""
+        try:
+            line = split(b, file, k + 1)
+        except DeckFormatError:
+            return None                           # the reader will say what is wrong with it
+        return line.first, line.cont or ""
+
+    prev = ""
+    owners: set[str] = set()            # field 10 of every line
+    loose: set[str] = set()             # markers of continuations below a line without field 10
+    for k in range(start, len(bodies)):
+        b = bodies[k]
+        if not b.strip():
+            continue
+        if b[:1] in "+*":
+            got = fields(b, k)
+            if got is None:
+                return False
+            if len(got[0]) > 1:
+                if prev and _key(got[0]) != _key(prev):
+                    return True
+                if not prev:
+                    loose.add(_key(got[0]))
+        if len(b) > 72 or "," in b or "\t" in b:
+            got = fields(b, k)
+            if got is None:
+                return False
+            prev = got[1]
+            if prev:
+                owners.add(_key(prev))
+        else:
+            prev = ""
+    return bool(loose & owners)
+
+
 def expand(bodies: list[str], start: int, file: str, split, include=None,
-           begin_bulk=None, text: str | None = None) -> tuple[list[str], list[int]] | None:
+           begin_bulk=None, text: str | None = None,
+           force: bool = False) -> tuple[list[str], list[int]] | None:
     """The comment-free lines of a file with its COSMIC free-field lines (from ``start``, the
     first bulk line) expanded, and each line's number in the file (1-based); None when the file
     has none. ``split``: the readers' line splitter (``tokens._split``), which gives the fields of
     the other lines (the card before a replication may be one of them); ``include`` and
     ``begin_bulk``: whether a stripped line is an INCLUDE or a BEGIN BULK line (the tokenizer's
-    tests), kept as they are (no card continues across an INCLUDE); ``text``: see :func:`needed`."""
-    if not needed(bodies, start, text):
+    tests), kept as they are (no card continues across an INCLUDE); ``text``: see :func:`needed`.
+    ``force``: the lines are read this way without free-field lines too (their continuations
+    put after their parents: :func:`orphan_continuation`)."""
+    if not force and not needed(bodies, start, text):
         return None
     is_include = include or (lambda s: False)
     is_begin = begin_bulk or (lambda s: False)

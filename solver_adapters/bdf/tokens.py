@@ -180,6 +180,7 @@ def not_bulk_data(file: str, lineno: int) -> DeckFormatError:
                            "is neither a card name nor a continuation); its content is not shown",
                            file=file, line=lineno, field=1)
 BEGIN_BULK = re.compile(r"BEGIN\s+BULK\b.*", re.IGNORECASE)
+_ORPHAN = re.compile(r"^[+*]\S", re.MULTILINE)       # a line that may continue a card away from it
 
 
 _SECTION = re.compile(r"BEGIN\b\s*(.*)", re.IGNORECASE)
@@ -279,6 +280,10 @@ class Includes:
         the file's text, if at hand (a quick test before the lines are looked at)."""
         got = freefield.expand(bodies, start, file, _split, is_include,
                                lambda s: BEGIN_BULK.fullmatch(s) is not None, text)
+        if got is None and _ORPHAN.search(text if text is not None else "\n".join(bodies[start:])) \
+                and freefield.orphan_continuation(bodies, start, _split, file):
+            got = freefield.expand(bodies, start, file, _split, is_include,
+                                   lambda s: BEGIN_BULK.fullmatch(s) is not None, text, force=True)
         if got is None:
             return bodies, None
         self.expanded[file] = got

@@ -198,6 +198,12 @@ class Effect:
         return ()
 
     @classmethod
+    def holdout_candidates(cls, ctx: CandidateContext, split: "SplitDeck") -> list["Effect"]:
+        """Effects of this family in a hold-out case, which the search never fits: what the
+        hold-out check tries a case it does not predict as (a load turned or misplaced there)."""
+        return []
+
+    @classmethod
     def split_columns(cls, ctx: CandidateContext, split: "SplitDeck") -> tuple[DofLabel, ...]:
         """DOFs the split run must load one by one for this family's candidates, beyond the
         joint boundary and the measured DOFs (the split run's own unit loads)."""

@@ -63,19 +63,26 @@ def tilt_derivatives(v: np.ndarray, axes: np.ndarray, t: np.ndarray) -> np.ndarr
     return np.array([-t[k] * s * v + t[k] * q * wv + s * np.cross(axes[k], v) for k in range(len(t))])
 
 
-def case_loads(ctx) -> list[tuple[str, int, np.ndarray]]:
-    """``(case, grid, load)`` of every grid a fitted case loads, its six components in the grid's
-    displacement system, in the cases' and the grids' order (scalar points, which have no
-    direction and no neighbour, left out)."""
+def case_loads(ctx, held: bool = False) -> list[tuple[str, int, np.ndarray]]:
+    """``(case, grid, load)`` of every grid a fitted case (``held``: a measured case not fitted,
+    a hold-out case) loads, its six components in the grid's displacement system, in the cases'
+    and the grids' order (scalar points, which have no direction and no neighbour, left out)."""
     loads = ctx.loads
     if loads is None:
         return []
     fitted = set(ctx.fit_obs.case_labels[int(i)] for i in np.unique(ctx.fit_obs.case_index))
+    if held:
+        m = ctx.measured
+        if m is None:
+            return []
+        want = set(m.case_labels[int(i)] for i in np.unique(m.case_index)) - fitted
+    else:
+        want = fitted
     grids = ctx.deck.grids
     V = loads.values.tocsc()
     out = []
     for j, case in enumerate(loads.cases):
-        if case not in fitted:
+        if case not in want:
             continue
         col = V[:, j].toarray().ravel()
         per: dict[int, np.ndarray] = {}
@@ -157,24 +164,30 @@ class LoadTilt(Effect):
         return float(np.linalg.norm(self.v))
 
     @classmethod
-    def _loaded(cls, ctx) -> list[tuple[str, int, int, np.ndarray]]:
-        """``(case, grid, first component, vector)`` of every force and moment of a fitted case."""
-        return [(case, g, first, f[first - 1:first + 2]) for case, g, f in case_loads(ctx)
+    def _loaded(cls, ctx, held: bool = False) -> list[tuple[str, int, int, np.ndarray]]:
+        """``(case, grid, first component, vector)`` of every force and moment of a fitted case
+        (``held``: of a hold-out case)."""
+        return [(case, g, first, f[first - 1:first + 2]) for case, g, f in case_loads(ctx, held)
                 for first in (1, 4) if np.any(f[first - 1:first + 2])]
 
     @classmethod
     def split_columns(cls, ctx, split) -> tuple:
-        return tuple(dict.fromkeys(d for e in cls.candidates(ctx, split) for d in e.load_dofs))
+        return tuple(dict.fromkeys(d for e in cls.candidates(ctx, split) + cls.holdout_candidates(ctx, split)
+                                   for d in e.load_dofs))
 
     @classmethod
     def candidates(cls, ctx, split) -> list["LoadTilt"]:
         return within_budget(ctx, cls.kind, cls._listed(ctx), 6 * len(ctx.deck.grids))
 
     @classmethod
-    def _listed(cls, ctx) -> list["LoadTilt"]:
+    def holdout_candidates(cls, ctx, split) -> list["LoadTilt"]:
+        return within_budget(ctx, f"{cls.kind} (hold-out cases)", cls._listed(ctx, True), 6 * len(ctx.deck.grids))
+
+    @classmethod
+    def _listed(cls, ctx, held_cases: bool = False) -> list["LoadTilt"]:
         """Every candidate, before the column budget (:func:`within_budget`)."""
         held = constrained_grids(ctx.deck)
-        loaded = cls._loaded(ctx)
+        loaded = cls._loaded(ctx, held_cases)
         if not loaded:
             return []
         frames = dict(zip(sorted({g for _, g, _, _ in loaded}),

@@ -62,25 +62,30 @@ class MisplacedLoad(Share, Effect):
         return float(np.linalg.norm([v for _, v in self.at_g]))
 
     @classmethod
-    def _places(cls, ctx) -> list[tuple[str, int, int, np.ndarray]]:
-        """``(case, g, h, f)`` of every candidate."""
+    def _places(cls, ctx, held_cases: bool = False) -> list[tuple[str, int, int, np.ndarray]]:
+        """``(case, g, h, f)`` of every candidate (``held_cases``: of the hold-out cases)."""
         nb = neighbours(ctx.deck)
         held = constrained_grids(ctx.deck)
-        return [(case, g, h, f) for case, g, f in case_loads(ctx) for h in nb.get(g, ())
+        return [(case, g, h, f) for case, g, f in case_loads(ctx, held_cases) for h in nb.get(g, ())
                 if h in ctx.deck.grids and held.get(h) != "123456"]
 
     @classmethod
     def split_columns(cls, ctx, split) -> tuple:
-        return tuple(dict.fromkeys(d for e in cls.candidates(ctx, split) for d in e.load_dofs))
+        return tuple(dict.fromkeys(d for e in cls.candidates(ctx, split) + cls.holdout_candidates(ctx, split)
+                                   for d in e.load_dofs))
 
     @classmethod
     def candidates(cls, ctx, split) -> list["MisplacedLoad"]:
         return within_budget(ctx, cls.kind, cls._listed(ctx), 6 * len(ctx.deck.grids))
 
     @classmethod
-    def _listed(cls, ctx) -> list["MisplacedLoad"]:
+    def holdout_candidates(cls, ctx, split) -> list["MisplacedLoad"]:
+        return within_budget(ctx, f"{cls.kind} (hold-out cases)", cls._listed(ctx, True), 6 * len(ctx.deck.grids))
+
+    @classmethod
+    def _listed(cls, ctx, held_cases: bool = False) -> list["MisplacedLoad"]:
         """Every candidate, before the column budget (:func:`within_budget`)."""
-        places = cls._places(ctx)
+        places = cls._places(ctx, held_cases)
         if not places:
             return []
         held = constrained_grids(ctx.deck)
