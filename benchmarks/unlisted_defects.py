@@ -385,6 +385,10 @@ def _reads_as(c: dict) -> str:
     if how in ("load_scale", "readings_scale"):
         return f"{how.split('_')[0]} x {c['scale']:.3g}"
     other = f"case {c.get('other')}'s " + ("response, its readings set aside" if c.get("other_response") else "readings")
+    if how in ("load_tilt", "misplaced_load"):
+        loads = c["load"]["loads"]
+        return "; ".join(f"load at {x['grid']} turned {x['angle_deg']:.3g} deg" if how == "load_tilt"
+                         else f"load at {x['grid']} put in at {x['moved_to']}" for x in loads)
     return {"other_case": other, "rigid_motion": "rigid motion"}.get(how, "not predicted")
 
 
