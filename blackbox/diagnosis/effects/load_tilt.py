@@ -11,13 +11,14 @@ order::
     R(w) v - v = (cos|w| - 1) v + (sin|w| / |w|) (w x v)          (w perpendicular to v)
 
 The structure's response follows by linearity from the split run's unit-load columns at the
-grid's three components (:meth:`LoadTilt.split_columns`: one batched run with the split run's
-own), so the refit needs no run. ``t = 0`` is the load as declared (nested, two-sided), each
+grid's three components (:meth:`LoadTilt.split_columns`, loaded in the split run's own batch),
+so the refit needs no run. ``t = 0`` is the load as declared (nested, two-sided), each
 angle bounded to +-pi. A component held by a support takes its load into the support: it is
 left out of the change. A load's size is ``load_scale``'s; a tilt keeps it.
 
 Candidates: every force and every moment of every fitted case, at a grid (scalar points have no
-direction). ``where`` is the grid; the case, the vector (``force`` or ``moment``) and the two
+direction); those of the hold-out cases are what the hold-out check tries a case it does not
+predict as (:meth:`LoadTilt.holdout_candidates`). ``where`` is the grid; the case, the vector (``force`` or ``moment``) and the two
 axes (in basic) are in the details, and the report gives the angle and the turned direction.
 A data defect: the structure is as declared, the load was not.
 """
@@ -102,8 +103,8 @@ DOFs x unit-load columns: every loaded grid of a study of a few thousand DOFs, 1
 
 def within_budget(ctx, kind: str, cands: list, n_dofs: int) -> list:
     """``cands`` whose unit-load columns (:attr:`~Effect.load_dofs`) fit in
-    :data:`LOAD_DOF_COLUMNS` / ``n_dofs``: grids taken whole, those loaded in the most fitted
-    cases first (then by the largest load there; the same choice wherever it is made, from the
+    :data:`LOAD_DOF_COLUMNS` / ``n_dofs``: grids taken whole, those loaded in the most cases
+    first (then by the largest load there; the same choice wherever it is made, from the
     deck and the loads alone). Beyond it the limit is noted in ``ctx`` (reported)."""
     budget = int(LOAD_DOF_COLUMNS // max(n_dofs, 1))
     cols = {d for e in cands for d in e.load_dofs}
@@ -122,14 +123,14 @@ def within_budget(ctx, kind: str, cands: list, n_dofs: int) -> list:
         kept += per[g]
     kept_ids = {id(e) for e in kept}
     ctx.note_limit(CandidateLimit(kind, len(kept), len(cands),
-                                  f"the loaded grids of the most fitted cases whose unit-load columns fit in "
+                                  f"the grids loaded in the most cases whose unit-load columns fit in "
                                   f"{LOAD_DOF_COLUMNS:.0e} model DOFs x columns", ""))
     return [e for e in cands if id(e) in kept_ids]
 
 
 def perpendicular_axes(v: np.ndarray) -> np.ndarray:
-    """Two orthonormal axes perpendicular to ``v`` (rows): the basic axis least along ``v``
-    made perpendicular to it, and ``v`` cross that."""
+    """Two orthonormal axes perpendicular to ``v`` (rows, in ``v``'s coordinates): the
+    coordinate axis least along ``v`` made perpendicular to it, and ``v`` cross that."""
     n = v / np.linalg.norm(v)
     a = np.eye(3)[int(np.argmin(np.abs(n)))]
     a = a - (a @ n) * n

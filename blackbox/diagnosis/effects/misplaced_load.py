@@ -13,7 +13,8 @@ load mostly where declared), one above 3/2 more than a misplacement: rejected, w
 reason (:class:`~blackbox.diagnosis.effects.base.Share`). A component held by a support takes
 its load into the support and is left out.
 
-Candidates: every grid a fitted case loads, with each of its neighbours. ``where`` is the
+Candidates: every grid a fitted case loads, with each of its neighbours (those of the hold-out
+cases: what the hold-out check tries a case it does not predict as). ``where`` is the
 declared grid; the case and the grid the load went in at (``moved_to``) are in the details. A
 data defect: the structure is as declared, the load was not where the log says.
 """
