@@ -261,7 +261,7 @@ class LoadTilt(Effect):
         return {"pattern": "turned", "angle_deg": deg,
                 "declared_direction": [float(a) for a in d0], "turned_direction": [float(a) for a in d1],
                 "pattern_detail": f"the {what} at grid {self.grid} in case {self.case} went in turned {deg:.3g} degrees, "
-                                  f"along {fmt(d1)} instead of {fmt(d0)} (basic): a load mounted askew?"}
+                                  f"along {fmt(d1)} instead of {fmt(d0)} in basic (a load mounted askew?)"}
 
     def label(self) -> str:
         return f"{self.kind} @ {self.grid} case {self.case} ({'force' if self.first == 1 else 'moment'})"
