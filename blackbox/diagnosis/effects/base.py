@@ -53,8 +53,8 @@ if TYPE_CHECKING:
     from blackbox.joints import JointModel
     from solver_adapters.protocol import Deck, LoadMatrix
 
-__all__ = ["CandidateContext", "CandidateLimit", "Effect", "FreeOffsets", "JointCaseEffect", "OnChannel", "ReadsAnother", "SetAsideEffect", "finite_or_none",
-           "kept_parameters", "proximity", "takes_readings"]
+__all__ = ["CandidateContext", "CandidateLimit", "Effect", "FreeOffsets", "JointCaseEffect", "OnChannel", "ReadsAnother",
+           "SetAsideEffect", "Share", "finite_or_none", "kept_parameters", "proximity", "takes_readings"]
 
 
 @dataclass(frozen=True)
