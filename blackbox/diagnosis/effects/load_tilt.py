@@ -33,7 +33,7 @@ from blackbox.diagnosis.decks import constrained_grids
 from blackbox.diagnosis.effects.base import CandidateLimit, Effect
 from blackbox.diagnosis.effects.registry import register
 
-__all__ = ["LOAD_DOF_COLUMNS", "LoadTilt", "case_loads", "tilt", "tilt_derivatives", "within_budget"]
+__all__ = ["LOAD_DOF_COLUMNS", "ChangesLoads", "LoadTilt", "case_loads", "tilt", "tilt_derivatives", "within_budget"]
 
 
 def _sinc_terms(theta: float) -> tuple[float, float, float]:
@@ -138,9 +138,38 @@ def perpendicular_axes(v: np.ndarray) -> np.ndarray:
     return np.array([a, np.cross(n, a)])
 
 
+class ChangesLoads:
+    """What a family whose effects change the study's loads at a grid (``where[0]``) shares on
+    top of :class:`Effect`: its candidates of the fitted cases and of the hold-out cases, each
+    kept within its column budget (:func:`within_budget`), whose :attr:`~Effect.load_dofs` the
+    split run loads one by one and a refit needs. Mixed into a dataclass that lists every
+    candidate, before the budget (``_listed(ctx, held_cases)``), and says each one's ``size``
+    (the load at its grid, which orders the grids kept)."""
+
+    @property
+    def grid(self) -> int:
+        return int(self.where[0])
+
+    @classmethod
+    def candidates(cls, ctx, split) -> list:
+        return within_budget(ctx, cls.kind, cls._listed(ctx), 6 * len(ctx.deck.grids))
+
+    @classmethod
+    def holdout_candidates(cls, ctx, split) -> list:
+        return within_budget(ctx, f"{cls.kind} (hold-out cases)", cls._listed(ctx, True), 6 * len(ctx.deck.grids))
+
+    @classmethod
+    def split_columns(cls, ctx, split) -> tuple:
+        return tuple(dict.fromkeys(d for e in cls.candidates(ctx, split) + cls.holdout_candidates(ctx, split)
+                                   for d in e.load_dofs))
+
+    def refit_columns(self):
+        return self.load_dofs
+
+
 @register
 @dataclass(frozen=True, eq=False)
-class LoadTilt(Effect):
+class LoadTilt(ChangesLoads, Effect):
     """``case``: the case whose load is turned; ``first``: 1 for the force, 4 for the moment at
     ``where[0]``; ``v``: the declared vector (the grid's displacement system); ``axes``: the two
     tilt axes in that system; ``frame``: its unit vectors in basic (rows); ``free``: the
@@ -157,10 +186,6 @@ class LoadTilt(Effect):
     free: tuple[int, ...] = ()
 
     @property
-    def grid(self) -> int:
-        return int(self.where[0])
-
-    @property
     def size(self) -> float:
         return float(np.linalg.norm(self.v))
 
@@ -170,19 +195,6 @@ class LoadTilt(Effect):
         (``held``: of a hold-out case)."""
         return [(case, g, first, f[first - 1:first + 2]) for case, g, f in case_loads(ctx, held)
                 for first in (1, 4) if np.any(f[first - 1:first + 2])]
-
-    @classmethod
-    def split_columns(cls, ctx, split) -> tuple:
-        return tuple(dict.fromkeys(d for e in cls.candidates(ctx, split) + cls.holdout_candidates(ctx, split)
-                                   for d in e.load_dofs))
-
-    @classmethod
-    def candidates(cls, ctx, split) -> list["LoadTilt"]:
-        return within_budget(ctx, cls.kind, cls._listed(ctx), 6 * len(ctx.deck.grids))
-
-    @classmethod
-    def holdout_candidates(cls, ctx, split) -> list["LoadTilt"]:
-        return within_budget(ctx, f"{cls.kind} (hold-out cases)", cls._listed(ctx, True), 6 * len(ctx.deck.grids))
 
     @classmethod
     def _listed(cls, ctx, held_cases: bool = False) -> list["LoadTilt"]:
@@ -220,9 +232,6 @@ class LoadTilt(Effect):
     @property
     def load_dofs(self):
         return tuple((self.grid, self.first + k) for k in self.free)
-
-    def refit_columns(self):
-        return self.load_dofs
 
     def _column(self, cases) -> int:
         return list(cases).index(self.case)

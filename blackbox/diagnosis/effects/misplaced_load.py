@@ -27,7 +27,7 @@ import numpy as np
 
 from blackbox.diagnosis.decks import constrained_grids
 from blackbox.diagnosis.effects.base import Effect, Share
-from blackbox.diagnosis.effects.load_tilt import case_loads, within_budget
+from blackbox.diagnosis.effects.load_tilt import ChangesLoads, case_loads
 from blackbox.diagnosis.effects.misplaced_sensor import neighbours
 from blackbox.diagnosis.effects.registry import register
 
@@ -41,7 +41,7 @@ def _free(held: dict, g: int) -> tuple[int, ...]:
 
 @register
 @dataclass(frozen=True, eq=False)
-class MisplacedLoad(Share, Effect):
+class MisplacedLoad(Share, ChangesLoads, Effect):
     """``case``: the case; ``moved_to``: the neighbour ``h``; ``at_g``/``at_h``: the free
     components of each grid the load acts on and their values (the whole load ``f`` at ``g`` in
     ``g``'s system, the same load in ``h``'s)."""
@@ -53,10 +53,6 @@ class MisplacedLoad(Share, Effect):
     moved_to: int = 0
     at_g: tuple = ()            # ((component, value), ...) at where[0]
     at_h: tuple = ()            # ((component, value), ...) at moved_to
-
-    @property
-    def grid(self) -> int:
-        return int(self.where[0])
 
     @property
     def size(self) -> float:
@@ -71,21 +67,8 @@ class MisplacedLoad(Share, Effect):
                 if h in ctx.deck.grids and held.get(h) != "123456"]
 
     @classmethod
-    def split_columns(cls, ctx, split) -> tuple:
-        return tuple(dict.fromkeys(d for e in cls.candidates(ctx, split) + cls.holdout_candidates(ctx, split)
-                                   for d in e.load_dofs))
-
-    @classmethod
-    def candidates(cls, ctx, split) -> list["MisplacedLoad"]:
-        return within_budget(ctx, cls.kind, cls._listed(ctx), 6 * len(ctx.deck.grids))
-
-    @classmethod
-    def holdout_candidates(cls, ctx, split) -> list["MisplacedLoad"]:
-        return within_budget(ctx, f"{cls.kind} (hold-out cases)", cls._listed(ctx, True), 6 * len(ctx.deck.grids))
-
-    @classmethod
     def _listed(cls, ctx, held_cases: bool = False) -> list["MisplacedLoad"]:
-        """Every candidate, before the column budget (:func:`within_budget`)."""
+        """Every candidate, before the column budget (:func:`~blackbox.diagnosis.effects.load_tilt.within_budget`)."""
         places = cls._places(ctx, held_cases)
         if not places:
             return []
@@ -109,9 +92,6 @@ class MisplacedLoad(Share, Effect):
     @property
     def load_dofs(self):
         return tuple((self.grid, c) for c, _ in self.at_g) + tuple((self.moved_to, c) for c, _ in self.at_h)
-
-    def refit_columns(self):
-        return self.load_dofs
 
     def _per_unit(self, cases) -> np.ndarray:
         out = np.zeros((len(self.at_g) + len(self.at_h), len(cases)))
