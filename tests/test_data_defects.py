@@ -67,6 +67,32 @@ def _within(p: dict, truth: float, n_std: float = 4.0) -> None:
     assert abs(p["value"] - truth) <= n_std * p["std"], (p, truth)
 
 
+TRUTH_K = 1.0e4         # the cube fixture's joint springs (Table 5.12 setting)
+
+
+def _truth_adapter(pr, k):
+    """The reference solver on the cube's deck with its joint's springs at ``k``."""
+    from blackbox.structures import make_joint, spring_network
+    j = pr.joints[0]
+    return ReferenceAdapter(pr.deck).with_springs(spring_network(make_joint(j.name, j.grids, "simple"), k))
+
+
+def _measure(study: Path, cases, response, seed: int) -> None:
+    """The study's readings rewritten as a truth, ``response(o)`` (displacements at the measured
+    DOFs ``o``, one column per case of ``cases``), plus fresh noise at each reading's declared
+    sigma (``seed``)."""
+    rows = _rows(study)
+    o = list(dict.fromkeys((int(r["grid"]), int(r["component"])) for r in rows))
+    U = response(o)
+    cases = list(cases)
+    oi = {d: i for i, d in enumerate(o)}
+    rng = np.random.default_rng(seed)
+    for r in rows:
+        u = U[oi[(int(r["grid"]), int(r["component"]))], cases.index(r["case"])]
+        r["value"] = repr(float(u + rng.normal() * float(r["sigma"])))
+    _write(study, rows)
+
+
 @pytest.fixture(scope="module")
 def tmp_module():
     with tempfile.TemporaryDirectory() as t:
@@ -361,17 +387,9 @@ def test_joint_gap_found(tmp_module, cube_prepared):
     pr = cube_prepared
     j = pr.joints[0]
     study = _copy(tmp_module, "gap")
-    rows = _rows(study)
-    o = list(dict.fromkeys((int(r["grid"]), int(r["component"])) for r in rows))
-    k = np.full(j.n_params, 1.0e4)                   # the fixture's truth (Table 5.12 setting)
-    U = gap_response(ReferenceAdapter(pr.deck), j.name, j.grids, k, 0.3, pr.study.loads, o)
-    cases = list(pr.study.loads.cases)
-    oi = {d: i for i, d in enumerate(o)}
-    rng = np.random.default_rng(11)
-    for r in rows:
-        u = U[oi[(int(r["grid"]), int(r["component"]))], cases.index(r["case"])]
-        r["value"] = repr(float(u + rng.normal() * float(r["sigma"])))
-    _write(study, rows)
+    k = np.full(j.n_params, TRUTH_K)
+    _measure(study, pr.study.loads.cases,
+             lambda o: gap_response(ReferenceAdapter(pr.deck), j.name, j.grids, k, 0.3, pr.study.loads, o), 11)
     a = _only(_diagnose(study), "joint_gap")
     assert a["where"] == ["J7"] and a["of"] == "structure"
     _within(a["parameters"][0], 0.3)
@@ -520,7 +538,6 @@ def test_load_tilt_model_is_the_turned_load(cube_prepared):
     differences of ``tilt`` to 1e-8, and a turn keeps the vector's length."""
     from blackbox.diagnosis.effects import LoadTilt
     from blackbox.diagnosis.effects.load_tilt import tilt, tilt_derivatives
-    from blackbox.structures import make_joint, spring_network
     pr = cube_prepared
     tilts = [e for e in pr.candidates if isinstance(e, LoadTilt)]
     e = next(e for e in tilts if e.case == "L3" and e.grid == 5 and e.first == 1)
@@ -532,8 +549,7 @@ def test_load_tilt_model_is_the_turned_load(cube_prepared):
     assert np.array_equal(model.predict(x, om), declared.predict(x[:-2], om))
     t = np.array([0.2, -0.15])
     x[-2:] = t
-    j = pr.joints[0]
-    adapter = ReferenceAdapter(pr.deck).with_springs(spring_network(make_joint(j.name, j.grids, "simple"), pr.ident.k))
+    adapter = _truth_adapter(pr, pr.ident.k)
     want = om.pick(adapter.solve(_turned_loads(pr.study.loads, "L3", 5, 1, t), o).values)
     assert np.max(np.abs(model.predict(x, om) - want)) < 1e-12 * np.max(np.abs(want))
     J = model.jacobian(x, om)
@@ -559,23 +575,11 @@ def test_load_tilt_found(tmp_module, cube_prepared):
     """Case L3's force at grid 5 went in turned 15 degrees (the cube's truth, springs 1e4, and
     fresh noise at each reading's declared sigma): found as load_tilt at grid 5 in L3, alone,
     a defect of the data, its angle within 4 std of 15 degrees."""
-    from blackbox.structures import make_joint, spring_network
     pr = cube_prepared
-    j = pr.joints[0]
     study = _copy(tmp_module, "tilt")
-    rows = _rows(study)
-    o = list(dict.fromkeys((int(r["grid"]), int(r["component"])) for r in rows))
-    k = np.full(j.n_params, 1.0e4)                   # the fixture's truth (Table 5.12 setting)
-    t = np.radians(15.0) * np.array([np.cos(0.7), np.sin(0.7)])
-    adapter = ReferenceAdapter(pr.deck).with_springs(spring_network(make_joint(j.name, j.grids, "simple"), k))
-    U = adapter.solve(_turned_loads(pr.study.loads, "L3", 5, 1, t), o).values
-    cases = list(pr.study.loads.cases)
-    oi = {d: i for i, d in enumerate(o)}
-    rng = np.random.default_rng(12)
-    for r in rows:
-        u = U[oi[(int(r["grid"]), int(r["component"]))], cases.index(r["case"])]
-        r["value"] = repr(float(u + rng.normal() * float(r["sigma"])))
-    _write(study, rows)
+    adapter = _truth_adapter(pr, np.full(pr.joints[0].n_params, TRUTH_K))
+    loads = _turned_loads(pr.study.loads, "L3", 5, 1, np.radians(15.0) * np.array([np.cos(0.7), np.sin(0.7)]))
+    _measure(study, pr.study.loads.cases, lambda o: adapter.solve(loads, o).values, 12)
     a = _only(_diagnose(study), "load_tilt")
     assert a["where"] == [5] and a["case"] == "L3" and a["vector"] == "force" and a["of"] == "data"
     std = np.degrees(max(p["std"] for p in a["parameters"]))
@@ -607,7 +611,6 @@ def test_misplaced_load_model_is_the_moved_load(cube_prepared):
     matches central differences (linear in t: rounding only, 1e-7 allowed). The candidates are
     every grid a fitted case loads with each neighbour that is not held in all six components."""
     from blackbox.diagnosis.effects import MisplacedLoad
-    from blackbox.structures import make_joint, spring_network
     pr = cube_prepared
     moves = [e for e in pr.candidates if isinstance(e, MisplacedLoad)]
     assert {(e.grid, e.moved_to) for e in moves if e.case == "L3"} == {(3, 2), (3, 4), (3, 7), (5, 6), (5, 8)}
@@ -619,8 +622,7 @@ def test_misplaced_load_model_is_the_moved_load(cube_prepared):
     declared = dg.AugmentedModel(pr.base, dg.ModelSpec(tuple(pr.joints)), pr.boundary, pr.K_deck, o)
     assert np.array_equal(model.predict(x, om), declared.predict(x[:-1], om))
     x[-1] = 0.7
-    j = pr.joints[0]
-    adapter = ReferenceAdapter(pr.deck).with_springs(spring_network(make_joint(j.name, j.grids, "simple"), pr.ident.k))
+    adapter = _truth_adapter(pr, pr.ident.k)
     want = om.pick(adapter.solve(_moved_loads(pr.study.loads, "L3", e, 0.7), o).values)
     assert np.max(np.abs(model.predict(x, om) - want)) < 1e-12 * np.max(np.abs(want))
     J = model.jacobian(x, om)[:, -1]
@@ -636,24 +638,13 @@ def test_misplaced_load_found(tmp_module, cube_prepared):
     each reading's declared sigma): found as misplaced_load at grid 5 in L3 moved to 6, alone, a
     defect of the data, its share within 4 std of 1."""
     from blackbox.diagnosis.effects import MisplacedLoad
-    from blackbox.structures import make_joint, spring_network
     pr = cube_prepared
-    j = pr.joints[0]
     e = next(e for e in pr.candidates if isinstance(e, MisplacedLoad) and e.case == "L3" and e.grid == 5
              and e.moved_to == 6)
     study = _copy(tmp_module, "moved")
-    rows = _rows(study)
-    o = list(dict.fromkeys((int(r["grid"]), int(r["component"])) for r in rows))
-    k = np.full(j.n_params, 1.0e4)                   # the fixture's truth (Table 5.12 setting)
-    adapter = ReferenceAdapter(pr.deck).with_springs(spring_network(make_joint(j.name, j.grids, "simple"), k))
-    U = adapter.solve(_moved_loads(pr.study.loads, "L3", e, 1.0), o).values
-    cases = list(pr.study.loads.cases)
-    oi = {d: i for i, d in enumerate(o)}
-    rng = np.random.default_rng(13)
-    for r in rows:
-        u = U[oi[(int(r["grid"]), int(r["component"]))], cases.index(r["case"])]
-        r["value"] = repr(float(u + rng.normal() * float(r["sigma"])))
-    _write(study, rows)
+    adapter = _truth_adapter(pr, np.full(pr.joints[0].n_params, TRUTH_K))
+    loads = _moved_loads(pr.study.loads, "L3", e, 1.0)
+    _measure(study, pr.study.loads.cases, lambda o: adapter.solve(loads, o).values, 13)
     a = _only(_diagnose(study), "misplaced_load")
     assert a["where"] == [5] and a["case"] == "L3" and a["moved_to"] == 6 and a["of"] == "data"
     _within(a["parameters"][0], 1.0)
@@ -698,30 +689,18 @@ def test_a_load_defect_in_a_holdout_case_is_read_as_that(tmp_module, cube_prepar
     ten noise draws (seeds 20-29: angle 15.1 +- 0.6 degrees, share 1.002 +- 0.013, 10 of 10
     read as the planted defect at grid 5 each time)."""
     from blackbox.diagnosis.effects import MisplacedLoad
-    from blackbox.structures import make_joint, spring_network
     pr = cube_prepared
-    j = pr.joints[0]
     study = _copy(tmp_module, f"hold_{defect}")
     toml = (study / "study.toml").read_text()
     (study / "study.toml").write_text(toml.replace("holdout_cases = []", 'holdout_cases = ["L2", "L9"]'))
-    k = np.full(j.n_params, 1.0e4)                   # the fixture's truth (Table 5.12 setting)
     if defect == "tilt":
         loads = _turned_loads(pr.study.loads, "L9", 5, 1, np.radians(15.0) * np.array([np.cos(2.0), np.sin(2.0)]))
     else:
         e = MisplacedLoad((5,), ("t",), case="L9", moved_to=6, at_g=((3, -4.0), (4, -0.16)),
                           at_h=((3, -4.0), (4, -0.16)))        # grids 5 and 6 share the basic system
         loads = _moved_loads(pr.study.loads, "L9", e, 1.0)
-    rows = _rows(study)
-    o = list(dict.fromkeys((int(r["grid"]), int(r["component"])) for r in rows))
-    adapter = ReferenceAdapter(pr.deck).with_springs(spring_network(make_joint(j.name, j.grids, "simple"), k))
-    U = adapter.solve(loads, o).values
-    cases = list(pr.study.loads.cases)
-    oi = {d: i for i, d in enumerate(o)}
-    rng = np.random.default_rng(14)
-    for r in rows:
-        u = U[oi[(int(r["grid"]), int(r["component"]))], cases.index(r["case"])]
-        r["value"] = repr(float(u + rng.normal() * float(r["sigma"])))
-    _write(study, rows)
+    adapter = _truth_adapter(pr, np.full(pr.joints[0].n_params, TRUTH_K))
+    _measure(study, pr.study.loads.cases, lambda o: adapter.solve(loads, o).values, 14)
     doc = _diagnose(study)
     assert not doc["added"] and doc["verdict"] == "explained", doc["verdict_detail"]
     (case,) = doc["holdout_check"]["cases"]
