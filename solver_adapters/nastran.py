@@ -261,6 +261,21 @@ def check_writable(model) -> None:
     for e in sorted(getattr(model, "gaps", {}).values(), key=lambda e: e.eid)[:1]:
         _cannot_run(e.src, "CGAP", f"CGAP {e.eid}: MYSTRAN 18 has no gap element (CGAP/PGAP); the reference "
                                    f"adapter models its linear stiffness")
+    # MYSTRAN 18's RBE3 is NASTRAN's weighted least-squares average only for translational
+    # independent components in the basic system (docs/mystran.md, "RBE3")
+    for e in sorted(getattr(model, "rbe3s", {}).values(), key=lambda e: e.eid):
+        if any(set(comps) & set("456") for _, comps, _ in e.groups):
+            _cannot_run(e.src, "RBE3", f"RBE3 {e.eid}: its independent components include rotations (4-6), "
+                                       f"which MYSTRAN 18 weighs and couples otherwise than NASTRAN (a rigid "
+                                       f"motion of every independent grid does not move its reference grid "
+                                       f"rigidly); the reference adapter models it")
+        grids = sorted({g for _, _, gs in e.groups for g in gs})
+        frames = model.displacement_frames(grids) if grids else np.zeros((0, 3, 3))
+        turned = [g for g, f in zip(grids, frames) if not np.allclose(f, np.eye(3), rtol=0.0, atol=1e-12)]
+        if turned:
+            _cannot_run(e.src, "RBE3", f"RBE3 {e.eid}: independent grid {turned[0]} has its displacements in a "
+                                       f"system turned from basic (CD {model.grids[turned[0]].cd}), which MYSTRAN "
+                                       f"18 weighs otherwise than NASTRAN; the reference adapter models it")
     for m in getattr(model, "dmigs", {}).values():
         if m.card == "GENEL":
             _cannot_run(m.src, "GENEL", f"{m.label} (a general element, its stiffness given as a matrix): "

@@ -359,7 +359,9 @@ MALFORMED = [
     ("duplicate GRID", "GRID,1,,0.,0.,0.\n", 8, "GRID", 2, "duplicate GRID ID 1"),
     ("duplicate element across cards", "CBAR,9,1,1,2,0.,0.,1.\nCELAS2,9,1.,1,1\n", 9, "CELAS2",
      2, "duplicate element ID 9"),
-    ("duplicate property across cards", "PELAS,1,5.\n", 8, "PELAS", 2, "duplicate property"),
+    ("duplicate property across cards of one family", "PBARL,1,1,,BAR\n,.1,.1\n", 8, "PBARL", 2,
+     "duplicate property ID 1 (already defined by PBAR at bad.bdf:5)"),
+    ("duplicate property of one card", "PELAS,8,5.,,,7,6.\n", 8, "PELAS", 6, "duplicate property ID 7"),
     ("CP undefined", "GRID,5,1,0.,0.,0.\n", 8, "GRID", 3, "coordinate system 1 is not defined"),
     ("CD undefined", "GRID,5,,0.,0.,0.,2\n", 8, "GRID", 7, "coordinate system 2 is not defined"),
     ("CORD2R RID undefined", "CORD2R,3,4,0.,0.,0.,0.,0.,1.\n,1.,0.,0.\n", 8, "CORD2R", 3,
@@ -433,6 +435,18 @@ MALFORMED = [
      8, None, None, "column 80"),
     ("bad INCLUDE", "INCLUDE 'x.bdf\n", 8, "INCLUDE", 2, "INCLUDE 'file'"),
 ]
+
+
+def test_property_ids_are_unique_within_their_family_only():
+    """A PELAS, PROD, PBUSH and PGAP may share ID 1 with the PBAR: each element names a property
+    of its own family (PROPERTY_FAMILIES), so each gets its own card, as in NASTRAN."""
+    from solver_adapters.bdf.reader import PROPERTY_FAMILIES
+    deck = read_deck_text(BASE + "PELAS,1,5.\nPROD,1,1,.5\nPBUSH,1,K,1.,2.,3.\nPGAP,1,,,1.+6\n"
+                          "CELAS1,10,1,1,1,2,1\nCROD,11,1,1,3\nCBAR,12,1,1,4,0.,1.,0.\n"
+                          "CBUSH,13,1,2,3,0.,0.,1.\nCGAP,14,1,3,4,1.,0.,0.\n", name="shared.bdf")
+    assert (deck.pelas[1].k, deck.prods[1].a, deck.pbars[1].a, deck.pbushes[1].k[:3], deck.pgaps[1].ka) == \
+        (5.0, 0.5, 1.0, (1.0, 2.0, 3.0), 1e6)
+    assert set(PROPERTY_FAMILIES.values()) == {"bar", "rod", "bush", "elas", "gap"}
 
 
 @pytest.mark.parametrize("text, line, card, field, why", [m[1:] for m in MALFORMED],

@@ -1031,6 +1031,68 @@ def test_rbe3_weighted_least_squares():
     assert any(c > 3 for _, c, _ in members) and deck.grids[13].cd == 5
 
 
+# a cantilever 1-2-3 whose tip 3 carries grid 4 rigidly (RBE2) and, through 4, grid 6 (RBE2):
+# the RBE3's independent grids 4 and 6 (all six components) move as one rigid body
+RBE3_RIGID = """GRID,1,,0.,0.,0.
+GRID,2,,1.,0.,0.
+GRID,3,,2.,0.,0.
+GRID,4,,2.,0.,0.
+GRID,6,,2.,.3,.2
+GRID,5,,2.,0.,.5
+CBAR,10,1,1,2,0.,0.,1.
+CBAR,11,1,2,3,0.,0.,1.
+PBAR,1,1,1.,1.,2.,3.
+MAT1,1,1000.,,.3
+RBE2,300,3,123456,4
+RBE2,301,4,123456,6
+RBE3,501,,5,123456,1.0,123456,4,6
+SPC1,1,123456,1
+"""
+
+
+def test_rbe3_follows_a_rigid_motion_and_mystran_is_refused_with_rotations(tmp_path):
+    """Every independent grid of an RBE3 moving as one rigid body moves its reference grid with
+    that body (NASTRAN's weighted least-squares average reproduces a rigid motion exactly): the
+    reference solver to round-off. MYSTRAN 18 does not (measured below: the reference grid's T1 and
+    R3 off the rigid motion by 2 % of its largest translation and rotation), so the mystran adapter
+    refuses an RBE3 with independent rotations, naming it."""
+    path = tmp_path / "rigid.bdf"
+    path.write_text(RBE3_RIGID)
+    deck = read_deck(path)
+    report = [(g, c) for g in (4, 5) for c in range(1, 7)]
+    u = ReferenceAdapter(deck).solve(LoadMatrix.from_dense([(5, 2)], np.array([[1.0]]), ["y"]),
+                                     report).values[:, 0]
+    u4, u5 = u[:6], u[6:]
+    rigid = np.concatenate([u4[:3] + np.cross(u4[3:], [0.0, 0.0, 0.5]), u4[3:]])
+    np.testing.assert_allclose(u5, rigid, rtol=0, atol=1e-12 * np.abs(u5).max())
+    from solver_adapters.nastran import model_cards
+    with pytest.raises(DeckFormatError, match="mystran adapter cannot run RBE3 501: its independent "
+                                              "components include rotations") as info:
+        model_cards(deck, 99)
+    assert info.value.card == "RBE3" and info.value.line == 13
+    # translations only, but one independent grid in a turned CD system: refused too
+    turned = read_deck_text(RBE3_RIGID.replace("GRID,6,,2.,.3,.2", "GRID,6,,2.,.3,.2,7")
+                            .replace("123456,4,6", "123,2,4\n,6") + "CORD2R,7,,0.,0.,0.,0.,0.,1.\n,0.,1.,0.\n")
+    with pytest.raises(DeckFormatError, match="RBE3 501: independent grid 6 has its displacements in a system "
+                                              "turned from basic"):
+        model_cards(turned, 99)
+
+
+@needs_mystran
+def test_rbe3_with_independent_rotations_mystran_measured(tmp_path):
+    """What the refusal above rests on: MYSTRAN 18 run on RBE3_RIGID moves grid 5 off the rigid
+    motion of its independent grids (the reference solver's, exact): its T1 and R3 are off by
+    about 2 % of the largest translation and rotation, far beyond MYSTRAN's 7 printed digits."""
+    path = tmp_path / "rigid.bdf"
+    path.write_text(RBE3_RIGID)
+    report = [(5, c) for c in range(1, 7)]
+    ref = ReferenceAdapter(path).solve(LoadMatrix.from_dense([(5, 2)], np.array([[1.0]]), ["y"]),
+                                       report).values[:, 0]
+    mys = mystran_direct(tmp_path / "m", path, [[(5, 2, 1.0)]], report)[:, 0]
+    assert abs(mys[0] - ref[0]) > 1e-2 * np.abs(ref[:3]).max()
+    assert abs(mys[5] - ref[5]) > 1e-2 * np.abs(ref[3:]).max()
+
+
 @pytest.mark.parametrize("grid", [100, 12, 13, 14, 200, 33])
 @needs_mystran
 def test_rbe3_mystran(tmp_path, grid):

@@ -45,6 +45,15 @@ _MERGED = ("grids", "cbars", "rods")
 """Deck collections that both the bulk converters and the parsers fill (kept in deck order)."""
 
 
+PROPERTY_FAMILIES = {"PBAR": "bar", "PBARL": "bar", "PBEAM": "bar", "PBEAML": "bar",
+                     "PROD": "rod", "PTUBE": "rod", "PBUSH": "bush", "PELAS": "elas", "PGAP": "gap"}
+"""Property card -> the family of elements that name it (CBAR/CBEAM, CROD/CTUBE, CBUSH, CELAS1/3,
+CGAP). A property ID is unique within its family only: an element finds its property among its
+own family's cards, so a PBUSH 3 beside a PBEAML 3 is no ambiguity (NX and MSC Nastran accept
+such decks: pyNastran issue #188, its maintainer's word; MYSTRAN 18 runs a PBAR 1 beside a
+PROD 1, measured), while two PBAR-family cards with one ID stay an error."""
+
+
 class _Reader:
     def __init__(self, keep_unmodelled: bool = False, table: CardTable | None = None) -> None:
         self.deck = Deck()
@@ -52,9 +61,10 @@ class _Reader:
         # being errors; cards of NOT_PASSABLE stay errors
         self.keep_unmodelled = keep_unmodelled
         self.table = table
-        # ID -> "CARD at file:line"; elements (CBAR, RBE2, CELASi) share one ID space, as do
-        # properties (PBAR, PELAS)
-        self.ids: dict[str, dict[int, str]] = {"GRID": {}, "element": {}, "property": {}, "MAT1": {},
+        # ID -> "CARD at file:line"; elements (CBAR, RBE2, CELASi) share one ID space; properties
+        # one per family of the elements that name them (PROPERTY_FAMILIES)
+        self.ids: dict[str, dict[int, str]] = {"GRID": {}, "element": {}, "MAT1": {},
+                                               **{f"property {k}": {} for k in set(PROPERTY_FAMILIES.values())},
                                                "SPCADD": {}, "MPCADD": {}, "CORD": {},
                                                **{k: {} for k in design.PARSERS if k not in ("DLINK", "DTABLE")}}
         self.design = design.DesignState.empty()   # SOL 200's design model, applied in finish()
@@ -219,7 +229,9 @@ class _Reader:
                                 keeping=self.keep_unmodelled)
 
     def claim(self, kind: str, ident: int, card, i: int) -> None:
-        table = self.ids[kind]
+        """Register ``ident`` of ``kind`` ("GRID", "element", "property" (of the card's family),
+        ...) as defined by ``card``; an ID defined twice is an error naming both cards."""
+        table = self.ids[f"property {PROPERTY_FAMILIES[card.name]}" if kind == "property" else kind]
         if ident in table:
             raise card.error(i, f"duplicate {kind} ID {ident} (already defined by {table[ident]})")
         table[ident] = f"{card.name} at {card.src}"
