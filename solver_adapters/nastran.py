@@ -216,14 +216,14 @@ class RawCard:
 
 WRITTEN = frozenset({"GRID", "GRDSET", "CBAR", "CBEAM", "BAROR", "PBAR", "PBARL", "PBEAM", "PBEAML",
                      "CROD", "PROD", "CONROD", "CTUBE", "PTUBE", "MAT1", "SPC1", "SPC", "SPCADD",
-                     "RBE2", "RBAR", "PELAS", "CELAS1", "CELAS2", "CELAS3", "CELAS4", "SPOINT",
-                     "MPC", "MPCADD", "CORD1R", "CORD1C", "CORD1S", "CORD2R", "CORD2C", "CORD2S",
+                     "RBE2", "RBAR", "CRIGD1", "CRIGD2", "PELAS", "CELAS1", "CELAS2", "CELAS3", "CELAS4",
+                     "SPOINT", "MPC", "MPCADD", "CORD1R", "CORD1C", "CORD1S", "CORD2R", "CORD2C", "CORD2S",
                      "SUPORT", "SUPORT1"})
 """Cards :func:`model_cards` writes back from the parsed model: GRDSET and BAROR through the
 GRIDs and CBARs they complete, SPC as SPC1, SUPORT/SUPORT1 as the SPC1 that a static solution
 without inertia relief makes of them (a study's loads are already balanced: docs/import.md), RBAR as the RBE2 it is (all six independent
-components at one grid), CTUBE/PTUBE as the CROD/PROD of the tube's A and J (MYSTRAN 18 has no
-CTUBE), every coordinate system as a CORD2x in basic, scalar points (SPOINT) with component 1
+components at one grid), NASTRAN-95's CRIGD1/CRIGD2 as the RBE2s they are, CTUBE/PTUBE as the
+CROD/PROD of the tube's A and J (MYSTRAN 18 has no CTUBE), every coordinate system as a CORD2x in basic, scalar points (SPOINT) with component 1
 on them in CELAS1/CELAS2 and MPC, the form MYSTRAN 18 requires (it refuses a blank or 0
 component there; a grounded CELAS3/CELAS4 ends on the fixed dummy grid as a CELAS1/CELAS2), and
 a CBEAM with its PBEAM/PBEAML, or a

@@ -326,3 +326,70 @@ def test_continuations_away_from_their_parents_in_fixed_field(tmp_path):
     with pytest.raises(DeckFormatError) as e:
         _import(tmp_path, "orphan.dat", orphan)
     assert e.value.line == orphan.splitlines().index("+ZZ".ljust(8) + "1.") + 1
+
+
+def test_two_scalar_springs_on_one_celas3_or_celas4_card():
+    """NASTRAN-95's CELAS3/CELAS4 define one or two springs a card (User's Manual, CELAS3 remark
+    3). Scalar point 1 held; springs 1-2 (CELAS3 10, k = 100), 2-3 (its second, PELAS 8,
+    k = 300), 3-4 (CELAS4 20, k = 50) and 4 to ground (its second, k = 25): a unit load at 4
+    stretches the chain 1-2-3 and the two last springs in parallel, closed form."""
+    from solver_adapters.protocol import LoadMatrix
+    from solver_adapters.reference import ReferenceAdapter
+    deck = read_deck_text("SPOINT,1,THRU,4\nPELAS,7,100.,,,8,300.\n"
+                          "CELAS3,10,7,1,2,11,8,2,3\nCELAS4,20,50.,3,4,21,25.,4\nSPC1,1,0,1\n")
+    assert sorted(deck.springs) == [10, 11, 20, 21] and deck.springs[21].g2 == 0
+    report = [(p, 1) for p in (2, 3, 4)]
+    u = ReferenceAdapter(deck).solve(LoadMatrix.from_dense([(4, 1)], np.array([[1.0]]), ["1"]), report)
+    # 4 to ground directly (k = 25) in parallel with the chain 4-3-2-1 (1/50 + 1/300 + 1/100)
+    chain = 1.0 / (1 / 50 + 1 / 300 + 1 / 100)
+    u4 = 1.0 / (25.0 + chain)
+    f = chain * u4                                     # the force through the chain
+    np.testing.assert_allclose(u.values[:, 0], [f / 100, f / 100 + f / 300, u4], rtol=1e-12)
+
+
+def test_grid_ps_zero_is_no_constraint():
+    """NASTRAN-95 allows PS 0 (GRID: "Integer >= 0 or blank"): no permanent constraint, and not
+    blank, so the GRDSET's PS does not replace it."""
+    deck = read_deck_text("GRDSET,,,,,,,3\nGRID,1,,0.,0.,0.,,0\nGRID,2,,1.,0.,0.\n"
+                          "GRID    3               2.      0.      0.              0\n")
+    assert {g: deck.grids[g].ps for g in deck.grids} == {1: "", 2: "3", 3: ""}
+
+
+_ARM = """GRID,1,,0.,0.,0.
+GRID,2,,1.,0.,0.
+GRID,3,,1.,.4,0.
+GRID,4,,1.,0.,.3
+GRID,5,,1.,.2,.2
+CBAR,10,1,1,2,0.,0.,1.
+PBAR,1,1,1.,.5,.8,.3
+MAT1,1,1000.,,.3
+SPC1,1,123456,1
+"""
+
+
+@pytest.mark.parametrize("rigid, rbe2", [
+    ("CRIGD1,20,2,3,4,5\n", "RBE2,20,2,123456,3,4,5\n"),
+    ("CRIGD1,20,2,3,THRU,5\n", "RBE2,20,2,123456,3,4,5\n"),
+    ("CRIGD2,20,2,3,123,4,123\nCRIGD2,21,2,5,123456\n", "RBE2,20,2,123,3,4\nRBE2,21,2,123456,5\n"),
+])
+def test_nastran95_crigd1_crigd2_are_the_rbe2s_they_describe(rigid, rbe2):
+    """CRIGD1 couples all six components of its dependent grids to the reference grid, CRIGD2 the
+    listed ones (NASTRAN-95 User's Manual): read, they are the RBE2s of that reference grid, so the
+    cantilever with its rigid arms gives the same displacements bit for bit; a CRIGD2 whose grids
+    list different components is refused at that field."""
+    from solver_adapters.protocol import LoadMatrix
+    from solver_adapters.reference import ReferenceAdapter
+    a, b = read_deck_text(_ARM + rigid), read_deck_text(_ARM + rbe2)
+    assert [(e.gn, e.cm, e.gm) for e in a.rbe2s.values()] == [(e.gn, e.cm, e.gm) for e in b.rbe2s.values()]
+    report = [(g, c) for g in (2, 3, 4, 5) for c in range(1, 7)]
+    loads = LoadMatrix.from_dense([(3, 2), (4, 3), (5, 1)], np.eye(3), ["a", "b", "c"])
+    ua, ub = (ReferenceAdapter(d).solve(loads, report).values for d in (a, b))
+    assert np.array_equal(ua, ub) and np.abs(ua).max() > 0
+
+
+def test_a_crigd2_with_different_components_and_other_cosmic_rigid_elements_are_refused():
+    with pytest.raises(DeckFormatError, match="CRIGD2 with different components") as info:
+        read_deck_text(_ARM + "CRIGD2,20,2,3,123,4,12\n")
+    assert info.value.field == 7
+    with pytest.raises(DeckFormatError, match="rigid elements other than CRIGD1 and CRIGD2"):
+        read_deck_text(_ARM + "CRIGDR,20,2,3,1\n", unmodelled="keep")

@@ -40,6 +40,8 @@ NOT_PASSABLE = {
         "ACCEL", "ACCEL1", "PLOADX1", "PLOADB3", "SLOAD", "TEMPP1", "TEMPRB", "QBDY1", "QVOL",
         "DAREA", "LSEQ", "CLOAD", "PRESAX", "FORCEAX", "MOMAX")},
     **{k: "superelements are not supported" for k in ("SEBULK", "SECONCT", "SESET")},
+    **{k: "NASTRAN-95's rigid elements other than CRIGD1 and CRIGD2 are not supported (MYSTRAN has "
+          "none of them)" for k in ("CRIGD3", "CRIGDR", "CRROD", "CRBAR", "CRBE3", "CRTRPLT", "CRSPLINE")},
 }
 """Unmodelled cards that stay errors even when a deck is read for an external solver
 (``unmodelled="keep"``), and why: handed on, they would change the model without a word."""

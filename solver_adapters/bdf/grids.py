@@ -21,13 +21,15 @@ ZERO_LENGTH = 1e-12
 
 def _grid(r, c) -> None:
     """GRID ID CP X1 X2 X3 CD PS SEID; a blank CP, CD, PS or SEID takes the GRDSET value (applied
-    in ``finish``, which also converts X1-X3 from the CP system to basic)."""
+    in ``finish``, which also converts X1-X3 from the CP system to basic). PS 0 is no constraint
+    (NASTRAN-95 User's Manual, GRID: "Integer >= 0 or blank"), and not blank: GRDSET's PS does not
+    apply to it."""
     _max_fields(c, 9)
     gid = _int(c, 2)
     cp = _int(c, 3, 0, minimum=0)
     xyz = (_real(c, 4, 0.0), _real(c, 5, 0.0), _real(c, 6, 0.0))
     cd = _int(c, 7, 0, minimum=0)
-    ps = _components(c, 8, required=False)
+    ps = "" if c.text(8) == "0" else _components(c, 8, required=False)
     if _int(c, 9, 0, minimum=0) != 0:
         raise c.error(9, "superelements are not supported: SEID must be blank")
     r.claim("GRID", gid, c, 2)
@@ -63,7 +65,7 @@ def bulk_grid(r, table, cards: np.ndarray) -> np.ndarray:
     ps_map = []
     for v in ps_u.tolist():
         t = v.decode("utf-8", "replace")
-        ps_map.append("".join(sorted(t)) if not t or valid_components(t) else None)
+        ps_map.append("" if t == "0" else "".join(sorted(t)) if not t or valid_components(t) else None)
     ps_bad = np.array([p is None for p in ps_map], bool)
     ok &= ~ps_bad[ps_inv.ravel()]
     rows = np.flatnonzero(ok)
@@ -101,7 +103,8 @@ def _grdset(r, c) -> None:
         _blank(c, i, f"GRDSET field {i}")
     for i in (3, 7, 9):
         _int(c, i, 0, minimum=0)
-    _components(c, 8, required=False)
+    if c.text(8) != "0":
+        _components(c, 8, required=False)
     if r.grdset is not None:
         raise c.error(1, f"only one GRDSET is allowed (the first is at {r.grdset.src})")
     r.grdset = c

@@ -365,7 +365,7 @@ class _Reader:
                 raise c.error(9, f"superelements are not supported: SEID {_int(c, 9)} of GRDSET is "
                                  f"the default of every GRID whose SEID is blank, e.g. GRID {gid} at "
                                  f"{self.deck.grids[gid].src}; GRDSET SEID must be 0 or blank")
-            ps = _components(c, 8, required=False)
+            ps = "" if c.text(8) == "0" else _components(c, 8, required=False)
             cp, cd = _int(c, 3, 0, minimum=0), _int(c, 7, 0, minimum=0)
             for key, value in (("CP", cp), ("CD", cd)):
                 if value:

@@ -1,4 +1,4 @@
-"""RBE2, RBAR and RBE3: rigid and interpolation elements."""
+"""RBE2, RBAR, RBE3 and NASTRAN-95's CRIGD1/CRIGD2: rigid and interpolation elements."""
 
 from __future__ import annotations
 
@@ -125,4 +125,45 @@ def _rbar(r, c) -> None:
     r.deck.rbe2s[eid] = Rbe2(eid, gn, cm, (gm,), c.src, card="RBAR")
 
 
-PARSERS = {"RBE2": _rbe2, "RBE3": _rbe3, "RBAR": _rbar}
+def _crigd1(r, c) -> None:
+    """CRIGD1 EID IG G1 G2 ... (or IG GID1 THRU GID2): NASTRAN-95's rigid element coupling all six
+    components of each dependent grid to the reference grid IG (User's Manual, CRIGD1), which is
+    the RBE2 of IG with CM = 123456 (held as that RBE2, ``card="CRIGD1"``)."""
+    eid, ig = _int(c, 2), _int(c, 3)
+    gm: list[int] = []
+    for item in _id_list(c, 4, len(c.fields)):
+        if isinstance(item, tuple):
+            if item[1] - item[0] > 1_000_000:
+                raise c.error(4, f"THRU range {item[0]}-{item[1]} is too long")
+            gm.extend(range(item[0], item[1] + 1))
+        else:
+            gm.append(item)
+    if not gm:
+        raise c.error(4, "CRIGD1 needs at least one dependent grid")
+    r.claim("element", eid, c, 2)
+    r.deck.rbe2s[eid] = Rbe2(eid, ig, "123456", tuple(gm), c.src, card="CRIGD1")
+
+
+def _crigd2(r, c) -> None:
+    """CRIGD2 EID IG G1 C1 G2 C2 ...: NASTRAN-95's rigid element coupling the components Ci of each
+    dependent grid Gi to all six of IG (User's Manual, CRIGD2). With one component list for all
+    its grids (as decks write it) it is the RBE2 of IG with CM = that list (``card="CRIGD2"``);
+    different lists on one card are an error (not supported: one CRIGD2 per list)."""
+    eid, ig = _int(c, 2), _int(c, 3)
+    pairs = [i for i in range(4, len(c.fields) + 1, 2) if c.text(i) or c.text(i + 1)]
+    if not pairs:
+        raise c.error(4, "CRIGD2 needs at least one dependent grid and its components")
+    gm, cms = [], []
+    for i in pairs:
+        gm.append(_int(c, i))
+        cms.append(_components(c, i + 1, required=True))
+    if len(set(cms)) > 1:
+        i = pairs[cms.index(next(x for x in cms if x != cms[0]))]
+        raise c.error(i + 1, f"CRIGD2 with different components on its grids ({cms[0]} at grid "
+                             f"{gm[0]}, {c.text(i + 1)} at grid {c.text(i)}) is not supported: "
+                             f"write one CRIGD2 for each component list")
+    r.claim("element", eid, c, 2)
+    r.deck.rbe2s[eid] = Rbe2(eid, ig, cms[0], tuple(gm), c.src, card="CRIGD2")
+
+
+PARSERS = {"RBE2": _rbe2, "RBE3": _rbe3, "RBAR": _rbar, "CRIGD1": _crigd1, "CRIGD2": _crigd2}

@@ -112,25 +112,31 @@ def _scalar_end(r, c, i: int) -> tuple[int, int]:
 
 def _celas(r, c) -> None:
     """CELAS1 EID PID G1 C1 G2 C2; CELAS2 EID K G1 C1 G2 C2 GE S; CELAS3 EID PID S1 S2;
-    CELAS4 EID K S1 S2 (MSC QRG: CELAS3/CELAS4 join scalar points only; GE, S have no effect)."""
-    _max_fields(c, {"CELAS1": 7, "CELAS2": 9, "CELAS3": 5, "CELAS4": 5}[c.name])
-    eid = _int(c, 2)
-    if c.name in ("CELAS1", "CELAS3"):
-        pid, k = _int(c, 3, eid), None
-    else:
-        pid, k = None, _real(c, 3)
-        if c.name == "CELAS2":
-            _ignored_reals(c, (8, 9))  # GE, S
-    if c.name in ("CELAS3", "CELAS4"):
-        (g1, c1), (g2, c2) = _scalar_end(r, c, 4), _scalar_end(r, c, 5)
-    else:
-        (g1, c1), (g2, c2) = _spring_end(r, c, 4), _spring_end(r, c, 6)
-    if g1 == 0:
-        if g2 == 0:
-            raise c.error(4, "both ends of the spring are grounded")
-        (g1, c1), (g2, c2) = (g2, c2), (g1, c1)
-    r.claim("element", eid, c, 2)
-    r.deck.springs[eid] = Spring(eid, g1, c1, g2, c2, k, pid, c.name, c.src)
+    CELAS4 EID K S1 S2 (MSC QRG: CELAS3/CELAS4 join scalar points only; GE, S have no effect).
+    A CELAS3/CELAS4 may define a second element in fields 6-9 (NASTRAN-95 User's Manual, CELAS3
+    remark 3: "One or two scalar springs may be defined on a single card")."""
+    scalar = c.name in ("CELAS3", "CELAS4")
+    _max_fields(c, {"CELAS1": 7, "CELAS2": 9, "CELAS3": 9, "CELAS4": 9}[c.name])
+    for b in (0, 4) if scalar else (0,):
+        if b and not any(c.text(i) for i in range(6, 10)):
+            break
+        eid = _int(c, 2 + b)
+        if c.name in ("CELAS1", "CELAS3"):
+            pid, k = _int(c, 3 + b, eid), None
+        else:
+            pid, k = None, _real(c, 3 + b)
+            if c.name == "CELAS2":
+                _ignored_reals(c, (8, 9))  # GE, S
+        if scalar:
+            (g1, c1), (g2, c2) = _scalar_end(r, c, 4 + b), _scalar_end(r, c, 5 + b)
+        else:
+            (g1, c1), (g2, c2) = _spring_end(r, c, 4), _spring_end(r, c, 6)
+        if g1 == 0:
+            if g2 == 0:
+                raise c.error(4 + b, "both ends of the spring are grounded")
+            (g1, c1), (g2, c2) = (g2, c2), (g1, c1)
+        r.claim("element", eid, c, 2 + b)
+        r.deck.springs[eid] = Spring(eid, g1, c1, g2, c2, k, pid, c.name, c.src)
 
 
 PARSERS = {"CBUSH": _cbush, "PBUSH": _pbush, "PELAS": _pelas, "CELAS1": _celas, "CELAS2": _celas,
