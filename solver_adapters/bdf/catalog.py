@@ -64,7 +64,7 @@ KNOWN_UNMODELLED = frozenset({
     "RBAR1", "RBE1", "RROD", "RTRPLT", "RTRPLT1", "RSPLINE", "RJOINT",
     # degree-of-freedom sets, scalar points, sequencing
     "BSET", "BSET1",
-    "CSET", "CSET1", "USET", "USET1", "SEQGP", "EPOINT",
+    "CSET", "CSET1", "USET", "USET1", "SEQGP",
     # other coordinate systems, direct matrix input, tables, functions
     "CORD3G", "CORD3R", "DTI", "BEAMOR",
 })

@@ -91,6 +91,10 @@ NO_EFFECT = frozenset({
     # direct matrix input for DMAP and the aerodynamic solutions (W2GJ, WKK, FA2J ...): a linear
     # static solution adds none of them (a stiffness added by matrix is DMIG, selected by K2GG)
     "DMI", "DMIJ", "DMIK",
+    # dynamics only: extra points (MSC QRG EPOINT: "for use in dynamics problems"), transfer
+    # functions (selected by TFL) and transient initial conditions (selected by IC); POINT, an
+    # edge point of FEEDGE geometry, holds no degree of freedom
+    "EPOINT", "TF", "TIC", "POINT",
 })
 """Cards with no effect on a linear static solve: accepted, counted in ``Deck.no_effect`` (one
 line of :meth:`~solver_adapters.deck.Deck.summary`), never handed to an external solver but
