@@ -916,6 +916,12 @@ def _try_study(rng: np.random.Generator, index: int, kinds: tuple[str, ...], fam
     m_k["case_swap"] = len(fit_labels) * (len(fit_labels) - 1) // 2
     # every force and every moment of a fitted case may have gone in turned (load_tilt)
     m_k["load_tilt"] = len({(c, g, 1 if k <= 3 else 4) for c, g, k, v in loads if c in fit_labels and v != 0.0})
+    # and every fitted case of two or more such vectors may have had all of them turned (case_tilt)
+    per_case = {}
+    for c, g, k, v in loads:
+        if c in fit_labels and v != 0.0:
+            per_case.setdefault(c, set()).add((g, 1 if k <= 3 else 4))
+    m_k["case_tilt"] = sum(1 for vs in per_case.values() if len(vs) >= 2)
     # and every grid a fitted case loads may have been the wrong one, its neighbour the right
     # one (misplaced_load; a neighbour held in all six components is none)
     m_k["misplaced_load"] = sum(1 for c, g in {(c, g) for c, g, _, v in loads if c in fit_labels and v != 0.0}

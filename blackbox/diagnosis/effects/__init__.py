@@ -32,10 +32,11 @@ from blackbox.diagnosis.effects.rigid_end_zone import RigidEndZone  # noqa: E402
 from blackbox.diagnosis.effects.support_fixity import SupportFixity  # noqa: E402
 from blackbox.diagnosis.effects.case_swap import CaseSwap  # noqa: E402
 from blackbox.diagnosis.effects.load_tilt import LoadTilt  # noqa: E402
+from blackbox.diagnosis.effects.case_tilt import CaseTilt  # noqa: E402
 from blackbox.diagnosis.effects.misplaced_load import MisplacedLoad  # noqa: E402
 
 __all__ = ["CandidateContext", "CandidateLimit", "Effect", "Connection", "register", "get", "kinds", "families",
            "UndeclaredJoint", "JointTranslation", "SupportFlexibility", "JointCoupling", "MemberStiffness", "JointGap",
            "JointSoftening", "JointUnloading", "PDelta", "Preload", "LoadScale", "SensorGain", "SensorOffset", "Outlier",
            "SignFlip", "ChannelSwap", "MisplacedSensor", "BadChannel", "BadCase", "RigidMotion", "RigidEndZone",
-           "SupportFixity", "CaseSwap", "LoadTilt", "MisplacedLoad"]
+           "SupportFixity", "CaseSwap", "LoadTilt", "CaseTilt", "MisplacedLoad"]

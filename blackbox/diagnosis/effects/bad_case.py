@@ -89,7 +89,7 @@ class BadCase(SetAsideEffect):
     def subsumes(self, other: Effect) -> bool:
         if other.kind == "outlier":
             return getattr(other, "case", None) == self.case
-        if other.kind in ("load_tilt", "misplaced_load"):
+        if other.kind in ("load_tilt", "case_tilt", "misplaced_load"):
             return getattr(other, "case", None) == self.case
         return other.kind == "load_scale" and tuple(other.where) == (self.case,)
 
