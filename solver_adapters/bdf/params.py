@@ -85,7 +85,8 @@ NO_EFFECT = frozenset({
     "DRESP1", "DRESP2", "DRESP3", "DCONSTR", "DCONADD", "DSCREEN", "DDVAL",
     # static aeroelasticity and flutter: the aerodynamic model adds nothing to a SOL 101 solution
     "AERO", "AEROS", "CAERO1", "CAERO2", "CAERO3", "CAERO4", "CAERO5", "PAERO1", "PAERO2",
-    "PAERO3", "PAERO4", "PAERO5", "SPLINE1", "SPLINE2", "SPLINE4", "SPLINE5", "SET1", "SET2",
+    "PAERO3", "PAERO4", "PAERO5", "SPLINE1", "SPLINE2", "SPLINE3", "SPLINE4", "SPLINE5", "SPLINE6",
+    "SPLINE7", "SET1", "SET2",
     "AEFACT", "AELIST", "AESTAT", "AESURF", "AESURFS", "AELINK", "AEPARM", "TRIM", "FLFACT",
     "FLUTTER", "MKAERO1", "MKAERO2", "GUST", "DIVERG",
     # direct matrix input for DMAP and the aerodynamic solutions (W2GJ, WKK, FA2J ...): a linear
