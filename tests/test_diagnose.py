@@ -104,6 +104,12 @@ def test_fixture_folder(folder, diagnosed):
         assert abs(d["after"]["holdout_rms"] / d["before"]["holdout_rms"] - 1) < 1e-3
         return
     assert not d["before"]["in_band"]
+    if all(p["effect"] in ("load_tilt", "case_tilt", "misplaced_load") for p in planted):
+        # loads of a fitted case that went in otherwise: the hold-out cases went in as declared,
+        # so their prediction moves only with the joint's estimate, by round-off and noise
+        # (case_tilt: 1.3e-5 relative); it must not get worse beyond that
+        assert d["after"]["holdout_rms"] < d["before"]["holdout_rms"] * (1 + 1e-3)
+        return
     if d["validation"]["method"] == "kfold":        # no hold-out declared (load_scale_day)
         assert d["validation"]["cv_chi2_after"] < d["validation"]["cv_chi2_before"]
     else:

@@ -458,7 +458,9 @@ LEFT_OUT = {"shell_thin": "its diagnosis piles complex-joint refits over five ro
             "joint_translation": "joint_translation_axes runs the same car deck with the same joint's translation "
                                  "springs, per axis (a superset of this folder's edited decks)",
             "member_stiffness": "member_bending runs the car deck's member edits (its section variant besides the "
-                                "whole-member factor this folder adds)"}
+                                "whole-member factor this folder adds)",
+            "case_tilt": "its study is load_tilt's deck and declared loads with other readings: the same split run "
+                         "and unit-load columns, which load_tilt compares"}
 """Folders not compared here, with the reason; ``python benchmarks/diagnose_mystran.py`` compares
 every folder (docs/mystran.md). A data defect's folder differs from the others of its deck in its
 readings only, so through MYSTRAN it runs the same kinds of deck (the shared cache reads most of
