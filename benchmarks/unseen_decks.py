@@ -8,6 +8,7 @@ and how the solution agrees with MYSTRAN's (issue 20's last target).
     python benchmarks/unseen_decks.py FOLDER3 --third [--collect --mirror ...]
     python benchmarks/unseen_decks.py FOLDER4 --fourth [--collect --mirror ...]
     python benchmarks/unseen_decks.py FOLDER5 --fifth [--collect --mirror ...]
+    python benchmarks/unseen_decks.py FOLDER --second ... --as-static
 
 The decks (``DECKS`` below) are every whole input file (a CEND and a BEGIN BULK) of four public
 repositories, at the commits of ``COMMITS``, that has a line element (CBAR, CBEAM, CROD, CONROD,
@@ -59,6 +60,11 @@ displacements from MYSTRAN's, relative to each subcase's largest translation (ro
   solve but not the import's reading of the load cards (for a study with enforced
   displacements the adapter picks MYSTRAN's band solver: ``solver_adapters.nastran.banded_solver``);
 * ``-``: MYSTRAN runs neither (a card it does not run: CBEAM, PLOAD1, ...).
+
+``--as-static`` takes the decks with no static load case instead (modal, flutter, trim decks),
+each made a linear static one (:func:`as_static`: a unit force at its first grid in an added
+subcase; the copy is written beside the deck, for its INCLUDEs, and removed): whether their bulk
+data imports and solves, without MYSTRAN.
 
 A summary line per half counts the decks accepted, those solved (the reference solver solves every
 case), those with a static load case (not stopped by "no static load case to import") and the
@@ -412,6 +418,25 @@ def row(path: Path, use_mystran: bool = True) -> tuple[str, str, str, float | No
     return "yes", str(len(cases)), shown, value
 
 
+def as_static(path: Path) -> Path | None:
+    """A copy of the deck ``path`` made a linear static one, beside it (so that its INCLUDEs
+    resolve; the caller removes it): ``SOL 101`` and one added subcase 999999 loaded by a unit
+    force along (1, 1, 1) at the first GRID of the file, ``LOAD = 999999``. ``None``: the file
+    has no GRID card or no BEGIN BULK of its own."""
+    text = path.read_text(errors="replace")
+    g = re.search(r"^GRID\*?[ ,\t]+\*?\s*(\d+)", text, re.M | re.I)
+    bulk = re.search(r"^\s*BEGIN\s+BULK.*$", text, re.M | re.I)
+    if not g or not bulk:
+        return None
+    head = text[:bulk.start()]
+    head = (re.sub(r"^(\s*SOL\s+)\S+.*$", r"\g<1>101", head, count=1, flags=re.M | re.I)
+            if re.search(r"^\s*SOL\s", head, re.M | re.I) else "SOL 101\n" + head)
+    out = path.with_name(path.stem + "__static" + path.suffix)
+    out.write_text(head + "SUBCASE 999999\n  LOAD = 999999\n" + text[bulk.start():bulk.end()]
+                   + f"\nFORCE,999999,{g.group(1)},0,1.0,1.,1.,1.\n" + text[bulk.end():])
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("folder", type=Path)
@@ -424,6 +449,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--third", action="store_true", help="the third corpus (decks_third.csv)")
     ap.add_argument("--fourth", action="store_true", help="the fourth corpus (decks_fourth.csv)")
     ap.add_argument("--fifth", action="store_true", help="the fifth corpus (decks_fifth.csv)")
+    ap.add_argument("--as-static", action="store_true",
+                    help="the decks with no static load case only, each made static (as_static: a unit "
+                         "force in an added subcase, written beside the deck and removed): does its bulk "
+                         "data import and solve? (no MYSTRAN comparison)")
     a = ap.parse_args(argv)
     listed = ("fifth" if a.fifth else "fourth" if a.fourth else "third" if a.third else "second" if a.second
               else None)
@@ -445,7 +474,21 @@ def main(argv: list[str] | None = None) -> int:
         half = halves[(repo, p)]
         if (a.half and half != a.half) or (a.only and a.only not in p):
             continue
-        accepted, n, shown, value = row(a.folder / repo.replace("/", "+") / p, not a.no_mystran)
+        path = a.folder / repo.replace("/", "+") / p
+        if a.as_static:
+            first, _, _, _ = row(path, False)
+            if "no static load case to import" not in first:
+                continue
+            made = as_static(path)
+            if made is None:
+                accepted, n, shown, value = "not made static (no GRID or BEGIN BULK in the file)", "", "", None
+            else:
+                try:
+                    accepted, n, shown, value = row(made, False)
+                finally:
+                    made.unlink()
+        else:
+            accepted, n, shown, value = row(path, not a.no_mystran)
         t = tally.setdefault(half, [0, 0, 0, 0, 0])
         t[0] += 1
         t[4] += "no static load case to import" in accepted
@@ -456,6 +499,10 @@ def main(argv: list[str] | None = None) -> int:
             bad.append(p)
         print(f"| `{PurePosixPath(p).name}` | {repo} `{p}` | {half} | {accepted} | {n} | {shown} |", flush=True)
     for half, (total, imported, solved, disagree, no_load) in sorted(tally.items()):
+        if a.as_static:
+            print(f"\n{half}, made static: {solved} of {total} decks with no static load case import and "
+                  f"solve ({imported} import)")
+            continue
         static = total - no_load
         print(f"\n{half}: {solved} of {total} imported and solved ({imported} imported); "
               f"{static} have a static load case, {solved} of them solved "
