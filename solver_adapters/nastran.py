@@ -221,14 +221,14 @@ WRITTEN = frozenset({"GRID", "GRDSET", "CBAR", "CBEAM", "BAROR", "PBAR", "PBARL"
                      "SUPORT", "SUPORT1"})
 """Cards :func:`model_cards` writes back from the parsed model: GRDSET and BAROR through the
 GRIDs and CBARs they complete, SPC as SPC1, SUPORT/SUPORT1 as the SPC1 that a static solution
-without inertia relief makes of them (a study's loads are already balanced: docs/import.md), RBAR as the RBE2 it is (all six independent
-components at one grid), NASTRAN-95's CRIGD1/CRIGD2 as the RBE2s they are, CTUBE/PTUBE as the
-CROD/PROD of the tube's A and J (MYSTRAN 18 has no CTUBE), every coordinate system as a CORD2x in basic, scalar points (SPOINT) with component 1
-on them in CELAS1/CELAS2 and MPC, the form MYSTRAN 18 requires (it refuses a blank or 0
-component there; a grounded CELAS3/CELAS4 ends on the fixed dummy grid as a CELAS1/CELAS2), and
-a CBEAM with its PBEAM/PBEAML, or a
-PBARL, as the CBAR/PBAR the reference solver makes of them (MYSTRAN 18 has no CBEAM: "CODE NOT
-WRITTEN"; its own PBARL section constants may differ)."""
+without inertia relief makes of them (a study's loads are already balanced: docs/import.md), RBAR
+as the RBE2 it is (all six independent components at one grid), NASTRAN-95's CRIGD1/CRIGD2 as the
+RBE2s they are, CTUBE/PTUBE as the CROD/PROD of the tube's A and J (MYSTRAN 18 has no CTUBE),
+every coordinate system as a CORD2x in basic, scalar points (SPOINT) with component 1 on them in
+CELAS1/CELAS2 and MPC, the form MYSTRAN 18 requires (it refuses a blank or 0 component there; a
+grounded CELAS3/CELAS4 ends on the fixed dummy grid as a CELAS1/CELAS2), and a CBEAM with its
+PBEAM/PBEAML, or a PBARL, as the CBAR/PBAR the reference solver makes of them (MYSTRAN 18 has no
+CBEAM: "CODE NOT WRITTEN"; its own PBARL section constants may differ)."""
 
 DESIGN_MODEL = frozenset({"DESVAR", "DLINK", "DVPREL1", "DVMREL1", "DVPREL2", "DVMREL2", "DVCREL1",
                           "DVCREL2", "DEQATN", "DTABLE"})
