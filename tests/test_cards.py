@@ -1053,9 +1053,9 @@ SPC1,1,123456,1
 def test_rbe3_follows_a_rigid_motion_and_mystran_is_refused_with_rotations(tmp_path):
     """Every independent grid of an RBE3 moving as one rigid body moves its reference grid with
     that body (NASTRAN's weighted least-squares average reproduces a rigid motion exactly): the
-    reference solver to round-off. MYSTRAN 18 does not (measured below: the reference grid's T1 and
-    R3 off the rigid motion by 2 % of its largest translation and rotation), so the mystran adapter
-    refuses an RBE3 with independent rotations, naming it."""
+    reference solver to round-off. MYSTRAN 18 does not (measured below: the reference grid's T1
+    and R3 off the rigid motion by 1.1 % and 2.5 % of its largest translation and rotation), so
+    the mystran adapter refuses an RBE3 with independent rotations, naming it."""
     path = tmp_path / "rigid.bdf"
     path.write_text(RBE3_RIGID)
     deck = read_deck(path)
@@ -1082,15 +1082,16 @@ def test_rbe3_follows_a_rigid_motion_and_mystran_is_refused_with_rotations(tmp_p
 def test_rbe3_with_independent_rotations_mystran_measured(tmp_path):
     """What the refusal above rests on: MYSTRAN 18 run on RBE3_RIGID moves grid 5 off the rigid
     motion of its independent grids (the reference solver's, exact): its T1 and R3 are off by
-    about 2 % of the largest translation and rotation, far beyond MYSTRAN's 7 printed digits."""
+    1.1 % and 2.5 % of the largest translation and rotation (-1.875e-5 against 0 and 9.75e-4
+    against 1e-3, measured), far beyond MYSTRAN's 7 printed digits; asserted at half of that."""
     path = tmp_path / "rigid.bdf"
     path.write_text(RBE3_RIGID)
     report = [(5, c) for c in range(1, 7)]
     ref = ReferenceAdapter(path).solve(LoadMatrix.from_dense([(5, 2)], np.array([[1.0]]), ["y"]),
                                        report).values[:, 0]
     mys = mystran_direct(tmp_path / "m", path, [[(5, 2, 1.0)]], report)[:, 0]
-    assert abs(mys[0] - ref[0]) > 1e-2 * np.abs(ref[:3]).max()
-    assert abs(mys[5] - ref[5]) > 1e-2 * np.abs(ref[3:]).max()
+    assert abs(mys[0] - ref[0]) > 0.5e-2 * np.abs(ref[:3]).max()
+    assert abs(mys[5] - ref[5]) > 1.2e-2 * np.abs(ref[3:]).max()
 
 
 @pytest.mark.parametrize("grid", [100, 12, 13, 14, 200, 33])
