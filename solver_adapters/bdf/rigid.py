@@ -8,6 +8,20 @@ from solver_adapters.bdf.numbers import _INT, _real_or_none
 from solver_adapters.deck import Rbe2, Rbe3
 
 
+def _dependent_grids(c, first: int, last: int) -> list[int]:
+    """The grid IDs of fields ``first``..``last``, ``A THRU B`` ranges expanded (a range over a
+    million IDs long is an error at field ``first``)."""
+    gm: list[int] = []
+    for item in _id_list(c, first, last):
+        if isinstance(item, tuple):
+            if item[1] - item[0] > 1_000_000:
+                raise c.error(first, f"THRU range {item[0]}-{item[1]} is too long")
+            gm.extend(range(item[0], item[1] + 1))
+        else:
+            gm.append(item)
+    return gm
+
+
 def _rbe2(r, c) -> None:
     eid, gn = _int(c, 2), _int(c, 3)
     cm = _components(c, 4, required=True)
@@ -25,14 +39,7 @@ def _rbe2(r, c) -> None:
         for i in [tail[0]] + after:
             _real(c, i)
         last = tail[0] - 1
-    gm: list[int] = []
-    for item in _id_list(c, 5, last):
-        if isinstance(item, tuple):
-            if item[1] - item[0] > 1_000_000:
-                raise c.error(5, f"THRU range {item[0]}-{item[1]} is too long")
-            gm.extend(range(item[0], item[1] + 1))
-        else:
-            gm.append(item)
+    gm = _dependent_grids(c, 5, last)
     if not gm:
         raise c.error(5, "RBE2 needs at least one dependent grid GM")
     r.claim("element", eid, c, 2)
@@ -130,14 +137,7 @@ def _crigd1(r, c) -> None:
     components of each dependent grid to the reference grid IG (User's Manual, CRIGD1), which is
     the RBE2 of IG with CM = 123456 (held as that RBE2, ``card="CRIGD1"``)."""
     eid, ig = _int(c, 2), _int(c, 3)
-    gm: list[int] = []
-    for item in _id_list(c, 4, len(c.fields)):
-        if isinstance(item, tuple):
-            if item[1] - item[0] > 1_000_000:
-                raise c.error(4, f"THRU range {item[0]}-{item[1]} is too long")
-            gm.extend(range(item[0], item[1] + 1))
-        else:
-            gm.append(item)
+    gm = _dependent_grids(c, 4, len(c.fields))
     if not gm:
         raise c.error(4, "CRIGD1 needs at least one dependent grid")
     r.claim("element", eid, c, 2)
