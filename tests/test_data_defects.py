@@ -528,6 +528,19 @@ def _turned_loads(loads, case: str, grid: int, first: int, t: np.ndarray):
     return LoadMatrix(tuple(dofs), sp.csc_matrix(V), loads.cases)
 
 
+def _load_model(pr, e):
+    """``(x, o, om, model)``: the cube's augmented model with the load effect ``e`` added at its
+    nominal parameters (the springs at the declared fit's estimate), the measured DOFs ``o`` and
+    the fitted cases' rows ``om``; checked to be the declared model exactly there."""
+    spec, x = dg.ModelSpec(tuple(pr.joints)).add(e, pr.ident.k)
+    o = list(dict.fromkeys(pr.study.measurements.all_dofs))
+    om = dg.ObsMap.of(pr.fit_obs, {d: i for i, d in enumerate(o)})
+    model = dg.AugmentedModel(pr.base, spec, pr.boundary, pr.K_deck, o)
+    declared = dg.AugmentedModel(pr.base, dg.ModelSpec(tuple(pr.joints)), pr.boundary, pr.K_deck, o)
+    assert np.array_equal(model.predict(x, om), declared.predict(x[:-e.n_params], om))
+    return x, o, om, model
+
+
 def test_load_tilt_model_is_the_turned_load(cube_prepared):
     """With the force at grid 5 in case L3 turned by t = (0.2, -0.15) rad, the augmented model
     predicts what the reference solver gives for the declared structure (springs at the
@@ -541,12 +554,7 @@ def test_load_tilt_model_is_the_turned_load(cube_prepared):
     pr = cube_prepared
     tilts = [e for e in pr.candidates if isinstance(e, LoadTilt)]
     e = next(e for e in tilts if e.case == "L3" and e.grid == 5 and e.first == 1)
-    spec, x = dg.ModelSpec(tuple(pr.joints)).add(e, pr.ident.k)
-    o = list(dict.fromkeys(pr.study.measurements.all_dofs))
-    om = dg.ObsMap.of(pr.fit_obs, {d: i for i, d in enumerate(o)})
-    model = dg.AugmentedModel(pr.base, spec, pr.boundary, pr.K_deck, o)
-    declared = dg.AugmentedModel(pr.base, dg.ModelSpec(tuple(pr.joints)), pr.boundary, pr.K_deck, o)
-    assert np.array_equal(model.predict(x, om), declared.predict(x[:-2], om))
+    x, o, om, model = _load_model(pr, e)
     t = np.array([0.2, -0.15])
     x[-2:] = t
     adapter = _truth_adapter(pr, pr.ident.k)
@@ -602,12 +610,7 @@ def test_case_tilt_model_is_the_turned_loads(cube_prepared):
     e = next(e for e in pr.candidates if isinstance(e, CaseTilt) and e.case == "L3")
     assert [(m.grid, m.first) for m in e.members] == list(_L3_TURNS) and len(e.names) == 6
     assert not any(isinstance(h, CaseTilt) for h in pr.holdout_candidates)
-    spec, x = dg.ModelSpec(tuple(pr.joints)).add(e, pr.ident.k)
-    o = list(dict.fromkeys(pr.study.measurements.all_dofs))
-    om = dg.ObsMap.of(pr.fit_obs, {d: i for i, d in enumerate(o)})
-    model = dg.AugmentedModel(pr.base, spec, pr.boundary, pr.K_deck, o)
-    declared = dg.AugmentedModel(pr.base, dg.ModelSpec(tuple(pr.joints)), pr.boundary, pr.K_deck, o)
-    assert np.array_equal(model.predict(x, om), declared.predict(x[:-6], om))
+    x, o, om, model = _load_model(pr, e)
     x[-6:] = np.concatenate(list(_L3_TURNS.values()))
     loads = pr.study.loads
     for (g, first), t in _L3_TURNS.items():
@@ -669,12 +672,7 @@ def test_misplaced_load_model_is_the_moved_load(cube_prepared):
     moves = [e for e in pr.candidates if isinstance(e, MisplacedLoad)]
     assert {(e.grid, e.moved_to) for e in moves if e.case == "L3"} == {(3, 2), (3, 4), (3, 7), (5, 6), (5, 8)}
     e = next(e for e in moves if e.case == "L3" and e.grid == 5 and e.moved_to == 6)
-    spec, x = dg.ModelSpec(tuple(pr.joints)).add(e, pr.ident.k)
-    o = list(dict.fromkeys(pr.study.measurements.all_dofs))
-    om = dg.ObsMap.of(pr.fit_obs, {d: i for i, d in enumerate(o)})
-    model = dg.AugmentedModel(pr.base, spec, pr.boundary, pr.K_deck, o)
-    declared = dg.AugmentedModel(pr.base, dg.ModelSpec(tuple(pr.joints)), pr.boundary, pr.K_deck, o)
-    assert np.array_equal(model.predict(x, om), declared.predict(x[:-1], om))
+    x, o, om, model = _load_model(pr, e)
     x[-1] = 0.7
     adapter = _truth_adapter(pr, pr.ident.k)
     want = om.pick(adapter.solve(_moved_loads(pr.study.loads, "L3", e, 0.7), o).values)
