@@ -62,12 +62,12 @@ class CaseTilt(ChangesLoads, Effect):
 
     @property
     def nominal(self) -> np.ndarray:
-        return np.zeros(2 * len(self.members))
+        return np.concatenate([m.nominal for m in self.members])
 
     @property
     def bounds(self):
-        n = 2 * len(self.members)
-        return np.full(n, -np.pi), np.full(n, np.pi)
+        lo, hi = zip(*(m.bounds for m in self.members))
+        return np.concatenate(lo), np.concatenate(hi)
 
     @property
     def load_dofs(self):
