@@ -626,6 +626,34 @@ def test_case_tilt_model_is_the_turned_loads(cube_prepared):
         assert np.max(np.abs(fd - J[:, q])) < 1e-7 * np.max(np.abs(J[:, q]))
 
 
+def test_tilt_beyond_135_degrees_reads_as_reversed(cube_prepared):
+    """A load turned by more than 135 degrees acts more against its declared direction than
+    across it: the report reads it as applied the other way (pattern ``reversed``), for one load
+    (load_tilt) and for a case whose every load turned so (case_tilt); a case with one load
+    turned 177 degrees and the others a few degrees stays ``turned``. The turned directions are
+    checked against the angle: their dot product with the declared one is its cosine."""
+    from types import SimpleNamespace
+    from blackbox.diagnosis.effects import CaseTilt, LoadTilt
+    pr = cube_prepared
+    e = next(e for e in pr.candidates if isinstance(e, CaseTilt) and e.case == "L3")
+    spec, x = dg.ModelSpec(tuple(pr.joints)).add(e, pr.ident.k)
+    back = np.array([np.pi - 0.05, 0.0])                      # 177.1 degrees
+    x[-6:] = np.concatenate([back, -back, back])
+    a = e.findings(SimpleNamespace(spec=spec, x=x))
+    assert a["pattern"] == "reversed" and "loaded reversed" in a["pattern_detail"]
+    for t in a["turns"]:
+        assert abs(t["angle_deg"] - np.degrees(np.pi - 0.05)) < 1e-9
+        assert abs(np.dot(t["declared_direction"], t["turned_direction"]) - np.cos(np.pi - 0.05)) < 1e-12
+    x[-4:] = np.concatenate([[0.05, 0.0], [0.0, -0.1]])
+    assert e.findings(SimpleNamespace(spec=spec, x=x))["pattern"] == "turned"
+    one = next(c for c in pr.candidates if isinstance(c, LoadTilt) and c.case == "L3" and c.grid == 5)
+    spec, x = dg.ModelSpec(tuple(pr.joints)).add(one, pr.ident.k)
+    for t, pattern in ((np.radians(136.0), "reversed"), (np.radians(134.0), "turned")):
+        x[-2:] = [0.0, t]
+        b = one.findings(SimpleNamespace(spec=spec, x=x))
+        assert b["pattern"] == pattern and abs(b["angle_deg"] - np.degrees(t)) < 1e-9
+
+
 def test_case_tilt_found(tmp_module, cube_prepared):
     """Every load of case L3 turned its own way (_L3_TURNS: 8 to 22 degrees; the cube's truth,
     springs 1e4, fresh noise at each reading's declared sigma): found as case_tilt of L3, alone, a

@@ -7,7 +7,9 @@ The members are the case's :class:`~blackbox.diagnosis.effects.load_tilt.LoadTil
 (two or more: a force or a moment at a grid), each with its two angles; the model, the split
 run's unit-load columns and the bounds are theirs. Candidates: every fitted case with two or
 more loaded vectors. In a hold-out case the hold-out check already tries all of its loads turned
-together (``blackbox.diagnosis.holdout``), so the family offers no hold-out candidate.
+together (``blackbox.diagnosis.holdout``), so the family offers no hold-out candidate. When every
+load turned by more than :data:`~blackbox.diagnosis.effects.load_tilt.REVERSED_DEG` the report
+reads the case as loaded the other way (pattern ``reversed``).
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from blackbox.diagnosis.effects.base import Effect
-from blackbox.diagnosis.effects.load_tilt import ChangesLoads, LoadTilt
+from blackbox.diagnosis.effects.load_tilt import REVERSED_DEG, ChangesLoads, LoadTilt
 from blackbox.diagnosis.effects.registry import register
 
 __all__ = ["CaseTilt"]
@@ -98,6 +100,10 @@ class CaseTilt(ChangesLoads, Effect):
             turns.append({"grid": m.grid, "vector": "force" if m.first == 1 else "moment", "angle_deg": deg,
                           "declared_direction": [float(a) for a in d0], "turned_direction": [float(a) for a in d1]})
         each = ", ".join(f"the {t['vector']} at {t['grid']} {t['angle_deg']:.3g}" for t in turns)
+        if all(t["angle_deg"] > REVERSED_DEG for t in turns):
+            return {"pattern": "reversed", "angle_deg": max(t["angle_deg"] for t in turns), "turns": turns,
+                    "pattern_detail": f"the {len(turns)} loads of case {self.case} went in the other way, turned "
+                                      f"(degrees): {each} (the case loaded reversed, push for pull?)"}
         return {"pattern": "turned", "angle_deg": max(t["angle_deg"] for t in turns), "turns": turns,
                 "pattern_detail": f"the {len(turns)} loads of case {self.case} went in turned (degrees): {each} "
                                   f"(loads mounted askew?)"}

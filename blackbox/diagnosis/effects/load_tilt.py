@@ -19,7 +19,8 @@ left out of the change. A load's size is ``load_scale``'s; a tilt keeps it.
 Candidates: every force and every moment of every fitted case, at a grid (scalar points have no
 direction); those of the hold-out cases are what the hold-out check tries a case it does not
 predict as (:meth:`LoadTilt.holdout_candidates`). ``where`` is the grid; the case, the vector (``force`` or ``moment``) and the two
-axes (in basic) are in the details, and the report gives the angle and the turned direction.
+axes (in basic) are in the details, and the report gives the angle and the turned direction;
+beyond :data:`REVERSED_DEG` it reads the load as applied the other way (pattern ``reversed``).
 A data defect: the structure is as declared, the load was not.
 """
 
@@ -33,7 +34,12 @@ from blackbox.diagnosis.decks import constrained_grids
 from blackbox.diagnosis.effects.base import CandidateLimit, Effect
 from blackbox.diagnosis.effects.registry import register
 
-__all__ = ["LOAD_DOF_COLUMNS", "ChangesLoads", "LoadTilt", "case_loads", "tilt", "tilt_derivatives", "within_budget"]
+__all__ = ["LOAD_DOF_COLUMNS", "REVERSED_DEG", "ChangesLoads", "LoadTilt", "case_loads", "tilt", "tilt_derivatives", "within_budget"]
+
+
+# a load turned by more than this (degrees) acts more against its declared direction than across
+# it: reported as reversed (``pattern`` "reversed"), not as mounted askew
+REVERSED_DEG = 135.0
 
 
 def _sinc_terms(theta: float) -> tuple[float, float, float]:
@@ -267,10 +273,14 @@ class LoadTilt(ChangesLoads, Effect):
 
         def fmt(d):
             return "(" + ", ".join(f"{a:.3f}" for a in d) + ")"
-        return {"pattern": "turned", "angle_deg": deg,
+        if deg > REVERSED_DEG:
+            why = "the load applied the other way, push for pull?"
+        else:
+            why = "a load mounted askew?"
+        return {"pattern": "reversed" if deg > REVERSED_DEG else "turned", "angle_deg": deg,
                 "declared_direction": [float(a) for a in d0], "turned_direction": [float(a) for a in d1],
                 "pattern_detail": f"the {what} at grid {self.grid} in case {self.case} went in turned {deg:.3g} degrees, "
-                                  f"along {fmt(d1)} instead of {fmt(d0)} in basic (a load mounted askew?)"}
+                                  f"along {fmt(d1)} instead of {fmt(d0)} in basic ({why})"}
 
     def label(self) -> str:
         return f"{self.kind} @ {self.grid} case {self.case} ({'force' if self.first == 1 else 'moment'})"
