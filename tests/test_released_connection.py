@@ -80,14 +80,22 @@ HINGES = {
 @pytest.mark.parametrize("case", list(HINGES))
 def test_a_rigid_connection_that_is_a_hinge_is_released_at_its_grid(tmp_path, case):
     """A bar end free to rotate in both bending planes is found as one undeclared joint at that
-    grid whose branch of that bar is released (per branch), and nothing else."""
+    grid, and nothing else: the hinge of that bar's end (or another bar's there with that one
+    named beside it), or the per-branch variant with that bar's branch released."""
     index, seed, family, bar, grids, at = HINGES[case]
     where, d = _planted_and_diagnosed(tmp_path, index, seed, family, "released_end")
     assert where["place"] == ["cbar", bar] and where["grids"] == grids
     assert d["verdict"] == "explained", d["verdict_detail"]
     (a,) = d["added"]
-    assert (a["effect"], a["where"], a["variant"]) == ("undeclared_joint", [at], "per-branch")
-    assert any(n.endswith(f"_e{bar}") for n in a["released"]), a["released"]
+    assert (a["effect"], a["where"]) == ("undeclared_joint", [at])
+    if "member" in a:
+        # the hinge of that bar's end, or of the bar in line with it at the grid with that one
+        # named beside (hall s0005: bars 46 and 47 at grid 51, evidence gap 0.26, with the
+        # sensors that would tell them apart)
+        beside = [x.get("member") for x in a.get("alternatives", []) if x["effect"] == "undeclared_joint"]
+        assert a["pattern"] == "hinged" and (a["member"] == bar or bar in beside), (a["member"], beside)
+    else:
+        assert a["variant"] == "per-branch" and any(n.endswith(f"_e{bar}") for n in a["released"]), a
 
 
 @pytest.mark.slow

@@ -27,7 +27,7 @@ from solver_adapters.protocol import DofLabel
 if TYPE_CHECKING:
     from blackbox.diagnosis.effects.base import CandidateContext, Effect
 
-__all__ = ["members_at", "constrained_grids", "unsplittable_grids", "unmodelled_notes", "element_deck",
+__all__ = ["members_at", "member_axes", "constrained_grids", "unsplittable_grids", "unmodelled_notes", "element_deck",
            "cards_at", "member_ends", "member_frames", "in_member_frames", "SplitEditor", "SplitDeck", "split_deck",
            "prune_spcadds"]
 
@@ -191,6 +191,28 @@ def member_ends(deck: Deck, eid: int) -> tuple[int, int]:
     """``(grid_a, grid_b)`` of member ``eid``: a CBAR (CBEAM) or a rod."""
     m = deck.cbars.get(eid) or deck.rods[eid]
     return m.ga, m.gb
+
+
+def member_axes(deck: Deck, eid: int) -> np.ndarray | None:
+    """``(3, 3)``: the element axes of CBAR ``eid`` in basic, as rows: x from end A to end B
+    (between the offset ends), y along the part of the orientation vector normal to x, z = x
+    cross y (NASTRAN's CBAR axes). ``None`` for a bar of zero length or an orientation vector
+    along it (the model refuses such a bar)."""
+    b = deck.cbars[eid]
+    xa = np.asarray(deck.grids[b.ga].xyz, float)
+    xb = np.asarray(deck.grids[b.gb].xyz, float)
+    r = (xb + np.asarray(b.wb or (0.0, 0.0, 0.0), float)) - (xa + np.asarray(b.wa or (0.0, 0.0, 0.0), float))
+    n = float(np.linalg.norm(r))
+    if n == 0.0:
+        return None
+    ex = r / n
+    v = np.asarray(b.x if b.g0 is None else np.subtract(deck.grids[b.g0].xyz, xa), float)
+    y = v - (v @ ex) * ex
+    ny = float(np.linalg.norm(y))
+    if not np.isfinite(ny) or ny <= 1e-9 * max(float(np.linalg.norm(v)), 1e-300):
+        return None
+    ey = y / ny
+    return np.vstack([ex, ey, np.cross(ex, ey)])
 
 
 def member_frames(deck: Deck, eid: int) -> np.ndarray:

@@ -118,7 +118,7 @@ def diagnosis_report(study: Study, doc: dict, files: list[str]) -> str:
                    else "None: no candidate effect is significant at its round's level, improves BIC and "
                         "passes the check against data it was not fitted to.")
     for i, e in enumerate(doc["added"], 1):
-        extra = "".join(f", {k} {e[k]}" for k in ("component", "group", "variant") if k in e)
+        extra = "".join(f", {k} {e[k]}" for k in ("component", "group", "variant", "member") if k in e)
         what = " -- the data, not the structure" if e.get("of") == "data" else ""
         out += [f"### {i}. {e['effect']} at {', '.join(map(str, e['where']))}{extra}{what}", "",
                 f"delta BIC {_g(e['delta_bic'])}, LR p-value {_g(e['lr_p_value'], 3)}", ""]
@@ -127,7 +127,8 @@ def diagnosis_report(study: Study, doc: dict, files: list[str]) -> str:
         if e.get("alternatives"):
             out += ["The data hardly tell this effect from (evidence, delta BIC + hold-out chi2, within "
                     f"{_g(10.0)} of it): " + "; ".join(
-                        f"{x['effect']} at {', '.join(map(str, x['where']))} (+{_g(x['evidence_gap'])})"
+                        f"{x['effect']} at {', '.join(map(str, x['where']))}"
+                        f"{''.join(f', {k} {x[k]}' for k in ('variant', 'member') if k in x)} (+{_g(x['evidence_gap'])})"
                         for x in e["alternatives"]) + ".", ""]
             for x in e["alternatives"]:
                 out += _separation_lines(e, x)

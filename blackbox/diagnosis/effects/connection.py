@@ -32,7 +32,7 @@ if TYPE_CHECKING:
     from solver_adapters.protocol import Deck
 
 __all__ = ["Connection", "Rung", "THETA_MAX", "AT_BOUND", "complete_graph_basis", "branch_ladder",
-           "grounded_ladder"]
+           "branch_axis_basis", "hinge_ladder", "grounded_ladder"]
 
 THETA_MAX = 1e4             # a compliance parameter: connection >= 1e-4 K0 (a free cut is a mechanism)
 AT_BOUND = 1e-7             # theta below this after a refit: the connection is rigid (parameter dropped)
@@ -100,6 +100,39 @@ def branch_ladder(n: int, k_ref: np.ndarray, axis_names: tuple[str, str, str], e
         rungs.append(Rung("per-branch", tuple(f"{a}_{t}" for a in axis_names for t in branch_tags),
                           star_basis(n, k_ref), np.repeat(k_ref, n), embed))
     return tuple(rungs)
+
+
+def branch_axis_basis(n: int, branch: int, e: np.ndarray) -> np.ndarray:
+    """``(3 m, 3 m)``: the compliance of a unit spring about the unit axis ``e`` (in the cut's
+    three rotation components) between branch ``branch`` (0-based, of ``n``) and the joint's
+    centre, in the coordinates and ordering of :func:`complete_graph_basis`: ``e e^T`` on the
+    branch's own block for ``branch >= 1``, on every pair of blocks for the first branch (whose
+    turn moves every relative coordinate alike). About a basic axis it is :func:`star_basis`'s
+    term of that branch and axis."""
+    m = n - 1
+    ee = np.outer(e, e)
+    out = np.zeros((3 * m, 3 * m))
+    rows = [list(range(p * m, (p + 1) * m)) if branch == 0 else [p * m + branch - 1] for p in range(3)]
+    for p in range(3):
+        for q in range(3):
+            out[np.ix_(rows[p], rows[q])] = ee[p, q]
+    return out
+
+
+def hinge_ladder(n: int, branch: int, axes: np.ndarray, k_ref: np.ndarray, names: tuple[str, str, str]
+                 ) -> tuple[Rung, ...]:
+    """The ladder of one branch's end turning against the joint about its own bending axes (a
+    member end hinged, or connected less rigidly than modelled): ``axes`` its element axes x,
+    y, z as rows in the cut's rotation components, ``k_ref`` the cut's reference stiffness per
+    component. "hinge" (``names[0]``: one compliance about both bending axes, y and z) and
+    "hinge-per-axis" (``names[1:]``: about y and about z apart). About each axis ``a`` the
+    reference is the cut's, ``1 / sum_p a_p^2 / k_ref_p``; the hinge's is the geometric mean of
+    its two. The twist about the member's own axis stays rigid (a pin releases bending)."""
+    k_ref = np.asarray(k_ref, float)
+    k_ax = np.array([1.0 / float(np.sum(a * a / k_ref)) for a in axes[1:]])
+    per = np.stack([branch_axis_basis(n, branch, a) / k for a, k in zip(axes[1:], k_ax)])
+    return (Rung("hinge", (names[0],), per.sum(axis=0)[None], np.array([float(np.sqrt(k_ax[0] * k_ax[1]))])),
+            Rung("hinge-per-axis", tuple(names[1:]), per, k_ax, np.ones((2, 1))))
 
 
 def grounded_ladder(comps: str, k_ref: np.ndarray, name: str) -> tuple[Rung, ...]:
