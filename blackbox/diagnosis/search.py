@@ -371,6 +371,23 @@ def holdout_worse(fit: Fit, f2: Fit, hold: ObsMap | None, keep: np.ndarray | Non
     return None
 
 
+def scale_profiled(fit: Fit, hold: ObsMap) -> Fit:
+    """``fit`` with each hold-out case's predictions times that case's own least-squares scale
+    (``sum(u y / s^2) / sum(u^2 / s^2)``, ``u`` its predictions): what the hold-out cases say of
+    the responses' shape, whatever each case's load amplitude (:meth:`Effect.holdout_scale_free`)."""
+    if fit.holdout_predicted is None:
+        return fit
+    u = np.asarray(fit.holdout_predicted, float)
+    w = 1.0 / hold.sigma ** 2
+    out = u.copy()
+    for k in np.unique(hold.case):
+        rows = hold.case == k
+        uu = float(np.sum(w[rows] * u[rows] ** 2))
+        if uu > 0.0:
+            out[rows] = u[rows] * float(np.sum(w[rows] * u[rows] * hold.y[rows])) / uu
+    return replace(fit, holdout_predicted=out, holdout_chi2=float(np.sum(((hold.y - out) / hold.sigma) ** 2)))
+
+
 def _whitened_sq(fit: Fit, hold: ObsMap) -> np.ndarray:
     return ((hold.y - fit.holdout_predicted) / hold.sigma) ** 2
 
@@ -468,6 +485,8 @@ class Checks:
         dh = dcv = None
         disp = 1.0
         if self.val.kind == "holdout" and fit.holdout_chi2 is not None and f2.holdout_chi2 is not None:
+            if e is not None and e.holdout_scale_free(self.hold):
+                fit, f2 = scale_profiled(fit, self.hold), scale_profiled(f2, self.hold)
             # readings the addition sets aside (a bad channel's hold-out readings) are compared
             # for neither fit: what it claims is that they follow no model
             aside = e.set_aside_rows(self.hold) if e is not None else None

@@ -486,6 +486,14 @@ class Effect:
         channel's), which a hold-out check then leaves out; ``None`` (default): none."""
         return None
 
+    def holdout_scale_free(self, hold: "ObsMap") -> bool:
+        """Whether the hold-out cases judge this effect with each case's own scale of its
+        predicted responses taken out (:func:`blackbox.diagnosis.search.scale_profiled`): an
+        effect on the loads of fitted cases only, which changes the hold-out prediction only
+        through the structure's refit, and whose defect the hold-out cases may share unseen (a
+        load cell of a test day that also ran hold-out cases). ``False`` (default)."""
+        return False
+
     def subsumes(self, other: "Effect") -> bool:
         """Whether ``other``, already in the model, describes nothing this effect does not (an
         offset of a channel whose every reading this effect sets aside): it leaves the model
