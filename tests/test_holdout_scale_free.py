@@ -51,6 +51,9 @@ def test_scale_profiled_takes_out_each_cases_own_scale():
 
 
 def test_only_a_scale_of_fitted_cases_is_judged_scale_free():
+    """A scale none of whose cases is a hold-out case is judged scale-free; one that scales a
+    hold-out case (a group named in loads.csv, all cases) changes their prediction directly and
+    is judged as it predicts them; without hold-out cases there is nothing to judge."""
     hold = _hold([1.0, 2.0], [1.0, 1.0], [0, 1], ["L5", "L9"])
     fitted_only = LoadScale(("L8", "L11"), ("s_found_L8_2",), cases=(7, 10), group="found: L8 +2")
     with_held = LoadScale(("L8", "L9"), ("s_group_day",), cases=(7, 8), group="day")
