@@ -68,6 +68,7 @@ import numpy as np
 from scipy import special, stats
 
 from blackbox.diagnosis.effects.base import Effect, proximity, takes_readings
+from blackbox.diagnosis.effects.load_scale import case_scales
 from blackbox.diagnosis.fit import Fit, chi2_band, fit_model
 from blackbox.diagnosis.holdout import HoldoutCheck, check_holdout, free_parameters
 from blackbox.diagnosis.noise_level import NoiseLevel, leverages, noise_level
@@ -378,13 +379,10 @@ def scale_profiled(fit: Fit, hold: ObsMap) -> Fit:
     if fit.holdout_predicted is None:
         return fit
     u = np.asarray(fit.holdout_predicted, float)
-    w = 1.0 / hold.sigma ** 2
     out = u.copy()
-    for k in np.unique(hold.case):
+    for k, (s, _) in case_scales(hold.case, hold.y, hold.sigma, u, range(int(hold.case.max()) + 1)).items():
         rows = hold.case == k
-        uu = float(np.sum(w[rows] * u[rows] ** 2))
-        if uu > 0.0:
-            out[rows] = u[rows] * float(np.sum(w[rows] * u[rows] * hold.y[rows])) / uu
+        out[rows] = u[rows] * (1.0 + s)
     return replace(fit, holdout_predicted=out, holdout_chi2=float(np.sum(((hold.y - out) / hold.sigma) ** 2)))
 
 
