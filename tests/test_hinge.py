@@ -30,14 +30,24 @@ FIXTURES = ROOT / "fixtures"
 
 
 def test_a_branch_axis_spring_about_a_basic_axis_is_the_star_term():
-    """About basic axis p, the compliance of branch b's spring is :func:`star_basis`'s term
-    ``p n + b`` (the per-branch rung's), exactly, for 2 to 6 branches."""
+    """About basic axis p, the compliance of branch b's spring (and :func:`star_basis`'s term
+    ``p n + b``, the per-branch rung's, built from it) is the star of springs to a centre in the
+    coordinates 'branch i relative to branch 1', axis-major: ``1 / k_p`` on every pair of axis
+    p's block for the first branch (its turn moves every relative coordinate alike), on its own
+    diagonal entry for the others; nothing about the other axes. Exactly, for 2 to 6 branches."""
     k = np.array([2.0, 3.0, 5.0])
     for n in range(2, 7):
+        m = n - 1
         star = star_basis(n, k)
         for b in range(n):
             for p in range(3):
-                assert np.array_equal(branch_axis_basis(n, b, np.eye(3)[p]) / k[p], star[p * n + b])
+                want = np.zeros((3 * m, 3 * m))
+                if b == 0:
+                    want[p * m:(p + 1) * m, p * m:(p + 1) * m] = 1.0 / k[p]
+                else:
+                    want[p * m + b - 1, p * m + b - 1] = 1.0 / k[p]
+                assert np.array_equal(branch_axis_basis(n, b, np.eye(3)[p]) / k[p], want)
+                assert np.array_equal(star[p * n + b], want)
 
 
 def _hinged(folder: str, tmp_path: Path, first_only: bool = False):

@@ -59,14 +59,7 @@ def star_basis(n: int, k_ref: np.ndarray) -> np.ndarray:
     own (``e_i e_i^T``); ``3 n`` parameters, axis-major. Equal compliances ``c`` on one axis give
     ``c (I + 1 1^T)``: the complete graph of equal springs ``1 / (n c)`` (the star-mesh identity),
     so this variant nests :func:`complete_graph_basis` at ``c = theta / n``."""
-    m = n - 1
-    out = np.zeros((3 * n, 3 * m, 3 * m))
-    for p in range(3):
-        blk = slice(p * m, (p + 1) * m)
-        out[p * n, blk, blk] = np.ones((m, m)) / k_ref[p]
-        for i in range(1, n):
-            out[p * n + i, p * m + i - 1, p * m + i - 1] = 1.0 / k_ref[p]
-    return out
+    return np.stack([branch_axis_basis(n, i, np.eye(3)[p]) / k_ref[p] for p in range(3) for i in range(n)])
 
 
 @dataclass(frozen=True)
@@ -107,8 +100,8 @@ def branch_axis_basis(n: int, branch: int, e: np.ndarray) -> np.ndarray:
     three rotation components) between branch ``branch`` (0-based, of ``n``) and the joint's
     centre, in the coordinates and ordering of :func:`complete_graph_basis`: ``e e^T`` on the
     branch's own block for ``branch >= 1``, on every pair of blocks for the first branch (whose
-    turn moves every relative coordinate alike). About a basic axis it is :func:`star_basis`'s
-    term of that branch and axis."""
+    turn moves every relative coordinate alike). About the basic axes it gives
+    :func:`star_basis`'s terms."""
     m = n - 1
     ee = np.outer(e, e)
     out = np.zeros((3 * m, 3 * m))
