@@ -115,6 +115,10 @@ TF,40,2,3,1.,0.,0.
 ,101,,0.,1.
 TIC,41,2,3,1.e-3
 POINT,103,,1.,2.,3.
+ECHOOFF
+PLOTEL4,42,1,2,1,2
+TSTEP1,43,1.,10,1
+ECHOON
 """
 
 
@@ -122,7 +126,7 @@ def test_no_effect_cards_are_named_once_and_keep_the_reference_adapter(tmp_path)
     deck = read_deck_text(CANTILEVER + NO_EFFECT_CARDS, name="m.bdf")
     assert {"MDLPRM", "EIGRL", "EIGR", "DEBUG", "CMASS1", "CMASS2", "PMASS", "CONM1", "CONM2",
             "PLOTEL", "PARAM", "CVISC", "PVISC", "CDAMP2", "MAT4", "MAT5", "EPOINT", "TF", "TIC",
-            "POINT"} <= set(deck.no_effect) <= NO_EFFECT
+            "POINT", "ECHOOFF", "ECHOON", "PLOTEL4", "TSTEP1"} <= set(deck.no_effect) <= NO_EFFECT
     assert deck.summary().count("accepted with no effect") == 1 and "MDLPRM x1 (first at m.bdf:7)" in deck.summary()
     text = "SOL 101\nCEND\nSPC = 1\nLOAD = 5\nBEGIN BULK\n" + CANTILEVER + NO_EFFECT_CARDS + \
         "FORCE,5,2,,1.,0.,0.,-1.\nENDDATA\n"

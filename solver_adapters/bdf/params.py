@@ -96,6 +96,17 @@ NO_EFFECT = frozenset({
     # functions (selected by TFL) and transient initial conditions (selected by IC); POINT, an
     # edge point of FEEDGE geometry, holds no degree of freedom
     "EPOINT", "TF", "TIC", "POINT",
+    # echo of the input in the printed output (MSC/OptiStruct: from this card until the other)
+    "ECHOON", "ECHOOFF",
+    # plot elements of other shapes (NX: PLOTEL3..PLOTEL8, PLOTTET, PLOTPEN, PLOTPYR, PLOTHEX:
+    # "no stiffness or mass", for display only), output groups and monitors of displacements
+    "PLOTEL3", "PLOTEL4", "PLOTEL6", "PLOTEL8", "PLOTTET", "PLOTPEN", "PLOTPYR", "PLOTHEX",
+    "GROUP", "MONPNT2", "MONDSP1",
+    # transient time steps, dynamic reduction, mode tracking (SOL 200), the strategy parameters
+    # of the advanced nonlinear solutions (SOL 401/601/701), heat-transfer tables
+    "TSTEP1", "DYNRED", "MODTRAK", "NXSTRAT", "TABLEH1", "TABLEHT",
+    # static aeroelasticity and flutter, further cards of the aerodynamic model
+    "AECOMP", "AECOMPL", "AEFORCE", "AEPRESS", "AEDW", "CSSCHD", "UXVEC", "GUST2", "TRIM2",
 })
 """Cards with no effect on a linear static solve: accepted, counted in ``Deck.no_effect`` (one
 line of :meth:`~solver_adapters.deck.Deck.summary`), never handed to an external solver but
