@@ -998,3 +998,21 @@ def _user_deck_through_mystran_is_the_plain_structure(tmp_path, family, seed):
     r = ReferenceAdapter(plain).solve(loads, report).values
     assert np.allclose(m, r, rtol=0, atol=1e-5 * np.abs(r).max())
     return f
+
+
+def test_unlisted_missing_member_never_leaves_a_grid_hanging(tmp_path):
+    """Seed 15's ladder s0000 drew bar 116, the only member at grid 107, where a load of case L17
+    acts: without it AUTOSPC held all six components of 107 and took that load, a structure no
+    test could have (the diagnosis read the lost load as the case's loads mounted askew). The
+    benchmark now passes over such places: a member whose removal leaves a component without
+    stiffness that had stiffness before. In this stiff ladder every other member's removal moves
+    the readings beyond the benchmark's noncentrality range, so the study has no place left and
+    the run takes the next study."""
+    from benchmarks import unlisted_structure as us
+    from solver_adapters.reference.adapter import ReferenceAdapter
+
+    st, where = us.planted_study(0, 15, "ladder", "missing_member", tmp_path)
+    assert where is None
+    truth = read_deck(st.hidden / "truth" / "truth.bdf")
+    hanging = set(ReferenceAdapter(us._changed(truth, "missing_member", ("cbar", 116))).autospc_dofs)
+    assert {(107, c) for c in range(1, 7)} <= hanging - set(ReferenceAdapter(truth).autospc_dofs)
