@@ -60,6 +60,7 @@ from blackbox.diagnosis.document import diagnosis_document, verdict_detail
 from blackbox.diagnosis.effects import (CandidateContext, CandidateLimit, Effect, MemberStiffness, PDelta, Preload,
                                        RigidEndZone, families)
 from blackbox.diagnosis.effects.load_scale import case_scales
+from blackbox.diagnosis.exchange import better, exchange_pays, swapped_pair, with_sigmas_exchanged
 from blackbox.diagnosis.effects.p_delta import axial_forces
 from blackbox.diagnosis.effects.undeclared_joint import UndeclaredJoint, joint_candidate_grids
 from blackbox.diagnosis.runs import RunRecord, element_stiffness
@@ -143,6 +144,8 @@ class Prepared:
     """The declared model on run 1's condensation: its predictions at any joint parameters."""
     holdout_candidates: tuple[Effect, ...] = ()
     """Effects in a hold-out case the hold-out check may read a case it does not predict as."""
+    context: CandidateContext | None = None
+    """What the candidates were listed from (listed again from other sigmas: :func:`exchanged`)."""
 
     @property
     def deck(self) -> Deck:
@@ -416,7 +419,7 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
     limits = {**sctx.limits, **ctx.limits}
     return Prepared(study, dm, fit_obs, hold_obs, tuple(dm.holdout), bool(declared_holdout), K_deck, ident,
                     K_e, e_asym, sd, base, tuple(cands), tuple(decks), log, cost, eadapter,
-                    tuple(limits.values()), held.get("condensed"), tuple(hold_cands))
+                    tuple(limits.values()), held.get("condensed"), tuple(hold_cands), ctx)
 
 
 # --------------------------------------------------------------------------------------------
@@ -478,6 +481,34 @@ class DiagnosisResult:
             (out / "decks" / name).write_text(text)
             files.append(f"decks/{name}")
         return files
+
+
+def exchanged(diag: Diagnosis, pr: Prepared, search: Callable[[Prepared], Diagnosis],
+              effects: Sequence[str] | None, say: Callable[[str], None]) -> tuple[Diagnosis, Prepared]:
+    """The diagnosis again with two exchanged cases' sigmas exchanged too, when it ends with a
+    ``case_swap`` whose final predictions fit better so and that search is the better one
+    (:mod:`blackbox.diagnosis.exchange`); else ``diag`` and ``pr`` as they are. The candidates
+    are listed again from the same context with the exchanged sigmas; the split run's columns
+    are reused (no solver run but the loop's own)."""
+    pair = swapped_pair(diag)
+    if pair is None or pr.context is None:
+        return diag, pr
+    obs2 = with_sigmas_exchanged(pr.fit_obs, *pair)
+    if obs2 is None or not exchange_pays(diag, pr.fit_obs, obs2):
+        return diag, pr
+    say(f"the readings of cases {pair[0]} and {pair[1]} are exchanged and fit better with their sigmas "
+        "exchanged too: searching again on that reading of the data")
+    ctx = dataclasses.replace(pr.context, fit_obs=obs2, limits={})
+    cands = list(pr.split.connections)
+    for fam in families(effects):
+        cands += fam.candidates(ctx, pr.split)
+    pr2 = dataclasses.replace(pr, fit_obs=obs2, candidates=tuple(cands), context=ctx)
+    again = search(pr2)
+    if not better(diag, again, pair):
+        say(f"  kept the first search (BIC {diag.final.bic:.6g}; with the sigmas exchanged {again.final.bic:.6g})")
+        return diag, pr
+    say(f"  kept the search with the sigmas exchanged (BIC {diag.final.bic:.6g} -> {again.final.bic:.6g})")
+    return dataclasses.replace(again, sigmas_exchanged=pair), pr2
 
 
 def load_magnitudes(loads) -> tuple[float, float]:
@@ -573,17 +604,22 @@ def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float =
                      max_member_candidates=max_member_candidates, effects=effects, say=say, executor=executor)
         xyz = {int(g): tuple(v) for g, v in pr.base.adapter.grid_xyz().items()}
         ident = pr.ident
-        try:
-            diag = diagnose(pr.base, pr.boundary, pr.K_deck, pr.joints,
-                            ident.k if ident is not None else np.zeros(0), pr.fit_obs, pr.hold_obs,
-                            pr.candidates, alpha=alpha, refit_top=refit_top, max_steps=max_steps,
-                            declared_prediction=ident.predicted if ident is not None else None,
-                            xyz=xyz, progress=progress_step, executor=executor,
-                            load_magnitudes=load_magnitudes(study.loads), holdout_loads=pr.holdout_candidates,
-                            declared_predict=(functools.partial(predict_rows, pr.declared_condensed, pr.fit_obs)
-                                              if pr.declared_condensed is not None else None))
-        except EditedDeckError as exc:
-            raise EditedDeckError(f"{exc}. {_nesting_cards(pr, exc.rows)}", exc.rows) from None
+
+        def search(pr: Prepared) -> Diagnosis:
+            try:
+                return diagnose(pr.base, pr.boundary, pr.K_deck, pr.joints,
+                                ident.k if ident is not None else np.zeros(0), pr.fit_obs, pr.hold_obs,
+                                pr.candidates, alpha=alpha, refit_top=refit_top, max_steps=max_steps,
+                                declared_prediction=ident.predicted if ident is not None else None,
+                                xyz=xyz, progress=progress_step, executor=executor,
+                                load_magnitudes=load_magnitudes(study.loads), holdout_loads=pr.holdout_candidates,
+                                declared_predict=(functools.partial(predict_rows, pr.declared_condensed, pr.fit_obs)
+                                                  if pr.declared_condensed is not None else None))
+            except EditedDeckError as exc:
+                raise EditedDeckError(f"{exc}. {_nesting_cards(pr, exc.rows)}", exc.rows) from None
+
+        diag = search(pr)
+        diag, pr = exchanged(diag, pr, search, effects, say)
         say(f"verdict: {diag.verdict}: {verdict_detail(diag)}")
         cost = pr.solver_cost()
     return DiagnosisResult(study, diag, pr, pr.decks, cost, time.perf_counter() - t0, plots)

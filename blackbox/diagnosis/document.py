@@ -121,7 +121,14 @@ def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: li
     for i in final_additions([None if s.added is None else s.added.effect.key for s in diag.steps], final):
         s = diag.steps[i]
         e = final[s.added.effect.key]
-        added.append({"effect": e.kind, "where": e.where_json(), **e.details_json(), **e.findings(diag.final),
+        found = e.findings(diag.final)
+        if e.kind == "case_swap" and diag.sigmas_exchanged is not None \
+                and set(map(str, e.where)) == set(diag.sigmas_exchanged):
+            found = {**found, "sigmas_exchanged": True,
+                     "pattern_detail": found.get("pattern_detail", "") + "; their declared sigmas stayed with "
+                     "the case labels, so each reading is judged by the sigma of the row it came from (the "
+                     "search ran again with the two cases' sigmas exchanged, which fits better)"}
+        added.append({"effect": e.kind, "where": e.where_json(), **e.details_json(), **found,
                       "of": "data" if e.of_data else "structure",
                       "parameters": e.parameters(diag.final), "step": i + 1,
                       "delta_bic": _num(s.added.delta_bic), "lr_p_value": _num(s.added.lr_p_value),

@@ -165,6 +165,8 @@ class Diagnosis:
     kfold: dict | None = None           # K-fold: the folds' case labels and the cv chi2 before / after
     holdout_check: HoldoutCheck | None = None   # the hold-out cases read against the final model
     noise_level: NoiseLevel | None = None       # above the band: whether the misfit looks like noise
+    sigmas_exchanged: tuple[str, str] | None = None     # the two exchanged cases' sigmas were read as
+                                                        # each other's (blackbox.diagnosis.exchange)
 
     @property
     def added(self) -> list[CandidateScore]:
