@@ -329,12 +329,16 @@ def plant_load(st, defect: str, rng: np.random.Generator, in_holdout: bool = Fal
         changed = _moved_loads(truth, loads, case, defect, rng)
         if changed is None:
             continue
+        mine = [r for r in loads if r[0] == case]
+        # each declared grid and where its load went in (the case's rows come last, in order)
+        moved = sorted({(r[1], m[1]) for r, m in zip(mine, changed[len(changed) - len(mine):])})
         changed.sort(key=lambda r: cases.index(r[0]))
         sim = gen.simulate_study(truth, changed, *rest)
         lam = kept_readings(st.folder, sim, clean)
         if lam is None:
             continue
-        return {"case": case, "noncentrality": lam}
+        return {"case": case, "noncentrality": lam,
+                **({"moved": [list(p) for p in moved]} if defect == "misplaced_load" else {})}
     return None
 
 

@@ -17,11 +17,22 @@ Candidates: every grid a fitted case loads, with each of its neighbours (those o
 cases: what the hold-out check tries a case it does not predict as). ``where`` is the
 declared grid; the case and the grid the load went in at (``moved_to``) are in the details. A
 data defect: the structure is as declared, the load was not where the log says.
+
+A case that loads several grids may have had more than one of them misplaced (actuators each on
+the wrong node, a loading frame set up one bay off). An accepted misplacement is refined
+through its richer variant ``loads`` (:class:`MisplacedLoads`, :meth:`MisplacedLoad.richer`):
+one more load of the same case at one of its neighbours, each with its own share, kept only
+when the data support it on the search's tests, and climbed again from there. One load at a
+time, so the variants tried grow with the case's loads and their neighbours, not with their
+product; the first climb's are counted in the kind's multiplicity
+(:attr:`MisplacedLoad.variant_tests`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import dataclasses
+import functools
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -31,7 +42,7 @@ from blackbox.diagnosis.effects.load_tilt import ChangesLoads, case_loads
 from blackbox.diagnosis.effects.misplaced_sensor import neighbours
 from blackbox.diagnosis.effects.registry import register
 
-__all__ = ["MisplacedLoad"]
+__all__ = ["MisplacedLoad", "MisplacedLoads"]
 
 
 def _free(held: dict, g: int) -> tuple[int, ...]:
@@ -53,6 +64,32 @@ class MisplacedLoad(Share, ChangesLoads, Effect):
     moved_to: int = 0
     at_g: tuple = ()            # ((component, value), ...) at where[0]
     at_h: tuple = ()            # ((component, value), ...) at moved_to
+    others: tuple = field(default=(), repr=False)   # the same case's other candidate moves:
+                                                    # ((g, h, at_g, at_h), ...), the richer variants
+
+    @classmethod
+    def candidates(cls, ctx, split) -> list["MisplacedLoad"]:
+        kept = super().candidates(ctx, split)
+        per: dict[str, list] = {}
+        for e in kept:
+            per.setdefault(e.case, []).append(e)
+        return [dataclasses.replace(e, others=tuple((o.grid, o.moved_to, o.at_g, o.at_h) for o in per[e.case]
+                                                    if o.grid != e.grid)) for e in kept]
+
+    def applicable(self, spec) -> bool:
+        # a load went in at one place: not again while a misplacement of it is in the model
+        return not any(e.kind == self.kind and getattr(e, "case", None) == self.case and self.grid in e.where
+                       for e in spec.effects)
+
+    @property
+    def variant_tests(self) -> int:
+        # the first climb's tests: each of the case's other loads at each of its neighbours (a
+        # later climb tests what is left of the same moves, from the model the last one kept)
+        return len(self.others)
+
+    def richer(self, x_effect):
+        return MisplacedLoads(self.where, self.names, case=self.case, members=(self,),
+                              others=self.others).richer(x_effect)
 
     @property
     def size(self) -> float:
@@ -123,3 +160,101 @@ class MisplacedLoad(Share, ChangesLoads, Effect):
 
     def marker_points(self, xyz, deck):
         return [xyz[g] for g in (self.grid, self.moved_to) if g in xyz]
+
+
+@dataclass(frozen=True, eq=False)
+class MisplacedLoads(ChangesLoads, Effect):
+    """Several loads of one fitted case each went in at a neighbouring grid: the ``members``
+    (:class:`MisplacedLoad`, one per declared grid), each with its own share ``t`` (the
+    parameters, in the members' order). ``others``: the case's remaining candidate moves (grids
+    not among the members), each a richer variant with one member more. The variant ``loads``
+    of ``misplaced_load`` (module docstring): never a candidate of its own."""
+    kind = "misplaced_load"
+    summary = MisplacedLoad.summary
+    of_data = True
+
+    variant: str = "loads"
+    case: str = ""
+    members: tuple = ()
+    others: tuple = field(default=(), repr=False)
+
+    @property
+    def key(self) -> tuple:
+        return (self.kind, self.case, tuple((m.grid, m.moved_to) for m in self.members))
+
+    @property
+    def nominal(self) -> np.ndarray:
+        return np.zeros(self.n_params)
+
+    @property
+    def bounds(self):
+        return np.zeros(self.n_params), np.full(self.n_params, 2.0)
+
+    @property
+    def one_sided(self) -> np.ndarray:
+        return np.ones(self.n_params, bool)
+
+    def refit_starts(self, x2, step, lo, hi, first):
+        whole = x2.copy()
+        whole[first:] = 1.0
+        return super().refit_starts(x2, step, lo, hi, first) + [whole]
+
+    def rejection(self, x_effect) -> str | None:
+        for m, t in zip(self.members, np.asarray(x_effect, float)):
+            why = m.rejection(np.array([t]))
+            if why is not None:
+                return f"the load at grid {m.grid}: {why}"
+        return None
+
+    def applicable(self, spec) -> bool:
+        return True
+
+    @functools.cached_property
+    def _rows(self) -> tuple[tuple, list]:
+        """The load DOFs (each once: two members may load one grid) and each member's rows in them."""
+        dofs = tuple(dict.fromkeys(d for m in self.members for d in m.load_dofs))
+        at = {d: i for i, d in enumerate(dofs)}
+        return dofs, [np.array([at[d] for d in m.load_dofs], int) for m in self.members]
+
+    @property
+    def load_dofs(self):
+        return self._rows[0]
+
+    def load_change_derivatives(self, x_effect, cases):
+        dofs, rows = self._rows
+        out = np.zeros((len(self.members), len(dofs), len(cases)))
+        for q, (m, r) in enumerate(zip(self.members, rows)):
+            np.add.at(out[q], r, m._per_unit(cases))
+        return out
+
+    def load_change(self, x_effect, cases):
+        return np.tensordot(np.asarray(x_effect, float), self.load_change_derivatives(x_effect, cases), axes=1)
+
+    def richer(self, x_effect):
+        out = []
+        x = np.asarray(x_effect, float)
+        for g, h, at_g, at_h in self.others:
+            m = MisplacedLoad((g,), (f"t_{self.case}_{g}_to_{h}",), case=self.case, moved_to=h, at_g=at_g, at_h=at_h)
+            members = self.members + (m,)
+            out.append((MisplacedLoads(tuple(x.grid for x in members), tuple(n for x in members for n in x.names),
+                                       case=self.case, members=members,
+                                       others=tuple(o for o in self.others if o[0] != g)),
+                        np.concatenate([x, [0.0]])))
+        return out
+
+    def details_json(self) -> dict:
+        return {"variant": self.variant, "case": self.case, "moved_to": [m.moved_to for m in self.members]}
+
+    def findings(self, fit) -> dict:
+        each = ", ".join(f"{m.grid} at {m.moved_to}" for m in self.members)
+        return {"pattern": "moved",
+                "pattern_detail": f"the loads of case {self.case} went into the structure at neighbouring grids, each "
+                                  f"the next grid along a member: {each} (actuators on the wrong nodes, a loading "
+                                  f"frame set up one bay off?)"}
+
+    def label(self) -> str:
+        return (f"{self.kind} @ {', '.join(str(m.grid) for m in self.members)} case {self.case} at "
+                f"{', '.join(str(m.moved_to) for m in self.members)}")
+
+    def marker_points(self, xyz, deck):
+        return [xyz[g] for m in self.members for g in (m.grid, m.moved_to) if g in xyz]
