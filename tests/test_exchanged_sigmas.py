@@ -85,3 +85,20 @@ def test_exchanged_cases_whose_sigmas_moved_along_need_no_second_search(swapped,
     assert [(a.effect.kind, tuple(a.effect.where)) for a in d.added] == [("case_swap", ("L5", "L6"))]
     assert d.sigmas_exchanged is None and "sigmas_exchanged" not in r.document["added"][0]
     assert d.band[0] <= d.final.reduced_chi2 <= d.band[1]
+
+
+def test_an_exchange_a_later_addition_removed_is_still_tried():
+    """Seed 47's portal: ``case_swap @ L4, L10`` added, then both cases set aside and the swap
+    removed as no longer needed (the wrong weights left it a misfit); the search on the data with
+    their sigmas exchanged ends with the swap alone (measured: BIC -18350 -> -19001, reduced
+    chi2 0.931). The pair is taken from the step that added it."""
+    from types import SimpleNamespace as NS
+
+    from blackbox.diagnosis.effects.case_swap import CaseSwap
+    from blackbox.diagnosis.exchange import swapped_pair
+    swap = CaseSwap(("L4", "L10"), ("swap_L4_L10",))
+    other = NS(kind="bad_case", where=("L10",))
+    steps = (NS(added=NS(effect=swap)), NS(added=NS(effect=other)), NS(added=None))
+    diag = NS(final=NS(spec=NS(effects=(other,))), steps=steps)
+    assert swapped_pair(diag) is None
+    assert swapped_pair(diag, added=True) == ("L4", "L10")

@@ -485,12 +485,12 @@ class DiagnosisResult:
 
 def exchanged(diag: Diagnosis, pr: Prepared, search: Callable[[Prepared], Diagnosis],
               effects: Sequence[str] | None, say: Callable[[str], None]) -> tuple[Diagnosis, Prepared]:
-    """The diagnosis again with two exchanged cases' sigmas exchanged too, when it ends with a
-    ``case_swap`` whose final predictions fit better so and that search is the better one
+    """The diagnosis again with two exchanged cases' sigmas exchanged too, when it added a
+    ``case_swap`` whose fit reads better so and that search is the better one
     (:mod:`blackbox.diagnosis.exchange`); else ``diag`` and ``pr`` as they are. The candidates
     are listed again from the same context with the exchanged sigmas; the split run's columns
     are reused (no solver run but the loop's own)."""
-    pair = swapped_pair(diag)
+    pair = swapped_pair(diag, added=True)
     if pair is None or pr.context is None:
         return diag, pr
     obs2 = with_sigmas_exchanged(pr.fit_obs, *pair)

@@ -10,11 +10,12 @@ noise band and the search goes on adding effects that describe nothing but the w
 
 The exchange of the two cases' sigmas channel by channel is a second reading of the same data:
 it only permutes the sigmas between the two rows of each channel, so the Gaussian likelihood's
-``sum(log sigma)`` is the same and the chi2 of the two readings compare directly (one
-discrete choice more, charged ``2 ln 2``). When a diagnosis ends with a ``case_swap`` and the fit
-that added it fits the readings better with the sigmas exchanged, the search is run again on
-the data with those sigmas exchanged; that diagnosis is kept when it has the same exchange and a
-lower BIC (:func:`better`), and says so (``Diagnosis.sigmas_exchanged``)."""
+``sum(log sigma)`` is the same and the chi2 of the two readings compare directly (one discrete
+choice more, charged ``2 ln 2``). When a diagnosis added a ``case_swap`` (kept to the end, or
+removed by a later addition) and the fit that added it fits the readings better with the sigmas
+exchanged, the search is run again on the data with those sigmas exchanged; that diagnosis is
+kept when it has the same exchange and a lower BIC (:func:`better`), and says so
+(``Diagnosis.sigmas_exchanged``)."""
 
 from __future__ import annotations
 
@@ -31,12 +32,19 @@ EXCHANGE_PENALTY = 2.0 * math.log(2.0)
 """What the choice of the sigmas' reading costs in BIC units: one binary choice."""
 
 
-def swapped_pair(diag) -> tuple[str, str] | None:
-    """The two case labels of the final model's ``case_swap`` (``None``: none)."""
+def swapped_pair(diag, *, added: bool = False) -> tuple[str, str] | None:
+    """The two case labels of the final model's ``case_swap`` (``None``: none); ``added``: or,
+    without one there, of the last ``case_swap`` the search added and a later addition removed
+    (both cases then set aside, say, because the wrong weights left the exchange a misfit)."""
     for e in diag.final.spec.effects:
         if e.kind == "case_swap":
             a, b = e.where
             return str(a), str(b)
+    if added:
+        for s in reversed(diag.steps):
+            if s.added is not None and s.added.effect.kind == "case_swap":
+                a, b = s.added.effect.where
+                return str(a), str(b)
     return None
 
 
@@ -67,7 +75,7 @@ def exchange_pays(diag, obs: Observations, exchanged: Observations) -> bool:
     fit, not the final one: an effect added after it (one exchanged case set aside, say) may
     have absorbed the misfit the wrong weights left, and there the two readings of the sigmas
     no longer differ where they should."""
-    pair = swapped_pair(diag)
+    pair = swapped_pair(diag, added=True)
     fits = [s.added.refit for s in diag.steps if s.added is not None and s.added.refit is not None
             and s.added.effect.kind == "case_swap" and tuple(map(str, s.added.effect.where)) == pair]
     if not fits:
