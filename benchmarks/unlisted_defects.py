@@ -31,9 +31,13 @@ in no list of the diagnosis, each of a kind real static tests have:
   u_c'`` in every case (its readings made from the two channels' recorded ones);
 * ``duplicated_case``: one fitted case's readings are a copy of another fitted case's (a file
   saved twice under two case names).
+* ``load_cell``: the load at one grid is 15 % less than logged in every case that loads it (the
+  load cell of that actuator reads high), measured again from the truth with the study's own
+  noise draws; its place is the cases that load the grid.
 
 The last two were first run on a diagnosis that was not changed afterwards, and nothing was
 changed for them.
+``load_cell`` was first run on the diagnosis of 2026-11-27 (after seed 54).
 
 The case defects go into a fitted case; with ``--in-holdout`` into a hold-out case instead
 (:data:`CASE_DEFECTS`; for two cases, the one written over is a hold-out case), where the
@@ -75,9 +79,10 @@ from blackbox.study import load_study                                   # noqa: 
 from solver_adapters.bdf import read_deck                               # noqa: E402
 
 DEFECTS = ("drift", "slip", "noisy", "dead", "units", "swapped_cases", "misplaced_load", "tilted_load",
-           "saturated", "reversed_case", "rig_slip", "tilted_sensor", "duplicated_case")
+           "saturated", "reversed_case", "rig_slip", "tilted_sensor", "duplicated_case", "load_cell")
 TILT = 20.0                         # a tilted sensor's angle off its axis, degrees
-LOAD_DEFECTS = ("misplaced_load", "tilted_load")
+LOAD_DEFECTS = ("misplaced_load", "tilted_load", "load_cell")
+LOAD_CELL = 0.85                    # the load an actuator whose load cell reads high really applied
 CASE_DEFECTS = ("units", "swapped_cases", "misplaced_load", "tilted_load", "reversed_case", "rig_slip",
                 "duplicated_case")    # defects of one case (or two), which --in-holdout puts in a hold-out case
 LAMBDA_RANGE = (60.0, 1e4)          # noncentrality of a planted defect: clearly detectable, not absurd
@@ -282,6 +287,9 @@ def _moved_loads(truth, loads, case: str, defect: str, rng: np.random.Generator)
                 w = _turned(v, rng, 15.0)
                 out += [(case, g, base + i, float(w[i])) for i in range(3) if w[i] != 0.0]
         return others + out
+    if defect == "load_cell":
+        g = int(rng.choice(list(dict.fromkeys(r[1] for r in rows))))
+        return [(c, gg, k, v * LOAD_CELL if gg == g else v) for c, gg, k, v in loads]
     held = {g: set(s.components) for s in truth.spc1s for g in s.grids}
     nbr: dict[int, set[int]] = {}
     for m in [*truth.cbars.values(), *truth.rods.values()]:
@@ -311,8 +319,9 @@ def kept_readings(folder: Path, sim, clean) -> float | None:
 
 
 def plant_load(st, defect: str, rng: np.random.Generator, in_holdout: bool = False) -> dict | None:
-    """Measure the study again with one fitted case's load misplaced or tilted (loads.csv keeps
-    the declared load; ``in_holdout``: a hold-out case's); ``None`` when no case qualifies."""
+    """Measure the study again with one fitted case's load misplaced or tilted, or the load at
+    one of its grids scaled in every case (``load_cell``; loads.csv keeps the declared loads;
+    ``in_holdout``: a hold-out case's); ``None`` when no case qualifies."""
     p = st.planted
     truth = read_deck(st.hidden / "truth" / "truth.bdf")
     seed = json.loads((st.hidden / "truth.json").read_text())["seed"]
@@ -332,11 +341,16 @@ def plant_load(st, defect: str, rng: np.random.Generator, in_holdout: bool = Fal
         mine = [r for r in loads if r[0] == case]
         # each declared grid and where its load went in (the case's rows come last, in order)
         moved = sorted({(r[1], m[1]) for r, m in zip(mine, changed[len(changed) - len(mine):])})
+        # the load cell's grid and the cases that load it
+        scaled = sorted({r[1] for r, m in zip(loads, changed) if m[3] != r[3]}) if defect == "load_cell" else []
         changed.sort(key=lambda r: cases.index(r[0]))
         sim = gen.simulate_study(truth, changed, *rest)
         lam = kept_readings(st.folder, sim, clean)
         if lam is None:
             continue
+        if defect == "load_cell":
+            return {"cases": sorted({r[0] for r in loads if r[1] in scaled}, key=cases.index), "load_at": scaled,
+                    "factor": LOAD_CELL, "noncentrality": lam}
         return {"case": case, "noncentrality": lam,
                 **({"moved": [list(p) for p in moved]} if defect == "misplaced_load" else {})}
     return None

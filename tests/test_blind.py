@@ -852,7 +852,8 @@ def test_unlisted_load_defects_change_one_case_as_they_name(tmp_path):
     """``benchmarks/unlisted_defects.py``'s load defects change one case's load and nothing
     else: ``misplaced_load`` puts each of its loads, same component and value, on a grid a member
     joins to the declared one and no support holds; ``tilted_load`` turns each force and moment
-    vector by 15 degrees, its magnitude kept (to rounding, 1e-12)."""
+    vector by 15 degrees, its magnitude kept (to rounding, 1e-12). ``load_cell`` scales the load
+    at one grid of the case by 0.85 in every case that loads it, and nothing else."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     import unlisted_defects as ud
 
@@ -865,6 +866,14 @@ def test_unlisted_load_defects_change_one_case_as_they_name(tmp_path):
     held = {g for s in truth.spc1s for g in s.grids}
     for defect in ud.LOAD_DEFECTS:
         new = ud._moved_loads(truth, loads, case, defect, np.random.default_rng(3))
+        if defect == "load_cell":
+            # one grid of the case, its load scaled in every case that loads it; all else as logged
+            changed = [(r, m) for r, m in zip(loads, new) if r != m]
+            (g,) = {r[1] for r, _ in changed}
+            assert g in {r[1] for r in mine} and len(new) == len(loads)
+            assert [r for r, _ in changed] == [r for r in loads if r[1] == g]
+            assert all(m[:3] == r[:3] and m[3] == ud.LOAD_CELL * r[3] for r, m in changed)
+            continue
         assert [r for r in new if r[0] != case] == [r for r in loads if r[0] != case]
         moved = [r for r in new if r[0] == case]
         if defect == "misplaced_load":
