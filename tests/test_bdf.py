@@ -410,7 +410,7 @@ MALFORMED = [
     ("CROD too many fields", "CROD,9,1,1,2,3,1,2,3,+A\n+A,4\n", 9, "CROD", 10, "at most 9"),
     ("PROD without A", "PROD,9,1\n", 8, "PROD", 4, "required real"),
     ("PBAR I12 too large", "PBAR,2,1,1.,1.,1.,1.\n,,,,,,,,\n,,,1.\n", 10, "PBAR", 20, "I1 * I2 > I12^2"),
-    ("PBARL type HAT", "PBARL,2,1,,HAT\n,.1,.01,.1,.02\n", 8, "PBARL", 5, "TYPE HAT not supported"),
+    ("PBARL type HAT1", "PBARL,2,1,,HAT1\n,.1,.01,.1,.02,.01\n", 8, "PBARL", 5, "TYPE HAT1 not supported"),
     ("PBARL angle leg", "PBARL,2,1,,L\n,.1,.1,.1,.01\n", 9, "PBARL", 12, "horizontal leg thickness DIM3"),
     ("PBARL group", "PBARL,2,1,MYLIB,BAR\n,.1,.1\n", 8, "PBARL", 4, "GROUP MYLIB"),
     ("PBARL dimension zero", "PBARL,2,1,,BAR\n,.1,0.\n", 9, "PBARL", 11, "DIM2 must be > 0"),
