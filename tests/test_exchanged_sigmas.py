@@ -70,6 +70,12 @@ def test_exchanged_cases_whose_sigmas_stayed_are_one_exchange(swapped):
     assert d.band[0] <= d.final.reduced_chi2 <= d.band[1]
     a = r.document["added"][0]
     assert a["sigmas_exchanged"] is True and "sigmas stayed with the case labels" in a["pattern_detail"]
+    # the first search is kept in brief: the swap and a case set aside, a higher BIC
+    ex = r.document["sigma_exchange"]
+    assert ex["cases"] == ["L5", "L6"] and ex["kept_exchanged"] and not ex["sigmas_exchanged"]
+    assert ex["added"][0].startswith("case_swap") and len(ex["added"]) >= 2 and ex["bic"] > d.final.bic
+    from blackbox.reports.diagnose import diagnosis_report
+    assert "kept for its lower BIC" in diagnosis_report(r.study, r.document, [])
     # the result's rows carry the sigmas the search used
     moved = {(int(g), int(c), str(r.prepared.fit_obs.case_labels[k])): s for (g, c), k, s in
              zip(r.prepared.fit_obs.dofs, r.prepared.fit_obs.case_index, r.prepared.fit_obs.sigma)}
@@ -84,6 +90,7 @@ def test_exchanged_cases_whose_sigmas_moved_along_need_no_second_search(swapped,
     d = r.diagnosis
     assert [(a.effect.kind, tuple(a.effect.where)) for a in d.added] == [("case_swap", ("L5", "L6"))]
     assert d.sigmas_exchanged is None and "sigmas_exchanged" not in r.document["added"][0]
+    assert r.document["sigma_exchange"] is None
     assert d.band[0] <= d.final.reduced_chi2 <= d.band[1]
 
 

@@ -60,7 +60,7 @@ from blackbox.diagnosis.document import diagnosis_document, verdict_detail
 from blackbox.diagnosis.effects import (CandidateContext, CandidateLimit, Effect, MemberStiffness, PDelta, Preload,
                                        RigidEndZone, families)
 from blackbox.diagnosis.effects.load_scale import case_scales
-from blackbox.diagnosis.exchange import better, exchange_pays, swapped_pair, with_sigmas_exchanged
+from blackbox.diagnosis.exchange import better, brief, exchange_pays, swapped_pair, with_sigmas_exchanged
 from blackbox.diagnosis.effects.p_delta import axial_forces
 from blackbox.diagnosis.effects.undeclared_joint import UndeclaredJoint, joint_candidate_grids
 from blackbox.diagnosis.runs import RunRecord, element_stiffness
@@ -506,9 +506,9 @@ def exchanged(diag: Diagnosis, pr: Prepared, search: Callable[[Prepared], Diagno
     again = search(pr2)
     if not better(diag, again, pair):
         say(f"  kept the first search (BIC {diag.final.bic:.6g}; with the sigmas exchanged {again.final.bic:.6g})")
-        return diag, pr
+        return dataclasses.replace(diag, other_search=brief(again, pair, True, False)), pr
     say(f"  kept the search with the sigmas exchanged (BIC {diag.final.bic:.6g} -> {again.final.bic:.6g})")
-    return dataclasses.replace(again, sigmas_exchanged=pair), pr2
+    return dataclasses.replace(again, sigmas_exchanged=pair, other_search=brief(diag, pair, False, True)), pr2
 
 
 def load_magnitudes(loads) -> tuple[float, float]:

@@ -4,7 +4,9 @@ Keys: ``study``, ``before`` / ``after`` (fit statistics with the 99 % band), ``c
 first round's, best first), ``added`` (each effect of the final model with its parameters there,
 in the order added), ``removed`` (effects a later addition made unnecessary), ``steps`` (every round:
 statistics, the 25 best candidates, joint parameters and residual structure before and after),
-``stop_reason``, ``joint_parameters``, ``holdout``, ``holdout_check`` (the hold-out cases read
+``stop_reason``, ``sigma_exchange`` (two exchanged cases searched again with their sigmas
+exchanged: the search the document is not, in brief, :func:`blackbox.diagnosis.exchange.brief`;
+``null`` when not run), ``joint_parameters``, ``holdout``, ``holdout_check`` (the hold-out cases read
 against the final model: outliers, cases of another size, whether the rest is predicted;
 :mod:`blackbox.diagnosis.holdout`), ``noise_level`` (above the noise band: whether the misfit looks
 like noise larger than declared, :mod:`blackbox.diagnosis.noise_level`; ``null`` within it),
@@ -170,6 +172,7 @@ def diagnosis_document(study_name: str, diag: Diagnosis, runs: dict, holdout: li
         "after": _stats(diag.final, diag.band),
         "steps": steps,
         "stop_reason": diag.stop_reason,
+        "sigma_exchange": diag.other_search,
         "joint_parameters": {"declared": _joint_params(diag.declared), "final": _joint_params(diag.final)},
         "holdout": {"cases": list(holdout), "declared_in_study": declared_holdout},
         "holdout_check": None if diag.holdout_check is None else diag.holdout_check.to_json(),

@@ -26,7 +26,7 @@ import numpy as np
 
 from blackbox.identification import Observations
 
-__all__ = ["EXCHANGE_PENALTY", "swapped_pair", "with_sigmas_exchanged", "exchange_pays", "better"]
+__all__ = ["EXCHANGE_PENALTY", "swapped_pair", "with_sigmas_exchanged", "exchange_pays", "better", "brief"]
 
 EXCHANGE_PENALTY = 2.0 * math.log(2.0)
 """What the choice of the sigmas' reading costs in BIC units: one binary choice."""
@@ -96,3 +96,13 @@ def better(diag, again, pair: tuple[str, str]) -> bool:
     same set of sigmas, so they compare)."""
     return (swapped_pair(again) in (pair, pair[::-1])
             and again.final.bic + EXCHANGE_PENALTY < diag.final.bic)
+
+
+def brief(diag, pair: tuple[str, str], exchanged: bool, kept: bool) -> dict:
+    """``diagnosis.json``'s ``sigma_exchange``: the search that is not the document's, in brief --
+    the cases, whether its sigmas were ``exchanged``, whether the document is the search with them
+    exchanged (``kept``), what it added, its reduced chi2 and BIC."""
+    return {"cases": list(pair), "sigmas_exchanged": exchanged, "kept_exchanged": kept,
+            "added": [a.effect.label() for a in diag.added],
+            "reduced_chi2": float(diag.final.reduced_chi2), "bic": float(diag.final.bic),
+            "verdict": diag.verdict}

@@ -167,6 +167,8 @@ class Diagnosis:
     noise_level: NoiseLevel | None = None       # above the band: whether the misfit looks like noise
     sigmas_exchanged: tuple[str, str] | None = None     # the two exchanged cases' sigmas were read as
                                                         # each other's (blackbox.diagnosis.exchange)
+    other_search: dict | None = None    # the search on the other reading of those sigmas, in brief
+                                        # (blackbox.diagnosis.exchange.brief): kept or not, never lost
 
     @property
     def added(self) -> list[CandidateScore]:

@@ -69,6 +69,20 @@ def diagnosis_report(study: Study, doc: dict, files: list[str]) -> str:
                 f"Check against data not fitted: {val.get('description', 'hold-out cases')}"
             + (f"; K-fold chi2 {_g(val['cv_chi2_before'])} -> {_g(val['cv_chi2_after'])}" if "k" in val else "")
             + ".", f"Stopped: {doc['stop_reason']}.", ""]
+    ex = doc.get("sigma_exchange")
+    if ex:
+        a, b = ex["cases"]
+        other = (f"the search with the declared sigmas (as measurements.csv labels them) added "
+                 f"{', '.join(ex['added']) or 'nothing'} and ended at reduced chi2 {_g(ex['reduced_chi2'])}, "
+                 f"BIC {_g(ex['bic'], 7)} ({ex['verdict']})")
+        if not ex["sigmas_exchanged"]:
+            out += [f"Cases {a} and {b}: their readings are exchanged, and their sigmas read as each other's fit "
+                    f"better; this is the search on the data with the two cases' sigmas exchanged channel by "
+                    f"channel, kept for its lower BIC: {other}.", ""]
+        else:
+            out += [f"Cases {a} and {b}: their readings are exchanged; the search was run again with their sigmas "
+                    f"exchanged too, and ended at reduced chi2 {_g(ex['reduced_chi2'])}, BIC {_g(ex['bic'], 7)} "
+                    f"({', '.join(ex['added']) or 'nothing added'}): not kept, its BIC is not lower by 2 ln 2.", ""]
     verdict = doc.get("verdict")
     if verdict is not None:
         out += ["## Verdict", "", f"**{verdict}**: {doc.get('verdict_detail', '')}.", ""]
