@@ -46,6 +46,8 @@ the model does not describe data it was not fitted to (:func:`blackbox.diagnosis
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -357,12 +359,12 @@ def check_holdout(model: AugmentedModel, fit: Fit, hold: ObsMap, alpha: float,
         def moved(rows: np.ndarray, label: str) -> list:
             """``[(kind, predictions at rows, parameters, the finding's fields)]`` of the case's
             loads turned or misplaced, each fitted to the case's readings; with more than one
-            load, also all of them turned (each its own angles), and each loaded grid's load
-            put in at the neighbour that fits it best, together."""
+            load, also all of them turned (each its own angles), and the loads put in at
+            neighbours together: grid by grid, each time the grid and neighbour that fit best
+            with those chosen before (:func:`_misplaced_together`)."""
             effects_of, augment = loads
             sub = hold.subset(rows)
             out = []
-            singles = {}
             mine = effects_of(label)
             for e in mine:
                 built = augment([e])
@@ -372,14 +374,12 @@ def check_holdout(model: AugmentedModel, fit: Fit, hold: ObsMap, alpha: float,
                 if got is None:
                     continue
                 xk, fk = got
-                q = float(np.sum(((sub.y - fk) / sub.sigma) ** 2))
-                if e.kind == "misplaced_load" and (e.grid not in singles or q < singles[e.grid][0]):
-                    singles[e.grid] = (q, e)
                 if e.rejection(xk) is not None:
                     continue
                 out.append((e.kind, fk, e.n_params, holdout_load([e], xk)))
+            together = _misplaced_together([e for e in mine if e.kind == "misplaced_load"], augment, sub)
             for kind, group in (("load_tilt", [e for e in mine if e.kind == "load_tilt"]),
-                                ("misplaced_load", [e for _, e in singles.values()])):
+                                ("misplaced_load", together)):
                 if len(group) < 2:
                     continue
                 built = augment(group)
@@ -395,6 +395,38 @@ def check_holdout(model: AugmentedModel, fit: Fit, hold: ObsMap, alpha: float,
                 out.append((kind, fk, len(xk), holdout_load(group, xk)))
             return out
     return read_holdout(hold, f, A, use, alpha, other_cases, rigid, loose, moved)
+
+
+def _misplaced_together(cands: list, augment, sub) -> list:
+    """The loads of a hold-out case put in at neighbours together, chosen grid by grid: each step
+    adds the grid's misplacement (one of ``cands``, one per grid at most) that, fitted with
+    those chosen before and every share one a misplacement has, leaves the lowest chi2 at the
+    case's rows ``sub``, while that chi2 falls. Chosen one grid at a time because a misplaced load's single fit is confounded by
+    the others when several moved (the best neighbour alone is then often the wrong one)."""
+    chosen: list = []
+    best_q = math.inf
+    while True:
+        step = None
+        for e in cands:
+            if any(c.grid == e.grid for c in chosen):
+                continue
+            group = chosen + [e]
+            built = augment(group)
+            if built is None:
+                continue
+            got = fit_load(*built, group, sub)
+            if got is None:
+                continue
+            parts = np.split(got[0], np.cumsum([c.n_params for c in group])[:-1])
+            if any(c.rejection(p) is not None for c, p in zip(group, parts)):
+                continue                # a share no misplacement has (mostly where declared, or beyond)
+            q = float(np.sum(((sub.y - got[1]) / sub.sigma) ** 2))
+            if q < best_q and (step is None or q < step[0]):
+                step = (q, e)
+        if step is None:
+            return chosen
+        best_q = step[0]
+        chosen.append(step[1])
 
 
 def holdout_load(effects, xk: np.ndarray) -> dict:
