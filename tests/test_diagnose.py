@@ -457,7 +457,8 @@ def test_registry_one_family_per_module():
                                "load_scale", "sensor_gain", "sensor_offset", "member_stiffness", "joint_gap",
                                "outlier", "sign_flip", "channel_swap", "misplaced_sensor", "joint_softening",
                                "joint_unloading", "p_delta", "rigid_end_zone", "bad_channel", "bad_case",
-                               "rigid_motion", "support_fixity", "case_swap", "load_tilt", "case_tilt", "misplaced_load"}
+                               "rigid_motion", "support_fixity", "case_swap", "load_tilt", "case_tilt", "misplaced_load",
+                               "load_cell"}
     for kind in dg.kinds():
         cls = dg.get(kind)
         assert cls.kind == kind and cls.__module__ == f"blackbox.diagnosis.effects.{kind}"

@@ -34,9 +34,10 @@ from blackbox.diagnosis.effects.case_swap import CaseSwap  # noqa: E402
 from blackbox.diagnosis.effects.load_tilt import LoadTilt  # noqa: E402
 from blackbox.diagnosis.effects.case_tilt import CaseTilt  # noqa: E402
 from blackbox.diagnosis.effects.misplaced_load import MisplacedLoad  # noqa: E402
+from blackbox.diagnosis.effects.load_cell import LoadCell  # noqa: E402
 
 __all__ = ["CandidateContext", "CandidateLimit", "Effect", "Connection", "register", "get", "kinds", "families",
            "UndeclaredJoint", "JointTranslation", "SupportFlexibility", "JointCoupling", "MemberStiffness", "JointGap",
            "JointSoftening", "JointUnloading", "PDelta", "Preload", "LoadScale", "SensorGain", "SensorOffset", "Outlier",
            "SignFlip", "ChannelSwap", "MisplacedSensor", "BadChannel", "BadCase", "RigidMotion", "RigidEndZone",
-           "SupportFixity", "CaseSwap", "LoadTilt", "CaseTilt", "MisplacedLoad"]
+           "SupportFixity", "CaseSwap", "LoadTilt", "CaseTilt", "MisplacedLoad", "LoadCell"]
