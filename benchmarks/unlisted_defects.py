@@ -470,9 +470,12 @@ def table(rows: list[dict]) -> str:
         if "grid" in w:
             here = [a[1][:1] == [w["grid"]] for a in r["added"]]
         else:
-            # the case: set aside, scaled or read as another, or one reading of it an outlier
+            # the case: set aside, scaled or read as another, or one reading of it an outlier; a
+            # load cell's grid (its cases are the cases that load it)
             cases = set(w.get("cases") or [w.get("case")])
-            here = [set(map(str, a[1])) <= cases or a[5] in cases for a in r["added"]]
+            grids = set(w.get("load_at") or [])
+            here = [set(map(str, a[1])) <= cases or a[5] in cases or bool(grids and set(a[1]) <= grids)
+                    for a in r["added"]]
         located = bool(here) and all(here)
         placed = located and all(a[2] == "data" for a in r["added"])
         out.append(f"| {r['study']} | {r['family']} | {r['defect']} | {at} | {added} | {r['verdict']} | "
