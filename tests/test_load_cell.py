@@ -28,6 +28,24 @@ def test_the_factor_scales_the_grids_load_in_every_case_that_has_one():
     assert e.load_dofs == ((7, 2), (7, 6)) and e.cases == ("A", "C")
 
 
+def test_a_grid_whose_cases_load_nothing_else_is_left_to_load_scale():
+    """Grid 1 is loaded by cases A and B, which load nothing else: a factor there is a load scale
+    of A and B (``load_scale``), so no ``load_cell`` candidate names it again. Grid 2, loaded by
+    C beside grid 3, is one; so is grid 3 (its one case loads grid 2 too). Grid 4, loaded only in
+    the hold-out case D, is none: its factor is the hold-out check's load factor of D."""
+    from types import SimpleNamespace as NS
+
+    from blackbox.identification import Observations
+    from solver_adapters.protocol import LoadMatrix
+    dofs = ((1, 2), (2, 3), (3, 3), (4, 1))
+    V = np.array([[5.0, 6.0, 0.0, 0.0], [0.0, 0.0, 7.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 2.0]])
+    loads = LoadMatrix(dofs, V, ("A", "B", "C", "D"))
+    obs = Observations(((9, 1),) * 3, np.array([0, 1, 2]), np.zeros(3), np.ones(3), ("A", "B", "C"))
+    deck = NS(grids={g: NS(id=g, ps="") for g in (1, 2, 3, 4)}, spc1s=[])
+    got = LoadCell._listed(NS(loads=loads, fit_obs=obs, deck=deck))
+    assert [e.grid for e in got] == [2, 3] and got[0].cases == ("C",) and got[0].comps == (3,)
+
+
 @pytest.fixture(scope="module")
 def scaled(tmp_path_factory):
     out = tmp_path_factory.mktemp("load_cell")

@@ -927,9 +927,15 @@ def _try_study(rng: np.random.Generator, index: int, kinds: tuple[str, ...], fam
     m_k["misplaced_load"] = sum(1 for c, g in {(c, g) for c, g, _, v in loads if c in fit_labels and v != 0.0}
                                 for h in neighbours_of(declared, g) if f.spcs.get(h) != "123456")
     # and the load at every grid a fitted case loads may be off by one factor in every case
-    # (load_cell; a component a support holds carries no load of it)
+    # (load_cell; a component a support holds carries no load of it; a grid whose every case
+    # loads nothing else is a load scale of those cases instead)
+    grids_of: dict = {}
+    for c, g, k, v in loads:
+        if v != 0.0:
+            grids_of.setdefault(c, set()).add(g)
     m_k["load_cell"] = len({g for c, g, k, v in loads if c in fit_labels and v != 0.0
-                            and str(k) not in (f.spcs.get(g) or "")})
+                            and str(k) not in (f.spcs.get(g) or "")
+                            and not all(gs == {g} for gs in grids_of.values() if g in gs)})
     m_k = {k: v for k, v in m_k.items() if v}
     # the diagnosis's first-round multiplier of one hypothesis of a kind (search.multipliers): 2 K M_k
     mult = {k: 2 * len(m_k) * m for k, m in m_k.items()}

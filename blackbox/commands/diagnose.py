@@ -60,9 +60,9 @@ from blackbox.diagnosis.document import diagnosis_document, verdict_detail
 from blackbox.diagnosis.effects import (CandidateContext, CandidateLimit, Effect, MemberStiffness, PDelta, Preload,
                                        RigidEndZone, families)
 from blackbox.diagnosis.effects.load_scale import case_scales
-from blackbox.diagnosis.exchange import better, brief, exchange_pays, swapped_pair, with_sigmas_exchanged
 from blackbox.diagnosis.effects.p_delta import axial_forces
 from blackbox.diagnosis.effects.undeclared_joint import UndeclaredJoint, joint_candidate_grids
+from blackbox.diagnosis.exchange import better, brief, exchange_pays, swapped_pair, with_sigmas_exchanged
 from blackbox.diagnosis.runs import RunRecord, element_stiffness
 from blackbox.diagnosis.search import Diagnosis, diagnose
 from blackbox.diagnosis.split import SplitBase

@@ -47,7 +47,6 @@ the model does not describe data it was not fitted to (:func:`blackbox.diagnosis
 from __future__ import annotations
 
 import math
-
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -401,8 +400,9 @@ def _misplaced_together(cands: list, augment, sub) -> list:
     """The loads of a hold-out case put in at neighbours together, chosen grid by grid: each step
     adds the grid's misplacement (one of ``cands``, one per grid at most) that, fitted with
     those chosen before and every share one a misplacement has, leaves the lowest chi2 at the
-    case's rows ``sub``, while that chi2 falls. Chosen one grid at a time because a misplaced load's single fit is confounded by
-    the others when several moved (the best neighbour alone is then often the wrong one)."""
+    case's rows ``sub``, while that chi2 falls. One grid at a time because a single load's fit
+    is confounded by the others when several moved (its best neighbour alone is then often the
+    wrong one)."""
     chosen: list = []
     best_q = math.inf
     while True:

@@ -14,7 +14,8 @@ parameter where a scale per case would need one per case and get the other loads
 wrong. The hold-out cases that load the grid are predicted with the factor, so they check it.
 
 Candidates: every grid a fitted case loads (scalar points left out, as the other load effects
-leave them). ``where`` is the grid; the cases that load it are in the
+leave them) but a grid whose every case loads nothing else: there the factor is a load scale of
+those cases (``load_scale``), one hypothesis that keeps the one name. ``where`` is the grid; the cases that load it are in the
 details. A data defect: the structure is as declared, the load was not what the log says.
 """
 
@@ -70,14 +71,20 @@ class LoadCell(ChangesLoads, Effect):
             if g not in ctx.deck.grids or str(c) in held.get(g, "") or not V[i].nnz:
                 continue
             per.setdefault(int(g), {})[int(c)] = i
+        grids_of: dict[str, set] = {}           # case -> every grid it loads (held components too)
+        for i, j in zip(*V.nonzero()):
+            grids_of.setdefault(ctx.loads.cases[j], set()).add(int(ctx.loads.dofs[i][0]))
         out = []
         for g, rows in sorted(per.items()):
             comps = tuple(sorted(rows))
             block = V[[rows[c] for c in comps]].toarray()            # (comps, cases)
             loads = tuple((case, tuple(float(v) for v in block[:, j])) for j, case in enumerate(ctx.loads.cases)
                           if np.any(block[:, j]))
-            if any(case in fitted for case, _ in loads):
-                out.append(cls((g,), (f"s_load_{g}",), comps=comps, loads=loads))
+            if not any(case in fitted for case, _ in loads):
+                continue
+            if all(grids_of[case] == {g} for case, _ in loads):
+                continue                        # a load scale of its cases (module docstring)
+            out.append(cls((g,), (f"s_load_{g}",), comps=comps, loads=loads))
         return out
 
     @classmethod

@@ -236,7 +236,7 @@ class MisplacedLoads(ChangesLoads, Effect):
         for g, h, at_g, at_h in self.others:
             m = MisplacedLoad((g,), (f"t_{self.case}_{g}_to_{h}",), case=self.case, moved_to=h, at_g=at_g, at_h=at_h)
             members = self.members + (m,)
-            out.append((MisplacedLoads(tuple(x.grid for x in members), tuple(n for x in members for n in x.names),
+            out.append((MisplacedLoads(tuple(k.grid for k in members), tuple(n for k in members for n in k.names),
                                        case=self.case, members=members,
                                        others=tuple(o for o in self.others if o[0] != g)),
                         np.concatenate([x, [0.0]])))
