@@ -70,8 +70,9 @@ def with_sigmas_exchanged(obs: Observations, a: str, b: str) -> Observations | N
 
 
 def exchange_pays(diag, obs: Observations, exchanged: Observations) -> bool:
-    """Whether the fit that added the final ``case_swap`` fits ``obs``'s readings better (by more
-    than :data:`EXCHANGE_PENALTY`) with the sigmas of ``exchanged`` than with their own. That
+    """Whether the fit that added the ``case_swap`` (:func:`swapped_pair` with ``added``) fits
+    ``obs``'s readings better (by more than :data:`EXCHANGE_PENALTY`) with the sigmas of
+    ``exchanged`` than with their own. That
     fit, not the final one: an effect added after it (one exchanged case set aside, say) may
     have absorbed the misfit the wrong weights left, and there the two readings of the sigmas
     no longer differ where they should."""
@@ -92,8 +93,8 @@ def exchange_pays(diag, obs: Observations, exchanged: Observations) -> bool:
 def better(diag, again, pair: tuple[str, str]) -> bool:
     """Whether ``again`` (the search on the data with ``pair``'s sigmas exchanged) is the better
     diagnosis: it explains the same exchange and its final BIC, charged
-    :data:`EXCHANGE_PENALTY`, is lower (both BICs are chi2 + p ln n on the same readings with the
-    same set of sigmas, so they compare)."""
+    :data:`EXCHANGE_PENALTY`, is lower (both BICs are on the same readings with the same set of
+    sigmas, so their sum(log sigma) terms are equal and they compare)."""
     return (swapped_pair(again) in (pair, pair[::-1])
             and again.final.bic + EXCHANGE_PENALTY < diag.final.bic)
 
