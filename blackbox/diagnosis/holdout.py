@@ -379,21 +379,25 @@ def check_holdout(model: AugmentedModel, fit: Fit, hold: ObsMap, alpha: float,
             together = _misplaced_together([e for e in mine if e.kind == "misplaced_load"], augment, sub)
             for kind, group in (("load_tilt", [e for e in mine if e.kind == "load_tilt"]),
                                 ("misplaced_load", together)):
-                if len(group) < 2:
-                    continue
-                built = augment(group)
-                if built is None:
-                    continue
-                got = fit_load(*built, group, sub)
-                if got is None:
-                    continue
-                xk, fk = got
-                parts = np.split(xk, np.cumsum([e.n_params for e in group])[:-1])
-                if any(e.rejection(p) is not None for e, p in zip(group, parts)):
-                    continue
-                out.append((kind, fk, len(xk), holdout_load(group, xk)))
+                got = _fitted_together(group, augment, sub) if len(group) >= 2 else None
+                if got is not None:
+                    xk, fk = got
+                    out.append((kind, fk, len(xk), holdout_load(group, xk)))
             return out
     return read_holdout(hold, f, A, use, alpha, other_cases, rigid, loose, moved)
+
+
+def _fitted_together(group: list, augment, sub) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(parameters, predictions at sub)`` of the load effects ``group`` fitted together to the
+    case's rows ``sub``; ``None`` when the model cannot be built, the fit fails, or a member's
+    fitted parameters are no effect of its kind (its :meth:`~Effect.rejection`: a share of a
+    misplacement mostly where declared, or beyond)."""
+    built = augment(group)
+    got = None if built is None else fit_load(*built, group, sub)
+    if got is None:
+        return None
+    parts = np.split(got[0], np.cumsum([e.n_params for e in group])[:-1])
+    return None if any(e.rejection(p) is not None for e, p in zip(group, parts)) else got
 
 
 def _misplaced_together(cands: list, augment, sub) -> list:
@@ -410,16 +414,9 @@ def _misplaced_together(cands: list, augment, sub) -> list:
         for e in cands:
             if any(c.grid == e.grid for c in chosen):
                 continue
-            group = chosen + [e]
-            built = augment(group)
-            if built is None:
-                continue
-            got = fit_load(*built, group, sub)
+            got = _fitted_together(chosen + [e], augment, sub)
             if got is None:
                 continue
-            parts = np.split(got[0], np.cumsum([c.n_params for c in group])[:-1])
-            if any(c.rejection(p) is not None for c, p in zip(group, parts)):
-                continue                # a share no misplacement has (mostly where declared, or beyond)
             q = float(np.sum(((sub.y - got[1]) / sub.sigma) ** 2))
             if q < best_q and (step is None or q < step[0]):
                 step = (q, e)
