@@ -51,6 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from blackbox.diagnosis.model import RIGID_RATIO, AugmentedModel, ModelSpec, ObsMap
+from blackbox.diagnosis.validation import inside_bounds
 from blackbox.errors import IdentificationError
 from blackbox.fitting.lm import PROJECTED_SCHEDULE, NaturalCoordinates, ProjectedBoxBounds, levenberg_marquardt
 from blackbox.fitting.statistics import FitStatistics, HoldoutStats, chi2_band, covariance
@@ -84,6 +85,8 @@ class Fit:
     message: str
     J: np.ndarray                       # whitened Jacobian at x (natural coordinates)
     holdout_predicted: np.ndarray | None = None     # predictions at the hold-out rows
+    holdout_J: np.ndarray | None = None             # whitened Jacobian at the hold-out rows
+    free: np.ndarray | None = None                  # parameters strictly inside their bounds
 
 
 class _Refit:
@@ -178,6 +181,7 @@ def fit_model(model: AugmentedModel, om: ObsMap, hold: ObsMap | None, x0: np.nda
     spec = model.spec
     _, lo, hi = spec.transforms()
     limit = model.rigid_limits()
+    hi_rigid = np.minimum(hi, limit)
     complex_ = np.zeros(model.p, bool)
     for j, sl in zip(spec.joints, spec.joint_slices()):
         complex_[sl] = isinstance(j, ComplexJoint)
@@ -208,16 +212,24 @@ def fit_model(model: AugmentedModel, om: ObsMap, hold: ObsMap | None, x0: np.nda
         converged, msg = True, "no parameters"
     f = model.predict(x, om, st)
     w = prob.weights
-    Jn = model.jacobian(x, om, st) / om.sigma[:, None] if model.p else np.zeros((len(om.y), 0))
+    with_hold = hold is not None and len(hold.y) > 0
+    if model.p:
+        Js = model.jacobians(x, (om, hold) if with_hold else (om,), st)
+        Jn = Js[0] / om.sigma[:, None]
+        Jh = Js[1] / hold.sigma[:, None] if with_hold else None
+    else:
+        Jn = np.zeros((len(om.y), 0))
+        Jh = np.zeros((len(hold.y), 0)) if with_hold else None
     fs = FitStatistics.of(om.y, f, om.sigma, model.p, weights=w)
     h_rms = h_chi2 = fh = None
     hn = 0
-    if hold is not None and len(hold.y):
+    if with_hold:
         fh = model.predict(x, hold, st)
         hs = HoldoutStats.of((), hold.y, fh, 1.0 / hold.sigma)
         h_rms, h_chi2, hn = hs.rms_error, hs.chi2, hs.n_obs
     return Fit(spec, x, std_of(Jn), fs.n_obs, fs.n_params, fs.chi2, fs.reduced_chi2, fs.rms_residual, fs.bic,
-               (om.y - f) * w, f, h_rms, h_chi2, hn, bool(converged), msg, Jn, fh)
+               (om.y - f) * w, f, h_rms, h_chi2, hn, bool(converged), msg, Jn, fh, Jh,
+               inside_bounds(x, lo, hi_rigid))
 
 
 DEFINITE_LIFT = 1e-9

@@ -646,15 +646,22 @@ class AugmentedModel:
 
     def jacobian(self, x: np.ndarray, om: ObsMap, st: State | None = None) -> np.ndarray:
         """``d prediction / dx`` at the rows of ``om``: ``(n_obs, n_params)``, natural coordinates."""
+        return self.jacobians(x, (om,), st)[0]
+
+    def jacobians(self, x: np.ndarray, oms, st: State | None = None) -> list[np.ndarray]:
+        """:meth:`jacobian` at each row set of ``oms``, the structural derivatives solved once."""
         x = np.asarray(x, float)
         st = self.state(x) if st is None else st
+        structural = self._structural
+        dU = self.structural_derivatives(x, st, structural) if structural.size else None
+        return [self._jacobian_rows(x, om, st, dU) for om in oms]
+
+    def _jacobian_rows(self, x: np.ndarray, om: ObsMap, st: State, dU) -> np.ndarray:
         mult = self.multiplier(x, om)
         base = self.pick(st.U_O, x, om)
         J = np.zeros((len(om.y), self.p))
-        structural = self._structural
-        if structural.size:
-            dU = self.structural_derivatives(x, st, structural)
-            for q, i in enumerate(structural):
+        if dU is not None:
+            for q, i in enumerate(self._structural):
                 J[:, i] = mult * self.pick(dU[q], x, om)
         factors = self._output_factors(om)
         for k, (i, rows) in enumerate(factors):

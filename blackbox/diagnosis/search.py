@@ -70,7 +70,7 @@ from scipy import special, stats
 from blackbox.diagnosis.effects.base import Effect, proximity, takes_readings
 from blackbox.diagnosis.effects.load_scale import case_scales
 from blackbox.diagnosis.fit import Fit, chi2_band, fit_model
-from blackbox.diagnosis.holdout import HoldoutCheck, check_holdout, free_parameters
+from blackbox.diagnosis.holdout import HoldoutCheck, check_holdout, free_parameters, prediction_basis
 from blackbox.diagnosis.noise_level import NoiseLevel, leverages, noise_level
 from blackbox.diagnosis.model import RIGID_RATIO, AugmentedModel, ModelSpec, ObsMap
 from blackbox.diagnosis.residuals import hotspots, residual_structure
@@ -352,9 +352,13 @@ def holdout_worse(fit: Fit, f2: Fit, hold: ObsMap | None, keep: np.ndarray | Non
     """Why ``f2`` predicts the hold-out cases worse than ``fit`` beyond chance, or ``None``.
 
     With ``d`` the whitened change of the hold-out predictions, an addition that is right
-    changes the hold-out chi2 by ``-|d|^2 - 2 n.d`` (``n`` the hold-out noise): mean ``-|d|^2``,
-    standard deviation ``2|d|``. A rise beyond ``-|d|^2 + HOLDOUT_Z 2|d|`` has probability below
-    0.2 % under that hypothesis: the hold-out cases contradict the addition, which is then never
+    changes the hold-out chi2 by ``-|d|^2 - 2 r.d``, ``r`` the hold-out residual of ``f2``. That
+    residual is the hold-out noise less the prediction error of ``f2``'s fitted parameters,
+    whitened covariance ``I + A A^T`` (``A``: :func:`~blackbox.diagnosis.holdout.prediction_basis`
+    of ``f2``), so the change has mean ``-|d|^2`` and standard deviation ``2 sqrt(d^T (I + A A^T) d)``:
+    ``2|d|`` when the fit determines the parameters the hold-out cases see, more when they
+    follow parameters the fitted cases leave loose. A rise beyond ``-|d|^2 + HOLDOUT_Z`` times
+    that has probability below 0.2 % under that hypothesis: the hold-out cases contradict the addition, which is then never
     kept, however much it improves the fit (a load scale or sensor offset that absorbs the
     misfit of an effect no candidate describes). An addition the hold-out cases hardly see
     (``|d|`` ~ 0) cannot be vetoed by their noise. ``keep``: the hold-out rows compared (default
@@ -368,7 +372,13 @@ def holdout_worse(fit: Fit, f2: Fit, hold: ObsMap | None, keep: np.ndarray | Non
     d = ((f2.holdout_predicted - fit.holdout_predicted) / hold.sigma)[keep] * np.sqrt(w)
     dh = float(np.sum(w * (_whitened_sq(f2, hold) - _whitened_sq(fit, hold))[keep]))
     dn = float(np.linalg.norm(d))
-    limit = max(-dn * dn + HOLDOUT_Z * 2.0 * dn, 1e-9 * max(1.0, fit.holdout_chi2))
+    floor = 1e-9 * max(1.0, fit.holdout_chi2)
+    limit = max(-dn * dn + HOLDOUT_Z * 2.0 * dn, floor)
+    if dh > limit and f2.holdout_J is not None and f2.free is not None:
+        # the prediction error's share, only when the noise alone would veto (it can only widen)
+        A = prediction_basis(f2.J, f2.holdout_J, f2.free)[keep] * np.sqrt(w)[:, None]
+        sd = 2.0 * math.sqrt(dn * dn + float(np.sum((A.T @ d) ** 2)))
+        limit = max(-dn * dn + HOLDOUT_Z * sd, floor)
     if dh > limit:
         return (f"it predicts the hold-out cases worse (hold-out chi2 {dh:+.4g}, beyond the {limit:+.3g} "
                 f"that chance allows for an addition that changes their prediction by {dn:.3g} sigma"
