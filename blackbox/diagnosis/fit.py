@@ -58,7 +58,7 @@ from blackbox.fitting.statistics import FitStatistics, HoldoutStats, chi2_band, 
 from blackbox.identification.problem import MatrixLog
 from blackbox.joints import ComplexJoint
 
-__all__ = ["Fit", "fit_model", "std_of", "chi2_band", "GRAM_RTOL", "RANK_RTOL"]
+__all__ = ["Fit", "fit_model", "std_of", "effective_rank", "chi2_band", "GRAM_RTOL", "RANK_RTOL"]
 
 GRAM_RTOL = 1e-12           # Gram eigenvalues below this x the largest (column-scaled): rank loss
 RANK_RTOL = 1e-6            # the same in singular values (|R_ii| of the pivoted QR): sqrt(GRAM_RTOL)
@@ -282,3 +282,18 @@ def std_of(J: np.ndarray) -> np.ndarray:
         return np.zeros(0)
     s = np.linalg.norm(J, axis=0)
     return covariance(J, scale=1.0 / np.where(s > 0, s, 1.0), rank_rtol=RANK_RTOL).std
+
+
+def effective_rank(J: np.ndarray) -> int:
+    """How many parameters the whitened Jacobian ``J`` determines: its numerical rank with the
+    columns scaled to unit norm, cut at :data:`RANK_RTOL` of the largest singular value (the cut
+    of :func:`std_of`). A parameter (or combination) the data do not see moves no prediction
+    and fits no noise: what an addition's likelihood-ratio test and BIC count as its degrees of
+    freedom (:meth:`blackbox.diagnosis.search.Checks.judge`), as the score test counts the rank
+    of its projected columns."""
+    J = np.asarray(J, float)
+    if J.ndim != 2 or J.shape[1] == 0 or J.shape[0] == 0:
+        return 0
+    s = np.linalg.norm(J, axis=0)
+    sv = np.linalg.svd(J / np.where(s > 0, s, 1.0), compute_uv=False)
+    return int(np.sum(sv > RANK_RTOL * sv[0])) if sv.size and sv[0] > 0 else 0

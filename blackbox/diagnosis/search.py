@@ -69,7 +69,7 @@ from scipy import special, stats
 
 from blackbox.diagnosis.effects.base import Effect, proximity, takes_readings
 from blackbox.diagnosis.effects.load_scale import case_scales
-from blackbox.diagnosis.fit import Fit, chi2_band, fit_model
+from blackbox.diagnosis.fit import Fit, chi2_band, effective_rank, fit_model
 from blackbox.diagnosis.holdout import HoldoutCheck, check_holdout, free_parameters, prediction_basis
 from blackbox.diagnosis.noise_level import NoiseLevel, leverages, noise_level
 from blackbox.diagnosis.model import RIGID_RATIO, AugmentedModel, ModelSpec, ObsMap
@@ -451,6 +451,27 @@ class Checks:
     def __init__(self, om: ObsMap, hold: ObsMap | None, val: Validation):
         self.om, self.hold, self.val = om, hold, val
         self._cv: dict[int, tuple[Fit, float, list[bool]]] = {}
+        self._rank: dict[int, tuple[Fit, int]] = {}
+
+    def rank(self, fit: Fit) -> int:
+        """:func:`~blackbox.diagnosis.fit.effective_rank` of ``fit``'s Jacobian, computed once."""
+        hit = self._rank.get(id(fit))
+        if hit is None or hit[0] is not fit:
+            hit = (fit, effective_rank(fit.J))
+            self._rank[id(fit)] = hit
+        return hit[1]
+
+    def added_dof(self, fit: Fit, f2: Fit) -> int:
+        """The degrees of freedom ``f2`` adds to ``fit``: the parameters it adds that the data
+        determine (the rise of the Jacobian's numerical rank), between 1 and the nominal count.
+        A joint turned complex adds the 12 entries of ``K_C`` a simple joint lacks, of which the
+        measured readings may see 6: counting all 12 charges BIC ``6 ln n`` for parameters that
+        fit nothing, so that a one-parameter data defect absorbing part of the signature wins
+        the choice (and the score test, which counts the rank, disagrees with the refit)."""
+        dp = f2.n_params - fit.n_params
+        if dp <= 0:
+            return dp
+        return min(dp, max(1, self.rank(f2) - self.rank(fit)))
 
     def cv(self, fit: Fit) -> tuple[float, list[bool]]:
         hit = self._cv.get(id(fit))
@@ -467,13 +488,14 @@ class Checks:
     def judge(self, fit: Fit, f2: Fit, multiplier: float, alpha: float, effect: int) -> Judgement:
         """``f2`` against ``fit``; ``multiplier``: ``2^r M_r``; ``effect``: the index in
         ``f2.spec.effects`` of the effect added or enriched."""
-        dp = f2.n_params - fit.n_params
+        dp = self.added_dof(fit, f2)                # the parameters the data determine
         lr = max(fit.chi2 - f2.chi2, 0.0)
         phi = max(1.0, f2.reduced_chi2)             # misfit left after the addition (quasi-likelihood)
         lr_p = float(stats.chi2.sf(lr / phi, dp)) if dp > 0 else 1.0
-        dbic = f2.bic - fit.bic
+        # BIC with the determined parameters counted (f2.bic counts every nominal one)
+        dbic = f2.bic - fit.bic - (f2.n_params - fit.n_params - dp) * math.log(f2.n_obs)
         e = f2.spec.effects[effect] if 0 <= effect < len(f2.spec.effects) else None
-        log_sel = e.selection_log_sf(lr / phi) if e is not None and dp == 1 else None
+        log_sel = e.selection_log_sf(lr / phi) if e is not None and f2.n_params - fit.n_params == 1 else None
         if log_sel is not None:
             # a candidate the data chose (module docstring of its family): its p-value accounts
             # for the choice, and its chi2 drop counts as what a fixed one-parameter candidate
