@@ -46,6 +46,7 @@ the column-scaled Jacobian, ``inf`` for a parameter that is not identifiable).
 from __future__ import annotations
 
 import copy
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,6 +88,16 @@ class Fit:
     holdout_predicted: np.ndarray | None = None     # predictions at the hold-out rows
     holdout_J: np.ndarray | None = None             # whitened Jacobian at the hold-out rows
     free: np.ndarray | None = None                  # parameters strictly inside their bounds
+
+    @functools.cached_property
+    def holdout_basis(self) -> np.ndarray | None:
+        """``A``: ``A A^T`` the whitened covariance of the hold-out predictions that the fitted
+        parameters' error carries (:func:`blackbox.diagnosis.holdout.prediction_basis`);
+        ``None`` without hold-out rows."""
+        if self.holdout_J is None or self.free is None:
+            return None
+        from blackbox.diagnosis.holdout import prediction_basis     # holdout.py imports this module
+        return prediction_basis(self.J, self.holdout_J, self.free)
 
 
 class _Refit:

@@ -85,7 +85,7 @@ from blackbox.identification import Observations
 from blackbox.joints import ComplexJoint, JointModel, SimpleJoint
 from solver_adapters.protocol import DofLabel
 
-__all__ = ["declared_fit", "multipliers", "hypotheses_by_kind", "refit_schedule", "screen", "SCREEN_DOF_COLUMNS", "eliminate", "without", "Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "near_tie", "holdout_dispersion", "holdout_worse", "VERDICTS", "verdict",
+__all__ = ["declared_fit", "multipliers", "hypotheses_by_kind", "refit_schedule", "screen", "SCREEN_DOF_COLUMNS", "eliminate", "without", "Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "near_tie", "holdout_dispersion", "holdout_worse", "prediction_metric", "VERDICTS", "verdict",
            "refit_candidate", "subsumed_removed", "refine", "round_level", "diagnose", "map_refits", "refits_pay"]
 
 
@@ -410,6 +410,40 @@ def scale_profiled(fit: Fit, hold: ObsMap) -> Fit:
     return replace(fit, holdout_predicted=out, holdout_chi2=float(np.sum(((hold.y - out) / hold.sigma) ** 2)))
 
 
+def prediction_metric(fit: Fit, f2: Fit, hold: ObsMap, keep: np.ndarray | None = None) -> tuple[Fit, Fit]:
+    """``fit`` and ``f2`` with their hold-out residuals measured in the metric of ``f2``'s
+    prediction: each hold-out case's whitened residual ``r`` (rows ``keep``) replaced by ``z``
+    with ``z^T z = r^T (I + A A^T)^-1 r``, ``A`` the rows' part of ``f2.holdout_basis`` (its
+    fitted parameters' error carried to them, :func:`~blackbox.diagnosis.holdout.prediction_basis`),
+    as the final hold-out check reads them. Under the hypothesis that ``f2`` is right, its
+    hold-out residual is the noise plus that error, so ``z`` is white noise and the rules of
+    :func:`holdout_worse` hold for it; a hold-out case that loads a parameter the fit rows leave
+    loose (a joint spring they hardly see) is off the plain prediction by wherever that parameter
+    happens to land, by many times its noise for either fit, and would otherwise decide between
+    two additions by that landing (a blind truss whose one hold-out case loads such a spring
+    vetoed the planted effect, which predicts every hold-out case to its noise in this metric).
+    ``(fit, f2)`` unchanged when ``f2`` has no such basis."""
+    A = f2.holdout_basis
+    if (A is None or A.shape[1] == 0 or fit.holdout_predicted is None or f2.holdout_predicted is None):
+        return fit, f2
+    keep = np.ones(len(hold.y), bool) if keep is None else np.asarray(keep, bool)
+    case = getattr(hold, "case", None)
+    case = np.zeros(len(hold.y), int) if case is None else case
+    groups = []
+    for k in np.unique(case[keep]):
+        rows = np.flatnonzero(keep & (case == k))
+        U, sv, _ = np.linalg.svd(A[rows], full_matrices=False)
+        groups.append((rows, U, 1.0 - 1.0 / np.sqrt(1.0 + sv * sv)))
+    out = []
+    for f in (fit, f2):
+        r = (hold.y - f.holdout_predicted) / hold.sigma
+        z = r.copy()
+        for rows, U, shrink in groups:
+            z[rows] = r[rows] - U @ (shrink * (U.T @ r[rows]))
+        out.append(replace(f, holdout_predicted=hold.y - z * hold.sigma, holdout_chi2=float(np.sum(z * z))))
+    return out[0], out[1]
+
+
 def _whitened_sq(fit: Fit, hold: ObsMap) -> np.ndarray:
     return ((hold.y - fit.holdout_predicted) / hold.sigma) ** 2
 
@@ -535,6 +569,7 @@ class Checks:
             # for neither fit: what it claims is that they follow no model
             aside = e.set_aside_rows(self.hold) if e is not None else None
             keep = None if aside is None or not aside.any() else ~aside
+            fit, f2 = prediction_metric(fit, f2, self.hold, keep)
             h2 = f2.holdout_chi2 if keep is None else holdout_chi2(f2, self.hold, keep)
             dh = h2 - (fit.holdout_chi2 if keep is None else holdout_chi2(fit, self.hold, keep))
             disp = holdout_dispersion(h2, len(self.hold.y) if keep is None else int(keep.sum()))
