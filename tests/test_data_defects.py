@@ -429,7 +429,7 @@ def test_holdout_veto_is_calibrated():
             y = s + rng.normal(size=n)
             hold = SimpleNamespace(sigma=np.ones(n), y=y, case=np.zeros(n, int))
             fit = SimpleNamespace(holdout_predicted=np.zeros(n), holdout_chi2=float(y @ y))
-            f2 = SimpleNamespace(holdout_predicted=s, holdout_chi2=float((y - s) @ (y - s)), holdout_J=None)
+            f2 = SimpleNamespace(holdout_predicted=s, holdout_chi2=float((y - s) @ (y - s)), holdout_basis=None)
             vetoed += holdout_worse(fit, f2, hold) is not None
         assert vetoed <= 7, (size, vetoed)
     d = rng.normal(size=n)
@@ -439,22 +439,26 @@ def test_holdout_veto_is_calibrated():
         y = rng.normal(size=n)
         hold = SimpleNamespace(sigma=np.ones(n), y=y, case=np.zeros(n, int))
         fit = SimpleNamespace(holdout_predicted=np.zeros(n), holdout_chi2=float(y @ y))
-        f2 = SimpleNamespace(holdout_predicted=d, holdout_chi2=float((y - d) @ (y - d)), holdout_J=None)
+        f2 = SimpleNamespace(holdout_predicted=d, holdout_chi2=float((y - d) @ (y - d)), holdout_basis=None)
         vetoed += holdout_worse(fit, f2, hold) is not None
     assert vetoed >= 970
 
 
-def _nested_ls_draws(rng, right: bool, loose: float, size: float, draws: int, with_basis: bool) -> int:
+def _nested_ls_draws(rng, right: bool, loose: float, size: float, draws: int, with_basis: bool,
+                     in_metric: bool = False) -> int:
     """How many of ``draws`` additions ``holdout_worse`` vetoes, in a linear model where every
     term of the rule is exact: 80 fitted and 40 hold-out readings of unit noise, 3 declared
     parameters, and an addition of 4 parameters that the fitted readings see ``loose`` times as
     strongly as the declared ones and the hold-out readings as strongly, moving the hold-out
     prediction by ``size`` sigma. ``right``: the hold-out readings carry the addition too (else
     only the fitted ones do: a defect of the fitted data that the addition absorbs). Both fits
-    are least squares; the fits keep their whitened Jacobians (``with_basis``) or not."""
+    are least squares; the fits keep their prediction bases (``with_basis``) or not; with
+    ``in_metric`` both hold-out residuals are read in the addition's predictive metric first,
+    as the search reads them (:func:`blackbox.diagnosis.search.prediction_metric`)."""
     from types import SimpleNamespace
 
-    from blackbox.diagnosis.search import holdout_worse
+    from blackbox.diagnosis.fit import prediction_basis
+    from blackbox.diagnosis.search import case_metric, holdout_worse
     m, n, p1, px = 80, 40, 3, 4
     J1, Jx = rng.normal(size=(m, p1)), loose * rng.normal(size=(m, px))
     Jh1, Jhx = rng.normal(size=(n, p1)), rng.normal(size=(n, px))
@@ -462,6 +466,8 @@ def _nested_ls_draws(rng, right: bool, loose: float, size: float, draws: int, wi
     bx = rng.normal(size=px)
     bx *= size / np.linalg.norm(Jhx @ bx)
     b1 = rng.normal(size=p1)
+    A1 = prediction_basis(J1, Jh1, np.ones(p1, bool))
+    A2 = prediction_basis(J2, Jh2, np.ones(p1 + px, bool))
     vetoed = 0
     for _ in range(draws):
         y = J1 @ b1 + Jx @ bx + rng.normal(size=m)
@@ -469,11 +475,14 @@ def _nested_ls_draws(rng, right: bool, loose: float, size: float, draws: int, wi
         u1 = Jh1 @ np.linalg.lstsq(J1, y, rcond=None)[0]
         u2 = Jh2 @ np.linalg.lstsq(J2, y, rcond=None)[0]
         hold = SimpleNamespace(sigma=np.ones(n), y=yh, case=np.zeros(n, int))
-        fit = SimpleNamespace(holdout_predicted=u1, holdout_chi2=float((yh - u1) @ (yh - u1)), J=J1,
-                              holdout_J=Jh1 if with_basis else None, free=np.ones(p1, bool))
-        f2 = SimpleNamespace(holdout_predicted=u2, holdout_chi2=float((yh - u2) @ (yh - u2)), J=J2,
-                             holdout_J=Jh2 if with_basis else None, free=np.ones(p1 + px, bool))
-        vetoed += holdout_worse(fit, f2, hold) is not None
+        metric = case_metric(A2, hold) if in_metric else None
+        if metric is not None:
+            u1, u2 = yh - metric(yh - u1), yh - metric(yh - u2)
+        fit = SimpleNamespace(holdout_predicted=u1, holdout_chi2=float((yh - u1) @ (yh - u1)),
+                              holdout_basis=A1 if with_basis else None)
+        f2 = SimpleNamespace(holdout_predicted=u2, holdout_chi2=float((yh - u2) @ (yh - u2)),
+                             holdout_basis=A2 if with_basis else None)
+        vetoed += holdout_worse(fit, f2, hold, metric=metric) is not None
     return vetoed
 
 
@@ -487,12 +496,15 @@ def test_holdout_veto_counts_the_prediction_error():
     -- the blind benchmark's seed 3, tube s0242: a 16-sigma outlier vetoed although its refit
     moved the hold-out prediction by 0.074 sigma along parameters the fit left loose. Where the
     fit determines the addition (``loose`` 1), a wrong one that moves the hold-out prediction
-    by 10 sigma is still always vetoed (its chi2 rises by about 100)."""
+    by 10 sigma is still always vetoed (its chi2 rises by about 100). The same holds with the
+    residuals read in the addition's predictive metric, as the search reads them."""
     rng = np.random.default_rng(11)
     for size in (0.5, 3.0):
         assert _nested_ls_draws(rng, True, 0.1, size, 1000, True) <= 7
+        assert _nested_ls_draws(rng, True, 0.1, size, 1000, True, in_metric=True) <= 7
     assert _nested_ls_draws(rng, True, 0.1, 3.0, 1000, False) > 20
     assert _nested_ls_draws(rng, False, 1.0, 10.0, 200, True) == 200
+    assert _nested_ls_draws(rng, False, 1.0, 10.0, 200, True, in_metric=True) == 200
 
 
 def test_separating_measurements(cube_prepared):

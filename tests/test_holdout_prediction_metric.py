@@ -84,7 +84,7 @@ def test_metric_is_the_predictive_chi2():
     A = f2.holdout_basis.copy()
     A[:N_CASE, 0] = rng.normal(size=N_CASE)
     f2 = _with_basis(f2, A)
-    a, b = prediction_metric(fit, f2, hold)
+    a, b, _ = prediction_metric(fit, f2, hold)
     for f, g in ((fit, a), (f2, b)):
         r = (hold.y - f.holdout_predicted) / hold.sigma
         z = (hold.y - g.holdout_predicted) / hold.sigma
@@ -95,7 +95,7 @@ def test_metric_is_the_predictive_chi2():
             assert np.isclose(z[rows] @ z[rows], want, rtol=1e-9)
         assert np.isclose(g.holdout_chi2, z @ z)
     keep = hold.case == 0
-    a, _ = prediction_metric(fit, f2, hold, keep)
+    a, _, _ = prediction_metric(fit, f2, hold, keep)
     assert np.array_equal(a.holdout_predicted[~keep], fit.holdout_predicted[~keep])
 
 

@@ -46,7 +46,6 @@ the column-scaled Jacobian, ``inf`` for a parameter that is not identifiable).
 from __future__ import annotations
 
 import copy
-import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -59,7 +58,7 @@ from blackbox.fitting.statistics import FitStatistics, HoldoutStats, chi2_band, 
 from blackbox.identification.problem import MatrixLog
 from blackbox.joints import ComplexJoint
 
-__all__ = ["Fit", "fit_model", "std_of", "effective_rank", "chi2_band", "GRAM_RTOL", "RANK_RTOL"]
+__all__ = ["Fit", "fit_model", "prediction_basis", "std_of", "effective_rank", "chi2_band", "GRAM_RTOL", "RANK_RTOL"]
 
 GRAM_RTOL = 1e-12           # Gram eigenvalues below this x the largest (column-scaled): rank loss
 RANK_RTOL = 1e-6            # the same in singular values (|R_ii| of the pivoted QR): sqrt(GRAM_RTOL)
@@ -86,18 +85,8 @@ class Fit:
     message: str
     J: np.ndarray                       # whitened Jacobian at x (natural coordinates)
     holdout_predicted: np.ndarray | None = None     # predictions at the hold-out rows
-    holdout_J: np.ndarray | None = None             # whitened Jacobian at the hold-out rows
-    free: np.ndarray | None = None                  # parameters strictly inside their bounds
-
-    @functools.cached_property
-    def holdout_basis(self) -> np.ndarray | None:
-        """``A``: ``A A^T`` the whitened covariance of the hold-out predictions that the fitted
-        parameters' error carries (:func:`blackbox.diagnosis.holdout.prediction_basis`);
-        ``None`` without hold-out rows."""
-        if self.holdout_J is None or self.free is None:
-            return None
-        from blackbox.diagnosis.holdout import prediction_basis     # holdout.py imports this module
-        return prediction_basis(self.J, self.holdout_J, self.free)
+    holdout_basis: np.ndarray | None = None         # A: A A^T the whitened covariance of those predictions
+                                                    # that the fitted parameters' error carries
 
 
 class _Refit:
@@ -227,10 +216,10 @@ def fit_model(model: AugmentedModel, om: ObsMap, hold: ObsMap | None, x0: np.nda
     if model.p:
         Js = model.jacobians(x, (om, hold) if with_hold else (om,), st)
         Jn = Js[0] / om.sigma[:, None]
-        Jh = Js[1] / hold.sigma[:, None] if with_hold else None
+        basis = prediction_basis(Jn, Js[1] / hold.sigma[:, None], inside_bounds(x, lo, hi_rigid)) if with_hold else None
     else:
         Jn = np.zeros((len(om.y), 0))
-        Jh = np.zeros((len(hold.y), 0)) if with_hold else None
+        basis = np.zeros((len(hold.y), 0)) if with_hold else None
     fs = FitStatistics.of(om.y, f, om.sigma, model.p, weights=w)
     h_rms = h_chi2 = fh = None
     hn = 0
@@ -239,8 +228,22 @@ def fit_model(model: AugmentedModel, om: ObsMap, hold: ObsMap | None, x0: np.nda
         hs = HoldoutStats.of((), hold.y, fh, 1.0 / hold.sigma)
         h_rms, h_chi2, hn = hs.rms_error, hs.chi2, hs.n_obs
     return Fit(spec, x, std_of(Jn), fs.n_obs, fs.n_params, fs.chi2, fs.reduced_chi2, fs.rms_residual, fs.bic,
-               (om.y - f) * w, f, h_rms, h_chi2, hn, bool(converged), msg, Jn, fh, Jh,
-               inside_bounds(x, lo, hi_rigid))
+               (om.y - f) * w, f, h_rms, h_chi2, hn, bool(converged), msg, Jn, fh, basis)
+
+
+def prediction_basis(J: np.ndarray, Jh: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """``A`` with ``A A^T`` the whitened covariance of the hold-out predictions that the fitted
+    parameters carry (:mod:`blackbox.diagnosis.holdout`); ``J``, ``Jh``: the whitened fit and
+    hold-out Jacobians; ``free``: the parameters that move. The fit's singular basis is cut at
+    :data:`RANK_RTOL` of its largest singular value (the columns scaled to unit norm)."""
+    if not free.any():
+        return np.zeros((Jh.shape[0], 0))
+    Jf = J[:, free]
+    scale = np.linalg.norm(Jf, axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    _, s, Wt = np.linalg.svd(Jf / scale, full_matrices=False)
+    keep = s > RANK_RTOL * s[0] if s[0] > 0 else np.zeros(len(s), bool)
+    return (Jh[:, free] / scale) @ Wt[keep].T / s[keep]
 
 
 DEFINITE_LIFT = 1e-9

@@ -52,7 +52,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import linalg, stats
 
-from blackbox.diagnosis.fit import RANK_RTOL, Fit, fit_model
+from blackbox.diagnosis.fit import Fit, fit_model, prediction_basis
 from blackbox.diagnosis.effects.base import SetAsideEffect, takes_readings
 from blackbox.diagnosis.effects.rigid_motion import rigid_weights
 from blackbox.diagnosis.model import AugmentedModel, ObsMap
@@ -201,21 +201,6 @@ def free_parameters(model: AugmentedModel, fit: Fit) -> np.ndarray:
     limit is held there)."""
     _, lo, hi = fit.spec.transforms()
     return inside_bounds(fit.x, lo, np.minimum(hi, model.rigid_limits()))
-
-
-def prediction_basis(J: np.ndarray, Jh: np.ndarray, free: np.ndarray) -> np.ndarray:
-    """``A`` with ``A A^T`` the whitened covariance of the hold-out predictions that the fitted
-    parameters carry (module docstring); ``J``, ``Jh``: the whitened fit and hold-out Jacobians;
-    ``free``: the parameters that move. The fit's singular basis is cut at :data:`RANK_RTOL` of
-    its largest singular value (the columns scaled to unit norm)."""
-    if not free.any():
-        return np.zeros((Jh.shape[0], 0))
-    Jf = J[:, free]
-    scale = np.linalg.norm(Jf, axis=0)
-    scale = np.where(scale > 0, scale, 1.0)
-    _, s, Wt = np.linalg.svd(Jf / scale, full_matrices=False)
-    keep = s > RANK_RTOL * s[0] if s[0] > 0 else np.zeros(len(s), bool)
-    return (Jh[:, free] / scale) @ Wt[keep].T / s[keep]
 
 
 def _chi2(r: np.ndarray, A: np.ndarray) -> float:

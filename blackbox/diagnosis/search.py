@@ -70,7 +70,7 @@ from scipy import special, stats
 from blackbox.diagnosis.effects.base import Effect, proximity, takes_readings
 from blackbox.diagnosis.effects.load_scale import case_scales
 from blackbox.diagnosis.fit import Fit, chi2_band, effective_rank, fit_model
-from blackbox.diagnosis.holdout import HoldoutCheck, check_holdout, free_parameters, prediction_basis
+from blackbox.diagnosis.holdout import HoldoutCheck, check_holdout, free_parameters
 from blackbox.diagnosis.noise_level import NoiseLevel, leverages, noise_level
 from blackbox.diagnosis.model import RIGID_RATIO, AugmentedModel, ModelSpec, ObsMap
 from blackbox.diagnosis.residuals import hotspots, residual_structure
@@ -85,7 +85,7 @@ from blackbox.identification import Observations
 from blackbox.joints import ComplexJoint, JointModel, SimpleJoint
 from solver_adapters.protocol import DofLabel
 
-__all__ = ["declared_fit", "multipliers", "hypotheses_by_kind", "refit_schedule", "screen", "SCREEN_DOF_COLUMNS", "eliminate", "without", "Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "near_tie", "holdout_dispersion", "holdout_worse", "prediction_metric", "VERDICTS", "verdict",
+__all__ = ["declared_fit", "multipliers", "hypotheses_by_kind", "refit_schedule", "screen", "SCREEN_DOF_COLUMNS", "eliminate", "without", "Step", "Diagnosis", "VariantTrial", "Judgement", "Checks", "evidence", "near_tie", "holdout_dispersion", "holdout_worse", "case_metric", "prediction_metric", "VERDICTS", "verdict",
            "refit_candidate", "subsumed_removed", "refine", "round_level", "diagnose", "map_refits", "refits_pay"]
 
 
@@ -348,7 +348,7 @@ addition counts as predicting the hold-out cases worse (:func:`holdout_worse`)."
 
 
 def holdout_worse(fit: Fit, f2: Fit, hold: ObsMap | None, keep: np.ndarray | None = None,
-                  weights: np.ndarray | None = None) -> str | None:
+                  weights: np.ndarray | None = None, metric=None) -> str | None:
     """Why ``f2`` predicts the hold-out cases worse than ``fit`` beyond chance, or ``None``.
 
     With ``d`` the whitened change of the hold-out predictions, an addition that is right
@@ -368,7 +368,10 @@ def holdout_worse(fit: Fit, f2: Fit, hold: ObsMap | None, keep: np.ndarray | Non
     (``|d|`` ~ 0) cannot be vetoed by their noise. ``keep``: the hold-out rows compared (default
     all; an addition that sets readings aside is judged on the others). Each case's rows are
     weighed by :func:`holdout_case_weights` (``weights``: those weights, when the caller has
-    them): a hold-out case neither fit predicts does not follow the noise this rule assumes."""
+    them): a hold-out case neither fit predicts does not follow the noise this rule assumes.
+    ``metric``: the ``M`` of :func:`prediction_metric` when the fits' hold-out residuals are
+    already read in ``f2``'s metric (there ``r`` is white, and ``A2``, ``A1`` are read through
+    ``M`` too)."""
     if hold is None or fit.holdout_predicted is None or f2.holdout_predicted is None:
         return None
     keep = np.ones(len(hold.sigma), bool) if keep is None else keep
@@ -378,16 +381,20 @@ def holdout_worse(fit: Fit, f2: Fit, hold: ObsMap | None, keep: np.ndarray | Non
     dn = float(np.linalg.norm(d))
     floor = 1e-9 * max(1.0, fit.holdout_chi2)
     limit = max(-dn * dn + HOLDOUT_Z * 2.0 * dn, floor)
-    if dh > limit and f2.holdout_J is not None and f2.free is not None:
+    if dh > limit and getattr(f2, "holdout_basis", None) is not None:
         # the prediction error's share, only when the noise alone would veto (it can only widen)
         sw = np.sqrt(w)[:, None]
-        A2 = prediction_basis(f2.J, f2.holdout_J, f2.free)[keep] * sw
-        A1 = (prediction_basis(fit.J, fit.holdout_J, fit.free)[keep] * sw
-              if getattr(fit, "holdout_J", None) is not None and fit.free is not None else A2[:, :0])
+        A2 = f2.holdout_basis
+        A1 = getattr(fit, "holdout_basis", None)
+        A1 = A2[:, :0] if A1 is None else A1
+        if metric is not None:
+            A2, A1 = metric(A2), metric(A1)
+        A2, A1 = A2[keep] * sw, A1[keep] * sw
         added = max(float(np.sum(A2 * A2) - np.sum(A1 * A1)), 0.0)
         added_sq = max(float(np.sum((A2.T @ A2) ** 2) - 2.0 * np.sum((A1.T @ A2) ** 2)
                              + np.sum((A1.T @ A1) ** 2)), 0.0)
-        var = 4.0 * (dn * dn + float(np.sum((A2.T @ d) ** 2))) + 8.0 * added_sq
+        spread = 0.0 if metric is not None else float(np.sum((A2.T @ d) ** 2))
+        var = 4.0 * (dn * dn + spread) + 8.0 * added_sq
         limit = max(-dn * dn + 2.0 * added + HOLDOUT_Z * math.sqrt(var), floor)
     if dh > limit:
         return (f"it predicts the hold-out cases worse (hold-out chi2 {dh:+.4g}, beyond the {limit:+.3g} "
@@ -410,22 +417,11 @@ def scale_profiled(fit: Fit, hold: ObsMap) -> Fit:
     return replace(fit, holdout_predicted=out, holdout_chi2=float(np.sum(((hold.y - out) / hold.sigma) ** 2)))
 
 
-def prediction_metric(fit: Fit, f2: Fit, hold: ObsMap, keep: np.ndarray | None = None) -> tuple[Fit, Fit]:
-    """``fit`` and ``f2`` with their hold-out residuals measured in the metric of ``f2``'s
-    prediction: each hold-out case's whitened residual ``r`` (rows ``keep``) replaced by ``z``
-    with ``z^T z = r^T (I + A A^T)^-1 r``, ``A`` the rows' part of ``f2.holdout_basis`` (its
-    fitted parameters' error carried to them, :func:`~blackbox.diagnosis.holdout.prediction_basis`),
-    as the final hold-out check reads them. Under the hypothesis that ``f2`` is right, its
-    hold-out residual is the noise plus that error, so ``z`` is white noise and the rules of
-    :func:`holdout_worse` hold for it; a hold-out case that loads a parameter the fit rows leave
-    loose (a joint spring they hardly see) is off the plain prediction by wherever that parameter
-    happens to land, by many times its noise for either fit, and would otherwise decide between
-    two additions by that landing (a blind truss whose one hold-out case loads such a spring
-    vetoed the planted effect, which predicts every hold-out case to its noise in this metric).
-    ``(fit, f2)`` unchanged when ``f2`` has no such basis."""
-    A = f2.holdout_basis
-    if (A is None or A.shape[1] == 0 or fit.holdout_predicted is None or f2.holdout_predicted is None):
-        return fit, f2
+def case_metric(A: np.ndarray, hold: ObsMap, keep: np.ndarray | None = None):
+    """``M``: per hold-out case (rows ``keep``), ``(I + A_c A_c^T)^-1/2`` of that case's rows of
+    the prediction basis ``A``, as a function of a row-indexed array (rows outside ``keep`` kept
+    as they are). Applied to a fit's whitened hold-out residual it gives the residual in the
+    metric of that prediction (:func:`prediction_metric`)."""
     keep = np.ones(len(hold.y), bool) if keep is None else np.asarray(keep, bool)
     case = getattr(hold, "case", None)
     case = np.zeros(len(hold.y), int) if case is None else case
@@ -434,14 +430,40 @@ def prediction_metric(fit: Fit, f2: Fit, hold: ObsMap, keep: np.ndarray | None =
         rows = np.flatnonzero(keep & (case == k))
         U, sv, _ = np.linalg.svd(A[rows], full_matrices=False)
         groups.append((rows, U, 1.0 - 1.0 / np.sqrt(1.0 + sv * sv)))
+
+    def apply(X: np.ndarray) -> np.ndarray:
+        X = np.asarray(X, float)
+        out = X.copy()
+        for rows, U, shrink in groups:
+            c = U.T @ X[rows]
+            out[rows] = X[rows] - U @ (shrink[:, None] * c if c.ndim == 2 else shrink * c)
+        return out
+    return apply
+
+
+def prediction_metric(fit: Fit, f2: Fit, hold: ObsMap, keep: np.ndarray | None = None):
+    """``(fit, f2, M)``: the fits with their hold-out residuals measured in the metric of
+    ``f2``'s prediction: each hold-out case's whitened residual ``r`` (rows ``keep``) replaced
+    by ``z = M r`` with ``z^T z = r^T (I + A A^T)^-1 r``, ``A`` the rows' part of
+    ``f2.holdout_basis`` (its fitted parameters' error carried to them,
+    :func:`~blackbox.diagnosis.holdout.prediction_basis`), as the final hold-out check reads
+    them (:func:`case_metric`: ``M``). Under the hypothesis that ``f2`` is right, its hold-out
+    residual is the noise plus that error, so ``z`` is white noise (:func:`holdout_worse`
+    counts what the added parameters' error adds to it); a hold-out case that loads a parameter
+    the fit rows leave loose (a joint spring they hardly see) is off the plain prediction by
+    wherever that parameter happens to land, by many times its noise for either fit, and would
+    otherwise decide between two additions by that landing (a blind truss whose one hold-out
+    case loads such a spring vetoed the planted effect, which predicts every hold-out case to
+    its noise in this metric). ``(fit, f2, None)`` when ``f2`` has no such basis."""
+    A = f2.holdout_basis
+    if (A is None or A.shape[1] == 0 or fit.holdout_predicted is None or f2.holdout_predicted is None):
+        return fit, f2, None
+    M = case_metric(A, hold, keep)
     out = []
     for f in (fit, f2):
-        r = (hold.y - f.holdout_predicted) / hold.sigma
-        z = r.copy()
-        for rows, U, shrink in groups:
-            z[rows] = r[rows] - U @ (shrink * (U.T @ r[rows]))
+        z = M((hold.y - f.holdout_predicted) / hold.sigma)
         out.append(replace(f, holdout_predicted=hold.y - z * hold.sigma, holdout_chi2=float(np.sum(z * z))))
-    return out[0], out[1]
+    return out[0], out[1], M
 
 
 def _whitened_sq(fit: Fit, hold: ObsMap) -> np.ndarray:
@@ -569,7 +591,7 @@ class Checks:
             # for neither fit: what it claims is that they follow no model
             aside = e.set_aside_rows(self.hold) if e is not None else None
             keep = None if aside is None or not aside.any() else ~aside
-            fit, f2 = prediction_metric(fit, f2, self.hold, keep)
+            fit, f2, metric = prediction_metric(fit, f2, self.hold, keep)
             h2 = f2.holdout_chi2 if keep is None else holdout_chi2(f2, self.hold, keep)
             dh = h2 - (fit.holdout_chi2 if keep is None else holdout_chi2(fit, self.hold, keep))
             disp = holdout_dispersion(h2, len(self.hold.y) if keep is None else int(keep.sum()))
@@ -582,7 +604,7 @@ class Checks:
                                f"(delta BIC {dbic:+.4g}, hold-out chi2 {dh:+.4g}"
                                + (")" if np.all(w[mask] == 1.0) else f", {dhw:+.4g} with cases neither fit "
                                                                      f"predicts weighed down)"))
-            elif (worse := holdout_worse(fit, f2, self.hold, keep, w)) is not None:
+            elif (worse := holdout_worse(fit, f2, self.hold, keep, w, metric)) is not None:
                 reasons.append(worse)
         elif self.val.kind == "kfold":
             cv0, _ = self.cv(fit)
