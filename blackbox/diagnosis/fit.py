@@ -87,6 +87,19 @@ class Fit:
     holdout_predicted: np.ndarray | None = None     # predictions at the hold-out rows
     holdout_basis: np.ndarray | None = None         # A: A A^T the whitened covariance of those predictions
                                                     # that the fitted parameters' error carries
+    holdout_J: np.ndarray | None = None             # whitened Jacobian at the hold-out rows
+    free: np.ndarray | None = None                  # the parameters strictly inside their bounds
+
+    def basis_without(self, sl: slice | None) -> np.ndarray | None:
+        """The prediction basis of the parameters outside ``sl`` with those in ``sl`` held at
+        their values (their columns left out): the error of the parameters an addition shares
+        with the fit it extends, given the addition's own (``holdout_basis`` when ``sl`` is
+        ``None`` or the hold-out Jacobian was not kept)."""
+        if sl is None or self.holdout_J is None or self.free is None:
+            return self.holdout_basis
+        cols = np.ones(self.J.shape[1], bool)
+        cols[sl] = False
+        return prediction_basis(self.J[:, cols], self.holdout_J[:, cols], self.free[cols])
 
 
 class _Refit:
@@ -213,13 +226,15 @@ def fit_model(model: AugmentedModel, om: ObsMap, hold: ObsMap | None, x0: np.nda
     f = model.predict(x, om, st)
     w = prob.weights
     with_hold = hold is not None and len(hold.y) > 0
+    free = inside_bounds(x, lo, hi_rigid)
     if model.p:
         Js = model.jacobians(x, (om, hold) if with_hold else (om,), st)
         Jn = Js[0] / om.sigma[:, None]
-        basis = prediction_basis(Jn, Js[1] / hold.sigma[:, None], inside_bounds(x, lo, hi_rigid)) if with_hold else None
+        Jh = Js[1] / hold.sigma[:, None] if with_hold else None
     else:
         Jn = np.zeros((len(om.y), 0))
-        basis = np.zeros((len(hold.y), 0)) if with_hold else None
+        Jh = np.zeros((len(hold.y), 0)) if with_hold else None
+    basis = prediction_basis(Jn, Jh, free) if with_hold else None
     fs = FitStatistics.of(om.y, f, om.sigma, model.p, weights=w)
     h_rms = h_chi2 = fh = None
     hn = 0
@@ -228,7 +243,7 @@ def fit_model(model: AugmentedModel, om: ObsMap, hold: ObsMap | None, x0: np.nda
         hs = HoldoutStats.of((), hold.y, fh, 1.0 / hold.sigma)
         h_rms, h_chi2, hn = hs.rms_error, hs.chi2, hs.n_obs
     return Fit(spec, x, std_of(Jn), fs.n_obs, fs.n_params, fs.chi2, fs.reduced_chi2, fs.rms_residual, fs.bic,
-               (om.y - f) * w, f, h_rms, h_chi2, hn, bool(converged), msg, Jn, fh, basis)
+               (om.y - f) * w, f, h_rms, h_chi2, hn, bool(converged), msg, Jn, fh, basis, Jh, free)
 
 
 def prediction_basis(J: np.ndarray, Jh: np.ndarray, free: np.ndarray) -> np.ndarray:

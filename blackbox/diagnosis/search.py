@@ -348,7 +348,8 @@ addition counts as predicting the hold-out cases worse (:func:`holdout_worse`)."
 
 
 def holdout_worse(fit: Fit, f2: Fit, hold: ObsMap | None, keep: np.ndarray | None = None,
-                  weights: np.ndarray | None = None, metric=None) -> str | None:
+                  weights: np.ndarray | None = None, metric=None,
+                  metric_basis: np.ndarray | None = None) -> str | None:
     """Why ``f2`` predicts the hold-out cases worse than ``fit`` beyond chance, or ``None``.
 
     With ``d`` the whitened change of the hold-out predictions, an addition that is right
@@ -370,8 +371,9 @@ def holdout_worse(fit: Fit, f2: Fit, hold: ObsMap | None, keep: np.ndarray | Non
     weighed by :func:`holdout_case_weights` (``weights``: those weights, when the caller has
     them): a hold-out case neither fit predicts does not follow the noise this rule assumes.
     ``metric``: the ``M`` of :func:`prediction_metric` when the fits' hold-out residuals are
-    already read in ``f2``'s metric (there ``r`` is white, and ``A2``, ``A1`` are read through
-    ``M`` too)."""
+    already read in that metric, ``metric_basis`` (``As``) the basis it was made of (default
+    ``f2``'s whole basis): there ``r`` has covariance ``I + M (A2 A2^T - As As^T) M``, and
+    ``A2``, ``A1`` are read through ``M`` too."""
     if hold is None or fit.holdout_predicted is None or f2.holdout_predicted is None:
         return None
     keep = np.ones(len(hold.sigma), bool) if keep is None else keep
@@ -387,13 +389,17 @@ def holdout_worse(fit: Fit, f2: Fit, hold: ObsMap | None, keep: np.ndarray | Non
         A2 = f2.holdout_basis
         A1 = getattr(fit, "holdout_basis", None)
         A1 = A2[:, :0] if A1 is None else A1
+        As = None
         if metric is not None:
+            As = metric((A2 if metric_basis is None else metric_basis))[keep] * sw
             A2, A1 = metric(A2), metric(A1)
         A2, A1 = A2[keep] * sw, A1[keep] * sw
         added = max(float(np.sum(A2 * A2) - np.sum(A1 * A1)), 0.0)
         added_sq = max(float(np.sum((A2.T @ A2) ** 2) - 2.0 * np.sum((A1.T @ A2) ** 2)
                              + np.sum((A1.T @ A1) ** 2)), 0.0)
-        spread = 0.0 if metric is not None else float(np.sum((A2.T @ d) ** 2))
+        # the residual's covariance beyond the noise: A2 A2^T, less what the metric took out
+        spread = float(np.sum((A2.T @ d) ** 2)) - (0.0 if As is None else float(np.sum((As.T @ d) ** 2)))
+        spread = max(spread, 0.0)
         var = 4.0 * (dn * dn + spread) + 8.0 * added_sq
         limit = max(-dn * dn + 2.0 * added + HOLDOUT_Z * math.sqrt(var), floor)
     if dh > limit:
@@ -441,21 +447,25 @@ def case_metric(A: np.ndarray, hold: ObsMap, keep: np.ndarray | None = None):
     return apply
 
 
-def prediction_metric(fit: Fit, f2: Fit, hold: ObsMap, keep: np.ndarray | None = None):
+def prediction_metric(fit: Fit, f2: Fit, hold: ObsMap, keep: np.ndarray | None = None,
+                      basis: np.ndarray | None = None):
     """``(fit, f2, M)``: the fits with their hold-out residuals measured in the metric of
     ``f2``'s prediction: each hold-out case's whitened residual ``r`` (rows ``keep``) replaced
-    by ``z = M r`` with ``z^T z = r^T (I + A A^T)^-1 r``, ``A`` the rows' part of
-    ``f2.holdout_basis`` (its fitted parameters' error carried to them,
-    :func:`~blackbox.diagnosis.holdout.prediction_basis`), as the final hold-out check reads
-    them (:func:`case_metric`: ``M``). Under the hypothesis that ``f2`` is right, its hold-out
-    residual is the noise plus that error, so ``z`` is white noise (:func:`holdout_worse`
-    counts what the added parameters' error adds to it); a hold-out case that loads a parameter
-    the fit rows leave loose (a joint spring they hardly see) is off the plain prediction by
-    wherever that parameter happens to land, by many times its noise for either fit, and would
-    otherwise decide between two additions by that landing (a blind truss whose one hold-out
-    case loads such a spring vetoed the planted effect, which predicts every hold-out case to
-    its noise in this metric). ``(fit, f2, None)`` when ``f2`` has no such basis."""
-    A = f2.holdout_basis
+    by ``z = M r`` with ``z^T z = r^T (I + A A^T)^-1 r``, ``A`` the rows' part of ``basis``
+    (default ``f2.holdout_basis``: its fitted parameters' error carried to them,
+    :func:`~blackbox.diagnosis.fit.prediction_basis`), as the final hold-out check reads them
+    (:func:`case_metric`: ``M``). A hold-out case that loads a parameter the fit rows leave
+    loose (a joint spring they hardly see) is off the plain prediction by wherever that
+    parameter happens to land, by many times its noise for either fit, and would otherwise
+    decide between two additions by that landing (a blind truss whose one hold-out case loads
+    such a spring vetoed the planted effect, which predicts every hold-out case to its noise in
+    this metric). The search takes ``basis`` from the parameters the addition shares with the
+    fit it extends, its own held (:meth:`~blackbox.diagnosis.fit.Fit.basis_without`): the
+    addition's own error runs along the response it adds, and a metric that discounted it would
+    discount the very misfit the addition explains, the more the less precisely the data size
+    it (a support spring against the member ending there). ``(fit, f2, None)`` when there is
+    no such basis."""
+    A = f2.holdout_basis if basis is None else basis
     if (A is None or A.shape[1] == 0 or fit.holdout_predicted is None or f2.holdout_predicted is None):
         return fit, f2, None
     M = case_metric(A, hold, keep)
@@ -591,7 +601,8 @@ class Checks:
             # for neither fit: what it claims is that they follow no model
             aside = e.set_aside_rows(self.hold) if e is not None else None
             keep = None if aside is None or not aside.any() else ~aside
-            fit, f2, metric = prediction_metric(fit, f2, self.hold, keep)
+            shared = f2.basis_without(f2.spec.effect_slices()[effect]) if e is not None else None
+            fit, f2, metric = prediction_metric(fit, f2, self.hold, keep, shared)
             h2 = f2.holdout_chi2 if keep is None else holdout_chi2(f2, self.hold, keep)
             dh = h2 - (fit.holdout_chi2 if keep is None else holdout_chi2(fit, self.hold, keep))
             disp = holdout_dispersion(h2, len(self.hold.y) if keep is None else int(keep.sum()))
@@ -604,7 +615,7 @@ class Checks:
                                f"(delta BIC {dbic:+.4g}, hold-out chi2 {dh:+.4g}"
                                + (")" if np.all(w[mask] == 1.0) else f", {dhw:+.4g} with cases neither fit "
                                                                      f"predicts weighed down)"))
-            elif (worse := holdout_worse(fit, f2, self.hold, keep, w, metric)) is not None:
+            elif (worse := holdout_worse(fit, f2, self.hold, keep, w, metric, shared)) is not None:
                 reasons.append(worse)
         elif self.val.kind == "kfold":
             cv0, _ = self.cv(fit)
