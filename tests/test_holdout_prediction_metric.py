@@ -21,9 +21,25 @@ def _fit(chi2: float, p: int, y: np.ndarray, residual: np.ndarray, basis: np.nda
     """A fit of ``p`` parameters with chi2 ``chi2`` on ``N_FIT`` rows whose hold-out residual
     (sigma 1) is ``residual``."""
     bic = chi2 + p * np.log(N_FIT)
+    J, Jh, free = _jacobians_of(p, len(y), basis)
     return Fit(ModelSpec(()), np.zeros(p), np.zeros(p), N_FIT, p, chi2, chi2 / (N_FIT - p), 1.0, bic,
                np.zeros(N_FIT), np.zeros(N_FIT), 1.0, float(residual @ residual), len(y), True, "",
-               np.zeros((N_FIT, p)), y - residual, basis)
+               J, y - residual, Jh, free)
+
+
+def _jacobians_of(p: int, n: int, basis: np.ndarray | None):
+    """``(J, holdout_J, free)`` whose prediction basis is ``basis`` (one column, or ``None``: no
+    basis): the first parameter alone moves, seen by the fit rows with unit norm, so that its
+    hold-out column is the basis itself."""
+    J = np.zeros((N_FIT, p))
+    if basis is None:
+        return J, None, None
+    J[0, 0] = 1.0
+    Jh = np.zeros((n, p))
+    Jh[:, 0] = basis[:, 0]
+    free = np.zeros(p, bool)
+    free[0] = True
+    return J, Jh, free
 
 
 def _case(rng, loose_off: tuple[float, float], spoiled: float = 0.0):
@@ -106,4 +122,5 @@ def _without_basis(f: Fit) -> Fit:
 def _with_basis(f: Fit, basis) -> Fit:
     from dataclasses import replace
 
-    return replace(f, holdout_basis=basis)
+    J, Jh, free = _jacobians_of(f.n_params, len(f.holdout_predicted), basis)
+    return replace(f, J=J, holdout_J=Jh, free=free)

@@ -46,6 +46,7 @@ the column-scaled Jacobian, ``inf`` for a parameter that is not identifiable).
 from __future__ import annotations
 
 import copy
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -85,10 +86,17 @@ class Fit:
     message: str
     J: np.ndarray                       # whitened Jacobian at x (natural coordinates)
     holdout_predicted: np.ndarray | None = None     # predictions at the hold-out rows
-    holdout_basis: np.ndarray | None = None         # A: A A^T the whitened covariance of those predictions
-                                                    # that the fitted parameters' error carries
     holdout_J: np.ndarray | None = None             # whitened Jacobian at the hold-out rows
     free: np.ndarray | None = None                  # the parameters strictly inside their bounds
+
+    @functools.cached_property
+    def holdout_basis(self) -> np.ndarray | None:
+        """``A``: ``A A^T`` the whitened covariance of the hold-out predictions that the fitted
+        parameters' error carries (:func:`prediction_basis`); ``None`` without hold-out rows.
+        Derived when first asked: most refits are never compared on it."""
+        if self.holdout_J is None or self.free is None:
+            return None
+        return prediction_basis(self.J, self.holdout_J, self.free)
 
     def basis_without(self, sl: slice | None) -> np.ndarray | None:
         """The prediction basis of the parameters outside ``sl`` with those in ``sl`` held at
@@ -234,7 +242,6 @@ def fit_model(model: AugmentedModel, om: ObsMap, hold: ObsMap | None, x0: np.nda
     else:
         Jn = np.zeros((len(om.y), 0))
         Jh = np.zeros((len(hold.y), 0)) if with_hold else None
-    basis = prediction_basis(Jn, Jh, free) if with_hold else None
     fs = FitStatistics.of(om.y, f, om.sigma, model.p, weights=w)
     h_rms = h_chi2 = fh = None
     hn = 0
@@ -243,7 +250,7 @@ def fit_model(model: AugmentedModel, om: ObsMap, hold: ObsMap | None, x0: np.nda
         hs = HoldoutStats.of((), hold.y, fh, 1.0 / hold.sigma)
         h_rms, h_chi2, hn = hs.rms_error, hs.chi2, hs.n_obs
     return Fit(spec, x, std_of(Jn), fs.n_obs, fs.n_params, fs.chi2, fs.reduced_chi2, fs.rms_residual, fs.bic,
-               (om.y - f) * w, f, h_rms, h_chi2, hn, bool(converged), msg, Jn, fh, basis, Jh, free)
+               (om.y - f) * w, f, h_rms, h_chi2, hn, bool(converged), msg, Jn, fh, Jh, free)
 
 
 def prediction_basis(J: np.ndarray, Jh: np.ndarray, free: np.ndarray) -> np.ndarray:
