@@ -35,6 +35,7 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
@@ -85,6 +86,7 @@ class Assembled:
     f_labels: list[DofLabel]
     autospc: list[DofLabel] = dataclasses.field(default_factory=list)   # constrained by AUTOSPC
     autospc_on: bool = True             # whether AUTOSPC ran (the deck's PARAM,AUTOSPC, default YES)
+    free_rigid: tuple[str, list[DofLabel]] | None = None   # a rigid motion nothing holds (free_rigid_motion)
 
     def g_index(self, dofs) -> np.ndarray:
         pos = np.searchsorted(self.grid_ids, [d[0] for d in dofs])
@@ -325,6 +327,12 @@ def assemble(deck: Deck, extra_springs: tuple[ScalarSpring, ...] = (),
     K_ff.sort_indices()
     tm["reduce_s"] = time.perf_counter() - t1
 
+    t1 = time.perf_counter()
+    scalar = np.fromiter((bool(getattr(deck.grids[g], "scalar", False)) for g in grid_ids.tolist()), bool,
+                         len(grid_ids))
+    free_rigid = free_rigid_motion(xyz, scalar, grid_ids, D, T, K_ff)
+    tm["rigid_motion_s"] = time.perf_counter() - t1
+
     removed: np.ndarray = np.zeros(0, np.int64)
     if deck.autospc:
         t1 = time.perf_counter()
@@ -343,7 +351,96 @@ def assemble(deck: Deck, extra_springs: tuple[ScalarSpring, ...] = (),
     auto_labels = [g_labels[i] for i in removed.tolist()]
     tm["labels_s"] = time.perf_counter() - t1
     tm["assemble_s"] = time.perf_counter() - t0
-    return Assembled(grid_ids, g_labels, T, K_gg, K_ff, f_labels, auto_labels, bool(deck.autospc))
+    return Assembled(grid_ids, g_labels, T, K_gg, K_ff, f_labels, auto_labels, bool(deck.autospc), free_rigid)
+
+
+RIGID_ADMISSIBLE = 1e-12
+"""A rigid motion whose squared misfit to what the constraints allow is below this fraction of
+its own squared norm is one the constraints allow (a support tilted by 1e-6 rad already holds it)."""
+RIGID_ENERGY = 1e-10
+"""An allowed rigid motion whose strain energy is below this fraction of the structure's typical
+stiffness times its squared translation is held by nothing (rounding of the systems' axes leaves
+1e-18 to 1e-15; a structure held at one grid among 1e6 keeps more than 1e-7)."""
+
+
+def free_rigid_motion(xyz: np.ndarray, scalar: np.ndarray, grid_ids: np.ndarray, D: sp.spmatrix | None,
+                      T: sp.spmatrix, K_ff: sp.spmatrix) -> tuple[str, list[DofLabel]] | None:
+    """A rigid-body motion of the whole structure that the supports, rigid elements, springs and
+    elements leave without stiffness, described, with the components that move most; None when
+    every rigid motion is held.
+
+    The factorization's pivot test sees a mechanism as a pivot that is zero up to rounding, and
+    rounding decides whether it is: a support whose components point, in its grid's CD system,
+    along the motion it should stop (a vertical restraint turned horizontal by a CORD1R) leaves
+    the structure free to roll with pivots of 1e-10 of their diagonal, next to the 1e-10 the test
+    uses, and the solve then returns metres for newtons. This test is exact instead: the six
+    rigid motions (in basic, turned into each grid's CD; scalar points held) are fitted by what
+    ``T`` allows (least squares), those fitted to rounding are allowed, and among them the one of
+    least strain energy ``u^T K_ff u`` is free when that energy is below :data:`RIGID_ENERGY` of
+    the median translational stiffness times ``|u|^2``."""
+    n = len(grid_ids)
+    if n == 0 or T.shape[1] == 0:
+        return None
+    c = xyz.mean(axis=0)
+    L = max(float(np.ptp(xyz, axis=0).max()), 1e-30)
+    r = (xyz - c) / L
+    R = np.zeros((6 * n, 6))
+    rows = np.arange(n) * 6
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = 1.0
+        R[rows + k, k] = 1.0
+        R[rows + 3 + k, 3 + k] = 1.0 / L            # a rotation of 1/L: translations of order 1
+        cr = np.cross(e, r)
+        for j in range(3):
+            R[rows + j, 3 + k] = cr[:, j]
+    R[np.repeat(scalar, 6)] = 0.0
+    if D is not None:
+        R = np.asarray(D.T @ R)
+    Tc = T.tocsc()
+    try:
+        U = spla.splu((Tc.T @ Tc).tocsc()).solve(np.asarray(Tc.T @ R))
+    except RuntimeError:              # T without full column rank: the pivot test decides
+        return None
+    miss = np.asarray(Tc @ U) - R
+    G = R.T @ R
+    if np.linalg.eigvalsh(G).min() <= 0.0:
+        return None
+    w, V = sla.eigh((miss.T @ miss + (miss.T @ miss).T) / 2, G)
+    V = V[:, w < RIGID_ADMISSIBLE]
+    if not V.shape[1]:
+        return None
+    Uv = U @ V
+    A = Uv.T @ (K_ff @ Uv)
+    A = (A + A.T) / 2
+    diag = K_ff.diagonal()
+    trans = np.zeros(T.shape[0], bool)
+    trans[(np.arange(T.shape[0]) % 6) < 3] = True
+    Ug = np.asarray(Tc @ Uv)
+    k_typ = np.median(np.abs(diag)) if diag.size else 0.0
+    B = Ug[trans].T @ Ug[trans]
+    if k_typ <= 0.0 or np.linalg.eigvalsh(B).min() <= 0.0:
+        return None
+    lam, a = sla.eigh(A / k_typ, B)
+    if lam[0] >= RIGID_ENERGY:
+        return None
+    mode = V @ a[:, 0]
+    t, th = mode[:3], mode[3:] / L
+    if np.linalg.norm(th) * L > 1e-6 * np.linalg.norm(t):
+        axis = th / np.linalg.norm(th)
+        axis = axis if axis[np.argmax(np.abs(axis))] > 0 else -axis
+        p = c + np.cross(th, t) / (th @ th)     # the point of the axis nearest the centroid
+        what = (f"a rotation about the axis along ({axis[0]:.3g}, {axis[1]:.3g}, {axis[2]:.3g}) through "
+                f"({p[0]:.4g}, {p[1]:.4g}, {p[2]:.4g}) (basic)")
+    else:
+        axis = t / np.linalg.norm(t)
+        axis = axis if axis[np.argmax(np.abs(axis))] > 0 else -axis
+        what = f"a translation along ({axis[0]:.3g}, {axis[1]:.3g}, {axis[2]:.3g}) (basic)"
+    amp = np.abs(Ug @ a[:, 0])
+    amp[~trans] = 0.0
+    top = np.argsort(-amp)[:12]
+    labels = [(int(grid_ids[i // 6]), int(i % 6) + 1) for i in top if amp[i] > 0.2 * amp[top[0]]]
+    return what, labels
 
 
 def dmig_stiffness(deck: Deck, grid_ids: np.ndarray) -> sp.csr_matrix:
@@ -1029,6 +1126,13 @@ class Factorization:
                 "negative diagonal stiffness at these free components: negative springs exceed "
                 "what the elements provide, the structure would be unstable",
                 [model.f_labels[i] for i in negative])
+        if model.free_rigid is not None:
+            what, labels = model.free_rigid
+            raise UnstableStructureError(
+                f"the structure is a mechanism: the supports leave it free to move as a rigid body "
+                f"({what}), most at grids {sorted({g for g, _ in labels})[:20]}: check the SPC1/GRID PS "
+                f"components in their grids' displacement systems (CD), which are the directions "
+                f"they hold", labels)
         if self.backend == "superlu":
             self._lu = self._superlu(K)
             self._check_pivots(K, diag)
