@@ -622,7 +622,8 @@ class Checks:
             cv1, checkable = self.cv(f2)
             dcv = cv1 - cv0
             if not checkable[effect]:
-                note = "confined to cases no other fold predicts: LR test and BIC only"
+                note = ("confined to cases no other fold predicts, or too weak in the cases the folds "
+                        "predict to be told from noise: LR test and BIC only")
             elif not dcv < 0:
                 reasons.append(f"the {self.val.k}-fold prediction over load cases is not better (chi2 {dcv:+.4g})")
         return Judgement(lr, lr_p, lr_adj, dbic, dh, dcv, tuple(reasons), note, disp)

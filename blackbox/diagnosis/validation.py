@@ -20,10 +20,13 @@ Two ways, chosen by the study:
   Parameters at a bound stay there, and so does a spring the step would move by more than its
   own value (in the flat valley of running rigid or free, where one linearised step predicts
   nonsense); an effect parameter that only the left-out fold informs
-  (one case's load scale when that case is left out) goes back to its nested value, since nothing
-  else can tell it. An effect whose parameters no fold can both learn and predict (confined to
-  one case) cannot be checked by prediction at all: it rests on the LR test and BIC, and the
-  search says so in its decision.
+  (one case's load scale when that case is left out), or that the other folds see below
+  :data:`LEARNABLE_NC` (a misplaced sensor whose neighbour reads nearly the same except in one
+  case), goes back to its nested value, since nothing else can tell it. An effect whose
+  parameters no fold can both learn and predict (confined to one case), or whose size the folds
+  that learn it see below :data:`LEARNABLE_NC` in all the cases they predict together (a check
+  that cannot tell the effect from noise), cannot be checked by prediction at all: it rests on
+  the LR test and BIC, and the search says so in its decision.
 
 With one fitted case neither is possible and additions rest on the LR test and BIC (a warning).
 """
@@ -38,6 +41,10 @@ import numpy as np
 __all__ = ["Validation", "KFOLD_MAX", "kfold", "cv_chi2", "inside_bounds"]
 
 KFOLD_MAX = 5               # folds at most: each fold's fit keeps >= 80 % of the cases
+LEARNABLE_NC = 9.0
+"""An effect parameter is learned by a fold when the fold's fitted cases alone see its fitted
+size from its nested value at 3 sigma (noncentrality 9); below that, the fold's one step would
+extrapolate their noise into the left-out case, so the parameter goes back to its nested value."""
 
 
 @dataclass(frozen=True)
@@ -93,13 +100,19 @@ def cv_chi2(J: np.ndarray, r: np.ndarray, x: np.ndarray, lo: np.ndarray, hi: np.
     tiny = 1e-12 * np.maximum(scale, 1e-300)
     resettable = np.isfinite(nominal)
     seen = np.zeros(p, bool)
+    predicted = np.zeros(p)    # an effect parameter's size (chi2) in the cases predicted by the folds that learn it
     total = 0.0
     for fold in folds:
         out = np.isin(case, np.asarray(fold, int))
         if not out.any():
             continue
         Jt, Jg = J[~out], J[out]
-        informed = np.linalg.norm(Jt, axis=0) > tiny
+        norm_t = np.linalg.norm(Jt, axis=0)
+        informed = norm_t > tiny
+        # an effect parameter the fold's own cases could not tell from its nested value (its
+        # size there below LEARNABLE_NC in chi2) is not learned from them: one step from weak
+        # information extrapolates the noise into the left-out case that holds the evidence
+        informed &= ~resettable | ((x - np.where(resettable, nominal, x)) ** 2 * norm_t ** 2 >= LEARNABLE_NC)
         learn = free & informed
         d = np.zeros(p)
         reset = resettable & ~informed
@@ -111,7 +124,8 @@ def cv_chi2(J: np.ndarray, r: np.ndarray, x: np.ndarray, lo: np.ndarray, hi: np.
             if not learn.any():
                 break
             s = np.linalg.norm(Jt[:, learn], axis=0)
-            sol = np.linalg.lstsq(Jt[:, learn] / s, r[~out], rcond=1e-10)[0]
+            # the learnt parameters fitted with the others where the fold keeps them
+            sol = np.linalg.lstsq(Jt[:, learn] / s, r[~out] - Jt[:, ~learn] @ d[~learn], rcond=1e-10)[0]
             d[learn] = sol / s
             wild = learn & ~resettable & (lo >= 0.0) & (np.abs(d) > np.abs(x))
             if not wild.any():
@@ -120,5 +134,9 @@ def cv_chi2(J: np.ndarray, r: np.ndarray, x: np.ndarray, lo: np.ndarray, hi: np.
             d[wild] = 0.0
         e = r[out] - Jg @ d
         total += float(e @ e)
-        seen |= learn & (np.linalg.norm(Jg, axis=0) > tiny)
+        norm_g = np.linalg.norm(Jg, axis=0)
+        seen |= learn & ~resettable & (norm_g > tiny)
+        both = learn & resettable
+        predicted[both] += (x - nominal)[both] ** 2 * norm_g[both] ** 2
+    seen |= resettable & (predicted >= LEARNABLE_NC)
     return total, [bool(seen[sl].any()) for sl in owners]
