@@ -796,6 +796,46 @@ def test_the_kind_with_fewer_places_wins_a_near_tie(tmp_path):
     assert abs(alt[("outlier", (169,))]) < 1.0
 
 
+def test_a_joint_the_cap_left_out_is_offered_at_the_end_of_the_member_kept(tmp_path):
+    """Blind study s0281 (seed 4): a bus with an undeclared joint at grid 51 (2.1x its
+    threshold). Of its 131 joint-candidate grids the cap (100) takes those nearest the declared
+    fit's residual, and 51 is not among them; the member ending there (187) explains the data
+    almost as well and was kept, the joint never offered. The member's end grids are now offered
+    in a second search, which finds the joint; the document says so."""
+    from blackbox.commands.diagnose import run as diagnose
+
+    st = gen.generate_study(281, 4, tmp_path)
+    e = st.planted["effects"][0]
+    assert e["kind"] == "undeclared_joint" and e["where"] == 51 and st.planted["family"] == "bus"
+    d = diagnose(st.folder, plots=False).document
+    assert [(a["effect"], a["where"]) for a in d["added"]] == [("undeclared_joint", [51])]
+    assert any("searched again with them, it finds a joint there" in w and "member_stiffness @ 187" in w
+               for w in d["warnings"])
+    # the solver runs of both searches are counted: three of the declared, element and split
+    # decks each, and the loop's own
+    assert d["solver"]["runs"] >= 6
+
+
+def test_a_misplaced_sensor_seen_in_one_case_is_not_lost_to_its_outlier(tmp_path):
+    """Blind study s0127 (seed 4, K-fold): a truss's channel 73/2 read at grid 74 (2.6x its
+    threshold); the neighbours read nearly the same except in case L1. One outlier at 73/2 in L1
+    fits as well (evidence 0.8 apart). The K-fold once vetoed the misplaced sensor by predicting
+    L1 from what the other cases see of it (noise, extrapolated: chi2 +1812); those cases see it
+    below 3 sigma, so it is judged like the outlier, by the LR test and BIC, and with its fewer
+    places it is added, the outlier named beside it."""
+    from blackbox.commands.diagnose import run as diagnose
+
+    st = gen.generate_study(127, 4, tmp_path)
+    e = st.planted["effects"][0]
+    assert e["kind"] == "misplaced_sensor" and e["where"] == [73] and e["read_at"] == 74
+    d = diagnose(st.folder, plots=False).document
+    assert d["validation"]["method"] == "kfold"
+    (a,) = d["added"]
+    assert (a["effect"], a["where"], a["read_at"]) == ("misplaced_sensor", [73], 74)
+    alt = {(x["effect"], tuple(x["where"])): x["evidence_gap"] for x in a["alternatives"]}
+    assert abs(alt[("outlier", (73,))]) < 2.0
+
+
 def test_unlisted_structure_defects_change_exactly_what_they_name(tmp_path):
     """``benchmarks/unlisted_structure.py``: each defect of the real structure changes the truth
     deck in the one way it names (a member gone; one member's orientation vector turned 90

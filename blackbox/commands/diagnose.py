@@ -264,11 +264,13 @@ def _split_needs_declared_fit(deck: Deck, dm: DeclaredModel, fams, max_joint_can
 def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapter], deck_dir: Path, *,
                   max_joint_candidates: int = MAX_JOINT_CANDIDATES,
                   max_member_candidates: int | None = None, effects: Sequence[str] | None = None,
-                  say: Callable[[str], None] | None = None, remote: Remote | None = None) -> Prepared:
+                  say: Callable[[str], None] | None = None, remote: Remote | None = None,
+                  include_grids: Sequence[int] = ()) -> Prepared:
     """Fit the declared model, run the element and the split deck (written into ``deck_dir``),
     list the candidates of the families ``effects`` (default: all), at most
     ``max_joint_candidates`` undeclared-joint grids and ``max_member_candidates`` members (those
-    nearest the declared fit's residual beyond; :attr:`Prepared.limits` says so).
+    nearest the declared fit's residual beyond; :attr:`Prepared.limits` says so), the grids
+    ``include_grids`` beside the cap.
     ``adapter_for(path)``: the adapter for the deck at ``path`` (``None``: the study's own deck).
     ``remote``: run 1 as a task of its executor, the split runs in column chunks over it
     (module docstring); runs 2 and 3 stay on ``adapter_for``."""
@@ -366,7 +368,7 @@ def prepare_study(study: Study, adapter_for: Callable[[Path | None], SolverAdapt
                                                  if ident is not None else None),
                                     max_member_candidates=max_member_candidates, measured=obs,
                                     loads=study.loads, sequential=study.config.measurements.sequential,
-                                    preload=held["preload"])
+                                    preload=held["preload"], include=frozenset(include_grids))
         # without the fit yet, the cuts and the rows do not read the residuals (checked above)
         def split_run():
             sctx = context()
@@ -511,6 +513,40 @@ def exchanged(diag: Diagnosis, pr: Prepared, search: Callable[[Prepared], Diagno
     return dataclasses.replace(again, sigmas_exchanged=pair, other_search=brief(diag, pair, False, True)), pr2
 
 
+def capped_member_ends(diag: Diagnosis, pr: Prepared) -> list[int]:
+    """The end grids of the member factors in ``diag``'s final model that could be joints (an
+    undeclared joint or rigid end zones there) but that the joint cap left out of those
+    candidates. A member factor and the joint at its end are explanations the data may hardly
+    tell apart; with the joint never offered, the member would win by default."""
+    capped = {lim.kind for lim in pr.limits} & {"undeclared_joint", "rigid_end_zone"}
+    if not capped:
+        return []
+    offered = {int(w) for e in pr.candidates if e.kind in capped for w in e.where_json()
+               if not isinstance(w, str)}
+    deck = pr.deck
+    eligible = set(joint_candidate_grids(deck, {g for j in pr.joints for g in j.grids}))
+    out = []
+    for e in diag.final.spec.effects:
+        if e.kind != "member_stiffness":
+            continue
+        for eid in e.where_json():
+            m = deck.cbars.get(int(eid)) or deck.rods.get(int(eid))
+            if m is None:
+                continue
+            for g in (m.ga, m.gb):
+                if g in eligible and g not in offered and g not in out:
+                    out.append(int(g))
+    return out
+
+
+def joint_at(diag: Diagnosis, grids: Sequence[int]) -> list[int]:
+    """The grids of ``grids`` where ``diag``'s final model has an undeclared joint or rigid end
+    zones."""
+    found = {int(w) for e in diag.final.spec.effects if e.kind in ("undeclared_joint", "rigid_end_zone")
+             for w in e.where_json() if not isinstance(w, str)}
+    return [g for g in grids if g in found]
+
+
 def load_magnitudes(loads) -> tuple[float, float]:
     """The study's typical force and moment: the median magnitude of its nonzero force and moment
     entries (1 for a kind it has none of) -- the size of the load cases a report proposes."""
@@ -557,7 +593,7 @@ def check_options(alpha: float, max_steps: int, refit_top: int, max_joint_candid
 def prepare(study: Study | str | Path, deck_dir: Path, *, adapter: str | None = None,
             max_joint_candidates: int = MAX_JOINT_CANDIDATES, max_member_candidates: int | None = None,
             effects: Sequence[str] | None = None, say: Callable[[str], None] | None = None,
-            executor: Executor | None = None) -> Prepared:
+            executor: Executor | None = None, include_grids: Sequence[int] = ()) -> Prepared:
     """:func:`prepare_study` with the study's adapter (or the one named) on each deck; the edited
     decks are written into ``deck_dir``, which must exist while the result's split run is used
     (member refits run it again). ``executor`` with more than one worker: run 1 on it and
@@ -567,7 +603,7 @@ def prepare(study: Study | str | Path, deck_dir: Path, *, adapter: str | None = 
     remote = Remote.of(study, executor, adapter) if executor is not None and executor.workers > 1 else None
     return prepare_study(study, lambda path: make_adapter_for(study, adapter, deck=path), deck_dir,
                          max_joint_candidates=max_joint_candidates, max_member_candidates=max_member_candidates,
-                         effects=effects, say=say, remote=remote)
+                         effects=effects, say=say, remote=remote, include_grids=include_grids)
 
 
 def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float = 0.01, max_steps: int = 5,
@@ -620,6 +656,32 @@ def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float =
 
         diag = search(pr)
         diag, pr = exchanged(diag, pr, search, effects, say)
+        earlier = None                  # the cost of a search that was not kept
+        ends = capped_member_ends(diag, pr)
+        if ends:
+            say(f"the member factor(s) kept end at grid(s) {', '.join(map(str, ends))}, which the joint cap "
+                "left out of the undeclared-joint and rigid-end-zone candidates: searching again with them")
+            tmp2 = Path(tmp) / "member_ends"
+            tmp2.mkdir()
+            pr2 = prepare(study, tmp2, adapter=adapter, max_joint_candidates=max_joint_candidates,
+                          max_member_candidates=max_member_candidates, effects=effects, say=say,
+                          executor=executor, include_grids=ends)
+            again = search(pr2)
+            again, pr2 = exchanged(again, pr2, search, effects, say)
+            where = ", ".join(map(str, ends))
+            if joint_at(again, ends):
+                say(f"  kept the second search: it finds a joint at {', '.join(map(str, joint_at(again, ends)))}")
+                note = (f"the first search kept a member factor ending at grid(s) {where}, which the joint cap "
+                        f"had left out of the joint candidates; searched again with them, it finds a joint "
+                        f"there (the first search's result: {', '.join(e.label() for e in diag.final.spec.effects)})")
+                diag, pr, other = again, pr2, pr
+            else:
+                say("  kept the first search: the second finds no joint at those grids")
+                note = (f"the member factor(s) kept end at grid(s) {where}, which the joint cap had left out of "
+                        "the joint candidates; searched again with them, no joint is found there")
+                other = pr2
+            diag = dataclasses.replace(diag, warnings=diag.warnings + (note,))
+            earlier = other.solver_cost()
         say(f"verdict: {diag.verdict}: {verdict_detail(diag)}")
-        cost = pr.solver_cost()
+        cost = pr.solver_cost() if earlier is None else pr.solver_cost() + earlier
     return DiagnosisResult(study, diag, pr, pr.decks, cost, time.perf_counter() - t0, plots)

@@ -106,6 +106,8 @@ class CandidateContext:
     sequential: bool = False                    # the cases are the steps of one test in time order
                                                 # (study.toml [measurements] sequential)
     preload: "Preload | None" = None            # the declared permanent load and its axial forces
+    include: frozenset = frozenset()            # keys a capped family considers whatever the cap
+                                                # (the ends of a member factor the search accepted)
 
     def note_limit(self, limit: CandidateLimit) -> None:
         self.limits[limit.kind] = limit
@@ -115,10 +117,11 @@ class CandidateContext:
         declared fit's residual concentration. Each point scores the largest per-grid residual RMS
         of a measured grid discounted by ``exp(-distance / median member length)``; without a
         declared fit (no joints) every measured grid weighs 1 (nearest the sensors). Ties keep
-        the order of ``points``."""
+        the order of ``points``. Keys in :attr:`include` are taken beside the ``limit``."""
         keys = list(points)
         if len(keys) <= limit:
             return keys
+        forced = {i for i, k in enumerate(keys) if k in self.include}
         deck = self.deck
         xyz = {g.id: np.array(g.xyz) for g in deck.grids.values()}
         lengths = [np.linalg.norm(xyz[b.ga] - xyz[b.gb]) for b in deck.cbars.values()]
@@ -128,12 +131,12 @@ class CandidateContext:
             {int(g): 1.0 for g, _ in self.fit_obs.dofs}
         meas = [(xyz[g], v) for g, v in weights.items() if g in xyz]
         if not meas:
-            return keys[:limit]
+            return [k for i, k in enumerate(keys) if i < limit or i in forced]
         P = np.array([p for p, _ in meas])
         w = np.array([v for _, v in meas])
         X = np.array([np.asarray(points[k], float) for k in keys])
         score = proximity(X, P, w, ell)
-        chosen = set(np.argsort(-score, kind="stable")[:limit].tolist())
+        chosen = set(np.argsort(-score, kind="stable")[:limit].tolist()) | forced
         return [k for i, k in enumerate(keys) if i in chosen]
 
 
