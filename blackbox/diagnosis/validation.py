@@ -19,7 +19,9 @@ Two ways, chosen by the study:
   optimum), so a K-fold check costs K small least-squares solves, no refits and no solver runs.
   Parameters at a bound stay there, and so does a spring the step would move by more than its
   own value (in the flat valley of running rigid or free, where one linearised step predicts
-  nonsense); an effect parameter that only the left-out fold informs
+  nonsense); no fold steps along a direction the full data do not determine (below the fit's
+  rank cut: a joint's coupling matrix has tens of them), which one step would fill with the
+  fold's noise; an effect parameter that only the left-out fold informs
   (one case's load scale when that case is left out), or that the other folds see below
   :data:`LEARNABLE_NC` (a misplaced sensor whose neighbour reads nearly the same except in one
   case), goes back to its nested value, since nothing else can tell it. An effect whose
@@ -99,6 +101,17 @@ def cv_chi2(J: np.ndarray, r: np.ndarray, x: np.ndarray, lo: np.ndarray, hi: np.
     scale = np.linalg.norm(J, axis=0)
     tiny = 1e-12 * np.maximum(scale, 1e-300)
     resettable = np.isfinite(nominal)
+    # the directions of the free parameters that the full data determine (the fit's rank cut):
+    # no fold learns along one the full data do not see (a joint's coupling matrix has tens of
+    # such), where one step would turn the fold's noise into any prediction at all
+    from blackbox.diagnosis.fit import RANK_RTOL
+    sc = np.where(scale > 0, scale, 1.0)
+    B = np.zeros((p, 0))
+    if free.any():
+        _, sv, Vt = np.linalg.svd(J[:, free] / sc[free], full_matrices=False)
+        keep = sv > RANK_RTOL * sv[0] if sv.size and sv[0] > 0 else np.zeros(len(sv), bool)
+        B = np.zeros((p, int(keep.sum())))
+        B[free] = Vt[keep].T / sc[free][:, None]
     seen = np.zeros(p, bool)
     predicted = np.zeros(p)    # an effect parameter's size (chi2) in the cases predicted by the folds that learn it
     total = 0.0
@@ -123,10 +136,13 @@ def cv_chi2(J: np.ndarray, r: np.ndarray, x: np.ndarray, lo: np.ndarray, hi: np.
         for _ in range(p):
             if not learn.any():
                 break
-            s = np.linalg.norm(Jt[:, learn], axis=0)
-            # the learnt parameters fitted with the others where the fold keeps them
-            sol = np.linalg.lstsq(Jt[:, learn] / s, r[~out] - Jt[:, ~learn] @ d[~learn], rcond=1e-10)[0]
-            d[learn] = sol / s
+            # the learnt parameters fitted with the others where the fold keeps them, along the
+            # determined directions (all of them when the full fit has full rank)
+            A = Jt[:, learn] @ B[learn]
+            s = np.linalg.norm(A, axis=0)
+            s = np.where(s > 0, s, 1.0)
+            sol = np.linalg.lstsq(A / s, r[~out] - Jt[:, ~learn] @ d[~learn], rcond=1e-10)[0]
+            d[learn] = B[learn] @ (sol / s)
             wild = learn & ~resettable & (lo >= 0.0) & (np.abs(d) > np.abs(x))
             if not wild.any():
                 break
