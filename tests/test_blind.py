@@ -816,6 +816,28 @@ def test_a_joint_the_cap_left_out_is_offered_at_the_end_of_the_member_kept(tmp_p
     assert d["solver"]["runs"] >= 6
 
 
+def test_a_tie_of_the_fitted_data_is_broken_by_the_k_fold_prediction(tmp_path):
+    """Blind study s0297 (seed 4, K-fold): a ladder with an undeclared joint at grid 117 (2.6x its
+    threshold); a factor on member 121, which ends there, fits the cases as well (delta BIC
+    -130.6 against -130.3) and its kind's fewer places made it the more probable by 2.1. Within
+    2 in evidence the fitted data do not decide, and the joint predicts the left-out cases better
+    (K-fold chi2 -134.2 against -124.1): it is added, the member named beside it."""
+    from blackbox.commands.diagnose import run as diagnose
+
+    st = gen.generate_study(297, 4, tmp_path)
+    e = st.planted["effects"][0]
+    assert e["kind"] == "undeclared_joint" and e["where"] == 117
+    d = diagnose(st.folder, plots=False).document
+    assert d["validation"]["method"] == "kfold"
+    (a,) = d["added"]
+    assert (a["effect"], a["where"]) == ("undeclared_joint", [117])
+    alt = {(x["effect"], tuple(x["where"])): x["evidence_gap"] for x in a["alternatives"]}
+    assert abs(alt[("member_stiffness", (121,))]) < 2.0
+    member = next(c for c in d["steps"][0]["candidates"] if c["effect"] == "member_stiffness"
+                  and c["where"] == [121])
+    assert "predicts the left-out cases better" in member["decision"]
+
+
 def test_a_misplaced_sensor_seen_in_one_case_is_not_lost_to_its_outlier(tmp_path):
     """Blind study s0127 (seed 4, K-fold): a truss's channel 73/2 read at grid 74 (2.6x its
     threshold); the neighbours read nearly the same except in case L1. One outlier at 73/2 in L1

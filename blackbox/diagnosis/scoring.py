@@ -61,6 +61,7 @@ class CandidateScore:
     reason: str = ""
     variants: tuple = ()                # search.VariantTrial: richer variants tried after acceptance
     kfold_delta_chi2: float | None = None
+    kfold_checked: bool = False         # some fold both learnt and predicted with it (validation.cv_chi2)
     screen_drop: float | None = None    # the chi2 drop at the effect's screen point, others held
                                         # (search.screen: a member removed), when evaluated
     prior: float = 0.0                  # 2 ln M_k: -2 ln of its prior probability, up to the

@@ -105,6 +105,26 @@ def near_tie(c: CandidateScore, added: CandidateScore) -> bool:
     return abs(c.evidence - added.evidence) < AMBIGUOUS
 
 
+KFOLD_TIE = 2.0
+"""Two accepted candidates whose evidence (delta BIC, ~ -2 ln Bayes factor) differs by less than
+this are a tie the fitted data cannot break ("not worth more than a bare mention", Kass & Raftery
+1995); with every case fitted (K-fold), the one that predicts the left-out cases better is taken."""
+
+
+def kfold_tiebreak(best: CandidateScore, ok: Sequence[CandidateScore]) -> CandidateScore:
+    """Among the accepted candidates ``ok`` whose evidence is within :data:`KFOLD_TIE` of that of
+    the most probable ``best``, the one of least K-fold chi2, when the K-fold checked each of them
+    (an effect no fold can learn and predict, an outlier, has a K-fold chi2 that says nothing);
+    else ``best``. The prior (its kind's places) does not enter: it separated a ladder's member
+    factor from the undeclared joint at its end by 2.1 where the data did by 0.34, and the joint
+    predicted the left-out cases better by 10."""
+    if not best.kfold_checked or best.kfold_delta_chi2 is None:
+        return best
+    ties = [c for c in ok if abs(c.evidence - best.evidence) < KFOLD_TIE and c.kfold_checked
+            and c.kfold_delta_chi2 is not None]
+    return min(ties, key=lambda c: (c.kfold_delta_chi2, c.posterior)) if ties else best
+
+
 def round_level(alpha: float, round_no: int, n_hypotheses: int) -> float:
     """The LR-test level of one hypothesis in round ``round_no`` (1-based) of ``n_hypotheses``:
     ``alpha / (2^round_no n_hypotheses)`` (module docstring, alpha spending)."""
@@ -326,6 +346,7 @@ class Judgement:
     reasons: tuple[str, ...]
     note: str = ""
     holdout_dispersion: float = 1.0
+    kfold_checked: bool = False         # the K-fold both learnt and predicted with the addition
 
     @property
     def accepted(self) -> bool:
@@ -594,6 +615,7 @@ class Checks:
             reasons.append(f"BIC does not improve ({dbic:+.4g})")
         dh = dcv = None
         disp = 1.0
+        checked = False
         if self.val.kind == "holdout" and fit.holdout_chi2 is not None and f2.holdout_chi2 is not None:
             if e is not None and e.holdout_scale_free(self.hold):
                 fit, f2 = scale_profiled(fit, self.hold), scale_profiled(f2, self.hold)
@@ -621,18 +643,19 @@ class Checks:
             cv0, _ = self.cv(fit)
             cv1, checkable = self.cv(f2)
             dcv = cv1 - cv0
+            checked = bool(checkable[effect])
             if not checkable[effect]:
                 note = ("confined to cases no other fold predicts, or too weak in the cases the folds "
                         "predict to be told from noise: LR test and BIC only")
             elif not dcv < 0:
                 reasons.append(f"the {self.val.k}-fold prediction over load cases is not better (chi2 {dcv:+.4g})")
-        return Judgement(lr, lr_p, lr_adj, dbic, dh, dcv, tuple(reasons), note, disp)
+        return Judgement(lr, lr_p, lr_adj, dbic, dh, dcv, tuple(reasons), note, disp, checked)
 
 
 def _judged(c: CandidateScore, j: Judgement, **kw) -> CandidateScore:
     return replace(c, lr=j.lr, lr_p_value=j.lr_p, lr_p_adjusted=j.lr_p_adjusted, delta_bic=j.delta_bic,
                    holdout_delta_chi2=j.holdout_delta_chi2, holdout_dispersion=j.holdout_dispersion,
-                   kfold_delta_chi2=j.kfold_delta_chi2,
+                   kfold_delta_chi2=j.kfold_delta_chi2, kfold_checked=j.kfold_checked,
                    accepted=j.accepted, reason=j.decision, **kw)
 
 
@@ -1253,10 +1276,16 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
                 best_post = min(best_post, refits[k].posterior)
         ok = [c for c in refits if c.accepted]
         best = min(ok, key=lambda c: c.posterior) if ok else None
+        by_prediction = kfold_tiebreak(best, ok) if best is not None and val.kind == "kfold" else best
         if best is not None:
-            refits = [replace(c, reason="accepted, but another candidate is more probable (lower delta BIC + "
-                                        "hold-out chi2 + 2 ln of its kind's hypotheses)")
-                      if (c.accepted and c is not best) else c for c in refits]
+            why = ("accepted, but another candidate is more probable (lower delta BIC + hold-out chi2 + "
+                   "2 ln of its kind's hypotheses)")
+            if by_prediction is not best:
+                why = (f"accepted, but another candidate that the fitted data support as well (evidence within "
+                       f"{KFOLD_TIE:g}) predicts the left-out cases better (K-fold chi2 "
+                       f"{by_prediction.kfold_delta_chi2:+.4g} against {best.kfold_delta_chi2:+.4g})")
+                best = by_prediction
+            refits = [replace(c, reason=why) if (c.accepted and c is not best) else c for c in refits]
             best = next(c for c in refits if c.effect is best.effect)
         by_key = {c.effect.key: c for c in refits}
         ranked = [by_key.get(c.effect.key, c) for c in scored]
