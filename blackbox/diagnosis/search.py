@@ -1278,14 +1278,19 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
         best = min(ok, key=lambda c: c.posterior) if ok else None
         by_prediction = kfold_tiebreak(best, ok) if best is not None and val.kind == "kfold" else best
         if best is not None:
-            why = ("accepted, but another candidate is more probable (lower delta BIC + hold-out chi2 + "
-                   "2 ln of its kind's hypotheses)")
-            if by_prediction is not best:
-                why = (f"accepted, but another candidate that the fitted data support as well (evidence within "
-                       f"{KFOLD_TIE:g}) predicts the left-out cases better (K-fold chi2 "
-                       f"{by_prediction.kfold_delta_chi2:+.4g} against {best.kfold_delta_chi2:+.4g})")
-                best = by_prediction
-            refits = [replace(c, reason=why) if (c.accepted and c is not best) else c for c in refits]
+            probable = best
+
+            def why(c: CandidateScore) -> str:
+                if by_prediction is not probable and c.kfold_checked and c.kfold_delta_chi2 is not None \
+                        and abs(c.evidence - probable.evidence) < KFOLD_TIE:
+                    return (f"accepted, but another candidate that the fitted data support as well (evidence "
+                            f"within {KFOLD_TIE:g}) predicts the left-out cases better (K-fold chi2 "
+                            f"{by_prediction.kfold_delta_chi2:+.4g} against {c.kfold_delta_chi2:+.4g})")
+                return ("accepted, but another candidate is more probable (lower delta BIC + hold-out chi2 + "
+                        "2 ln of its kind's hypotheses)")
+
+            best = by_prediction
+            refits = [replace(c, reason=why(c)) if (c.accepted and c is not best) else c for c in refits]
             best = next(c for c in refits if c.effect is best.effect)
         by_key = {c.effect.key: c for c in refits}
         ranked = [by_key.get(c.effect.key, c) for c in scored]
