@@ -530,10 +530,7 @@ def capped_member_ends(diag: Diagnosis, pr: Prepared) -> list[int]:
         if e.kind != "member_stiffness":
             continue
         for eid in e.where_json():
-            m = deck.cbars.get(int(eid)) or deck.rods.get(int(eid))
-            if m is None:
-                continue
-            for g in (m.ga, m.gb):
+            for g in member_ends(deck, int(eid)):
                 if g in eligible and g not in offered and g not in out:
                     out.append(int(g))
     return out
@@ -669,8 +666,9 @@ def run(study: Study | str | Path, *, adapter: str | None = None, alpha: float =
             again = search(pr2)
             again, pr2 = exchanged(again, pr2, search, effects, say)
             where = ", ".join(map(str, ends))
-            if joint_at(again, ends):
-                say(f"  kept the second search: it finds a joint at {', '.join(map(str, joint_at(again, ends)))}")
+            found = joint_at(again, ends)
+            if found:
+                say(f"  kept the second search: it finds a joint at {', '.join(map(str, found))}")
                 note = (f"the first search kept a member factor ending at grid(s) {where}, which the joint cap "
                         f"had left out of the joint candidates; searched again with them, it finds a joint "
                         f"there (the first search's result: {', '.join(e.label() for e in diag.final.spec.effects)})")

@@ -118,11 +118,16 @@ def kfold_tiebreak(best: CandidateScore, ok: Sequence[CandidateScore]) -> Candid
     else ``best``. The prior (its kind's places) does not enter: it separated a ladder's member
     factor from the undeclared joint at its end by 2.1 where the data did by 0.34, and the joint
     predicted the left-out cases better by 10."""
-    if not best.kfold_checked or best.kfold_delta_chi2 is None:
+    if not kfold_tied(best, best):
         return best
-    ties = [c for c in ok if abs(c.evidence - best.evidence) < KFOLD_TIE and c.kfold_checked
-            and c.kfold_delta_chi2 is not None]
-    return min(ties, key=lambda c: (c.kfold_delta_chi2, c.posterior)) if ties else best
+    ties = [c for c in ok if kfold_tied(c, best)]
+    return min(ties, key=lambda c: (c.kfold_delta_chi2, c.posterior))
+
+
+def kfold_tied(c: CandidateScore, best: CandidateScore) -> bool:
+    """Whether ``c`` is in :func:`kfold_tiebreak`'s tie with ``best``: checked by the K-fold, and
+    its evidence within :data:`KFOLD_TIE` of ``best``'s."""
+    return c.kfold_checked and c.kfold_delta_chi2 is not None and abs(c.evidence - best.evidence) < KFOLD_TIE
 
 
 def round_level(alpha: float, round_no: int, n_hypotheses: int) -> float:
@@ -1281,8 +1286,7 @@ def diagnose(base: SplitBase, boundary: Sequence[DofLabel], K_deck: np.ndarray |
             probable = best
 
             def why(c: CandidateScore) -> str:
-                if by_prediction is not probable and c.kfold_checked and c.kfold_delta_chi2 is not None \
-                        and abs(c.evidence - probable.evidence) < KFOLD_TIE:
+                if by_prediction is not probable and kfold_tied(c, probable):
                     return (f"accepted, but another candidate that the fitted data support as well (evidence "
                             f"within {KFOLD_TIE:g}) predicts the left-out cases better (K-fold chi2 "
                             f"{by_prediction.kfold_delta_chi2:+.4g} against {c.kfold_delta_chi2:+.4g})")

@@ -407,7 +407,8 @@ def free_rigid_motion(xyz: np.ndarray, scalar: np.ndarray, grid_ids: np.ndarray,
     G = R.T @ R
     if np.linalg.eigvalsh(G).min() <= 0.0:
         return None
-    w, V = sla.eigh((miss.T @ miss + (miss.T @ miss).T) / 2, G)
+    E = miss.T @ miss
+    w, V = sla.eigh((E + E.T) / 2, G)
     V = V[:, w < RIGID_ADMISSIBLE]
     if not V.shape[1]:
         return None
